@@ -1,0 +1,9 @@
+"""``python -m sarmoco``: the command line."""
+
+from __future__ import annotations
+
+import sys
+
+from sarmoco.daemon.cli import main
+
+sys.exit(main())

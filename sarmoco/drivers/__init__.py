@@ -1,0 +1,1 @@
+"""Links: bytes in, typed and timestamped samples out (MAVLink, SBG, CAN, VITA 49)."""

@@ -1,0 +1,1 @@
+"""Pure numpy/scipy signal processing: no I/O, no threads, no imports of daemon, drivers or sim."""

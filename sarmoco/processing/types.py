@@ -1,0 +1,176 @@
+"""Data types shared by every processing stage (and produced by sim, daemon).
+
+Units are SI throughout (m, s, Hz, rad); times are GPS time in integer
+nanoseconds (``int64``) unless a name says otherwise. Positions and velocities
+are in local NED (north, east, down) unless a name says ``imaging`` (METHODS §1).
+Quaternions are scalar-first ``[w, x, y, z]`` and rotate body-frame vectors
+into NED (3-2-1 yaw, pitch, roll).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from sarmoco.errors import ProcessingError
+
+C_MPS = 299_792_458.0
+"""Speed of light in vacuum, m/s."""
+
+FloatArray = npt.NDArray[np.float64]
+ComplexArray = npt.NDArray[np.complexfloating]
+IntArray = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class RadarParams:
+    """Waveform and receiver of one radar channel.
+
+    Parameters
+    ----------
+    carrier_hz : float
+        Centre (RF reference) frequency, Hz.
+    bandwidth_hz : float
+        Transmitted chirp bandwidth, Hz (positive: up-chirp).
+    pulse_width_s : float
+        Chirp duration, s.
+    sample_rate_hz : float
+        Complex (I/Q) sample rate of the receiver, Hz.
+    prf_hz : float
+        Nominal pulse repetition frequency, Hz (actual pulse times may vary).
+    n_samples : int
+        Complex samples per pulse.
+    range_gate_delay_s : float
+        Two-way delay from the transmit time stamp to the first sample
+        (``matched``) or to the dechirp reference (``dechirp``: the reference
+        chirp is delayed by this much; a target at that delay has zero beat
+        frequency), s.
+    receive : {"matched", "dechirp"}
+        ``matched``: baseband chirp echoes, compressed with a matched filter.
+        ``dechirp``: FMCW / stretch processing, the receiver outputs beat
+        signals, compressed with an FFT.
+    """
+
+    carrier_hz: float
+    bandwidth_hz: float
+    pulse_width_s: float
+    sample_rate_hz: float
+    prf_hz: float
+    n_samples: int
+    range_gate_delay_s: float
+    receive: Literal["matched", "dechirp"] = "matched"
+
+    def __post_init__(self) -> None:
+        for name in ("carrier_hz", "bandwidth_hz", "pulse_width_s", "sample_rate_hz", "prf_hz"):
+            if not getattr(self, name) > 0:
+                raise ProcessingError(f"RadarParams.{name}: {getattr(self, name)!r} is not > 0")
+        if self.n_samples < 1:
+            raise ProcessingError(f"RadarParams.n_samples: {self.n_samples!r} is not >= 1")
+        if self.receive not in ("matched", "dechirp"):
+            raise ProcessingError(
+                f"RadarParams.receive: {self.receive!r} is not one of 'matched', 'dechirp'"
+            )
+
+    @property
+    def wavelength_m(self) -> float:
+        """Carrier wavelength, m."""
+        return C_MPS / self.carrier_hz
+
+    @property
+    def chirp_rate_hz_per_s(self) -> float:
+        """Chirp rate K = B / T_p, Hz/s."""
+        return self.bandwidth_hz / self.pulse_width_s
+
+    @property
+    def range_resolution_m(self) -> float:
+        """Slant-range resolution of an unweighted chirp, c / 2B, m (IRW is 0.886 of it)."""
+        return C_MPS / (2.0 * self.bandwidth_hz)
+
+    @property
+    def near_range_m(self) -> float:
+        """Slant range of the range-gate delay, m."""
+        return C_MPS * self.range_gate_delay_s / 2.0
+
+
+@dataclass(frozen=True)
+class NavSamples:
+    """INS (or GNSS) samples on the GPS time base.
+
+    Parameters
+    ----------
+    t_ns : ndarray of int64, shape (N,)
+        Sample times, GPS ns, strictly increasing.
+    vel_ned : ndarray of float64, shape (N, 3)
+        Velocity of the IMU in NED, m/s.
+    quat : ndarray of float64, shape (N, 4)
+        Attitude, scalar-first quaternion rotating body to NED.
+    pos_ned : ndarray of float64, shape (N, 3), optional
+        Position of the IMU in the local NED frame, m (None when the source
+        gives no position, e.g. an INS-only velocity stream).
+    """
+
+    t_ns: IntArray
+    vel_ned: FloatArray
+    quat: FloatArray
+    pos_ned: FloatArray | None = None
+
+    def __post_init__(self) -> None:
+        n = self.t_ns.shape[0]
+        if self.vel_ned.shape != (n, 3) or self.quat.shape != (n, 4):
+            raise ProcessingError(
+                f"NavSamples: shapes t{self.t_ns.shape} vel{self.vel_ned.shape} "
+                f"quat{self.quat.shape} disagree (want (N,), (N,3), (N,4))"
+            )
+        if self.pos_ned is not None and self.pos_ned.shape != (n, 3):
+            raise ProcessingError(f"NavSamples: pos_ned shape {self.pos_ned.shape} is not ({n}, 3)")
+
+
+@dataclass(frozen=True)
+class PulseBlock:
+    """A block of consecutive pulses of one channel.
+
+    Parameters
+    ----------
+    echo : ndarray of complex64, shape (P, S)
+        Raw or range-compressed samples, pulse-major.
+    t_ns : ndarray of int64, shape (P,)
+        Transmit time of each pulse, GPS ns.
+    pulse_id : ndarray of int64, shape (P,)
+        Running pulse number.
+    """
+
+    echo: ComplexArray
+    t_ns: IntArray
+    pulse_id: IntArray
+
+
+@dataclass(frozen=True)
+class Image:
+    """A focused complex image with its grid.
+
+    Parameters
+    ----------
+    data : ndarray of complex, shape (n_az, n_rg)
+        Complex pixels; axis 0 is azimuth (or the ground-grid x axis),
+        axis 1 range (or ground-grid y).
+    axis0_m, axis1_m : ndarray of float64
+        Pixel-centre coordinates along each axis, m.
+    frame : str
+        What the axes are: ``"slant"`` (axis0 along-track x, axis1 slant range
+        from the reference track), ``"ground"`` (x, y of the imaging frame at
+        z = ground depth) or ``"polar"`` (spotlight: along/cross range about the
+        scene centre).
+    """
+
+    data: ComplexArray
+    axis0_m: FloatArray
+    axis1_m: FloatArray
+    frame: str
+
+    @property
+    def spacing_m(self) -> tuple[float, float]:
+        """Pixel spacing along axis 0 and axis 1, m."""
+        return (float(self.axis0_m[1] - self.axis0_m[0]), float(self.axis1_m[1] - self.axis1_m[0]))

@@ -1,0 +1,1 @@
+"""Simulated hardware: scenarios, trajectories, INS errors, echoes, wire emitters."""
