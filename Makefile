@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/python -m sarmoco demo --out demo-out
+	$(BIN)/sarmoco config check systemd/sarmoco.toml
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -1,0 +1,355 @@
+"""Configuration: one TOML file loaded into frozen, typed objects.
+
+Every section is a frozen dataclass; every field carries its unit, its
+documentation and its constraints in ``dataclasses.field`` metadata, so the
+loader, the error messages and the README's key table all come from one place.
+Errors name the key path, the bad value and what is allowed
+(``radar.prf_hz: -3 is not > 0``); unknown keys are errors.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+import types
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from sarmoco.errors import ConfigError
+
+
+def _key(
+    default: Any,
+    doc: str,
+    *,
+    unit: str = "",
+    gt: float | None = None,
+    ge: float | None = None,
+    le: float | None = None,
+    lt: float | None = None,
+) -> Any:
+    """Declare a config key with its documentation and numeric bounds."""
+    meta = {"doc": doc, "unit": unit, "gt": gt, "ge": ge, "le": le, "lt": lt}
+    if isinstance(default, list | dict):
+        raise TypeError("mutable defaults are not allowed in config sections")
+    return field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class RadarConfig:
+    """Radar waveform, receiver and echo link."""
+
+    link: str = _key(
+        "udp://127.0.0.1:49152",
+        "Where VITA 49.2 echo packets arrive: udp://HOST:PORT (listen), tcp://HOST:PORT "
+        "(connect), or a .vrt file path for replay",
+    )
+    carrier_hz: float = _key(15.0e9, "RF reference (centre) frequency", unit="Hz", gt=0)
+    bandwidth_hz: float = _key(750.0e6, "Chirp bandwidth", unit="Hz", gt=0)
+    pulse_width_s: float = _key(10.0e-6, "Chirp duration", unit="s", gt=0)
+    sample_rate_hz: float = _key(1.0e9, "Complex I/Q sample rate", unit="Hz", gt=0)
+    prf_hz: float = _key(1000.0, "Nominal pulse repetition frequency", unit="Hz", gt=0)
+    n_samples: int = _key(4096, "Complex samples per pulse", gt=0)
+    range_gate_delay_s: float = _key(
+        6.0e-6,
+        "Two-way delay from the pulse time stamp to the first sample (matched) or to the "
+        "dechirp reference (dechirp)",
+        unit="s",
+        ge=0,
+    )
+    receive: Literal["matched", "dechirp"] = _key(
+        "matched", "Receiver: pulsed LFM (matched filter) or dechirp-on-receive (FFT)"
+    )
+    sample_format: Literal["int16", "float32"] = _key("int16", "I/Q sample type on the wire")
+    channels: int = _key(1, "Receive channels (VITA stream IDs 0..channels-1)", gt=0)
+
+
+@dataclass(frozen=True)
+class InsConfig:
+    """Navigation source (INS velocity and attitude)."""
+
+    protocol: Literal["mavlink", "sbg", "sbg-can"] = _key("mavlink", "Wire protocol of the INS")
+    link: str = _key(
+        "udpin:127.0.0.1:14550",
+        "MAVLink: a pymavlink connection string (udpin:, tcp:, /dev/tty..., .tlog, .bin); "
+        "SBG: a serial device or binary log; SBG CAN: interface:channel (socketcan:can0, "
+        "slcan:/dev/ttyACM0, socketcand:127.0.0.1:29536:can0, or a candump log)",
+    )
+    baudrate: int = _key(921600, "Serial baud rate (serial links only)", unit="bit/s", gt=0)
+    rate_hz: float = _key(100.0, "Rate requested from the INS", unit="Hz", gt=0, le=1000)
+    lever_arm_m: tuple[float, float, float] = _key(
+        (0.0, 0.0, 0.0), "IMU to antenna phase centre, body frame (forward, right, down)", unit="m"
+    )
+    max_gap_s: float = _key(
+        0.05,
+        "Longest INS gap bridged by interpolation; pulses in longer gaps are flagged",
+        unit="s",
+        gt=0,
+    )
+    latency_budget_s: float = _key(
+        0.5,
+        "How long a pulse waits for INS samples that bracket it before it is flagged",
+        unit="s",
+        gt=0,
+    )
+    gps_minus_utc_s: int = _key(18, "GPS - UTC leap seconds", unit="s", ge=0)
+    signing_key_hex: str = _key(
+        "", "MAVLink 2 signing key (64 hex digits); when set, unsigned packets are rejected"
+    )
+
+
+@dataclass(frozen=True)
+class GeometryConfig:
+    """Imaging geometry."""
+
+    look_side: Literal["right", "left"] = _key("right", "Side the antenna looks to")
+    scene_depth_m: float = _key(
+        0.0, "Depth (NED down) of the flat scene below the local NED origin", unit="m"
+    )
+    center_slant_range_m: float = _key(
+        900.0, "Scene-centre slant range used for first-order compensation", unit="m", gt=0
+    )
+
+
+@dataclass(frozen=True)
+class MocompConfig:
+    """INS-only per-pulse motion compensation (METHODS §2)."""
+
+    order: Literal[1, 2] = _key(
+        2, "1: scene-centre look angle for every bin; 2: look angle per range bin + eq. 29 term"
+    )
+    envelope_fraction: float = _key(
+        0.25,
+        "Shift pulses in range when |d_los| exceeds this fraction of a range cell",
+        ge=0,
+        le=10,
+    )
+
+
+@dataclass(frozen=True)
+class AutofocusConfig:
+    """Sliding-subaperture autofocus (METHODS §3) and PGA."""
+
+    enabled: bool = _key(True, "Run the two-step autofocus")
+    subaperture_s: float = _key(0.5, "Subaperture length", unit="s", gt=0)
+    overlap: float = _key(0.5, "Fractional overlap of consecutive subapertures", ge=0, lt=1)
+    n_lines: int = _key(16, "Range lines used per subaperture", gt=0)
+    estimator: Literal["map-drift", "contrast"] = _key("map-drift", "Doppler-rate estimator")
+    pga: bool = _key(False, "Refine with phase gradient autofocus")
+
+
+@dataclass(frozen=True)
+class ImagingConfig:
+    """Image formation."""
+
+    algorithm: Literal["rda", "pfa", "backprojection"] = _key(
+        "backprojection", "Image formation algorithm"
+    )
+    block_pulses: int = _key(1024, "Pulses per processing block", gt=0)
+    window: Literal["none", "hann", "taylor"] = _key("none", "Range and azimuth weighting")
+    pixel_m: float = _key(0.1, "Ground grid spacing (backprojection)", unit="m", gt=0)
+
+
+@dataclass(frozen=True)
+class RecorderConfig:
+    """Zarr v3 recording of each run."""
+
+    directory: str = _key("/var/lib/sarmoco", "Directory that receives one store per run")
+    raw_echoes: bool = _key(True, "Record the raw echoes")
+    chunk_pulses: int = _key(256, "Pulses per chunk of the echo arrays", gt=0)
+    fsync_interval_s: float = _key(1.0, "Interval between fsyncs of committed data", unit="s", gt=0)
+
+
+@dataclass(frozen=True)
+class StatusConfig:
+    """Local status endpoint and logging."""
+
+    http_port: int = _key(
+        9108,
+        "TCP port on 127.0.0.1 for /status (JSON) and /metrics (Prometheus); 0 disables",
+        ge=0,
+        le=65535,
+    )
+    log_level: Literal["debug", "info", "warning", "error"] = _key("info", "Log level")
+
+
+@dataclass(frozen=True)
+class Config:
+    """The whole daemon configuration."""
+
+    radar: RadarConfig = field(default_factory=RadarConfig)
+    ins: InsConfig = field(default_factory=InsConfig)
+    geometry: GeometryConfig = field(default_factory=GeometryConfig)
+    mocomp: MocompConfig = field(default_factory=MocompConfig)
+    autofocus: AutofocusConfig = field(default_factory=AutofocusConfig)
+    imaging: ImagingConfig = field(default_factory=ImagingConfig)
+    recorder: RecorderConfig = field(default_factory=RecorderConfig)
+    status: StatusConfig = field(default_factory=StatusConfig)
+
+
+def load_config(path: str | Path) -> Config:
+    """Read and validate a TOML configuration file.
+
+    Parameters
+    ----------
+    path : str or Path
+        The TOML file.
+
+    Returns
+    -------
+    Config
+        The frozen configuration, defaults filled in.
+
+    Raises
+    ------
+    ConfigError
+        If the file cannot be read or parsed, or any key is unknown or invalid.
+    """
+    p = Path(path)
+    try:
+        with p.open("rb") as fh:
+            table = tomllib.load(fh)
+    except OSError as exc:
+        raise ConfigError(f"{p}: cannot read: {exc.strerror}") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"{p}: not valid TOML: {exc}") from exc
+    return parse_config(table)
+
+
+def parse_config(table: Mapping[str, Any]) -> Config:
+    """Validate a parsed TOML table into a :class:`Config`.
+
+    Raises
+    ------
+    ConfigError
+        Naming the key path, the bad value and what is allowed.
+    """
+    return _build(Config, table, "")
+
+
+def _build(cls: type, table: Any, prefix: str) -> Any:
+    if not isinstance(table, Mapping):
+        raise ConfigError(f"{prefix or '<root>'}: {table!r} is not a table")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = sorted(set(table) - set(fields))
+    if unknown:
+        where = f"{prefix}.{unknown[0]}" if prefix else unknown[0]
+        raise ConfigError(f"{where}: unknown key (allowed: {', '.join(sorted(fields))})")
+    values = {}
+    for name, value in table.items():
+        path = f"{prefix}.{name}" if prefix else name
+        values[name] = _coerce(hints[name], value, path, fields[name].metadata)
+    return cls(**values)
+
+
+def _coerce(tp: Any, value: Any, path: str, meta: Mapping[str, Any]) -> Any:
+    if dataclasses.is_dataclass(tp):
+        return _build(typing.cast(type, tp), value, path)
+    origin = typing.get_origin(tp)
+    if origin is Literal:
+        allowed = typing.get_args(tp)
+        if value not in allowed or type(value) is not type(allowed[0]):
+            raise ConfigError(f"{path}: {value!r} is not one of {', '.join(map(repr, allowed))}")
+        return value
+    if origin is tuple:
+        args = typing.get_args(tp)
+        if not isinstance(value, list) or len(value) != len(args):
+            raise ConfigError(f"{path}: {value!r} is not a list of {len(args)} numbers")
+        return tuple(
+            _coerce(a, v, f"{path}[{i}]", meta)
+            for i, (a, v) in enumerate(zip(args, value, strict=True))
+        )
+    if origin in (typing.Union, types.UnionType):
+        raise TypeError(f"{path}: union types are not supported in config sections")
+    return _scalar(tp, value, path, meta)
+
+
+def _scalar(tp: type, value: Any, path: str, meta: Mapping[str, Any]) -> Any:
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{path}: {value!r} is not true or false")
+        return value
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{path}: {value!r} is not a string")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{path}: {value!r} is not an integer")
+    elif tp is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"{path}: {value!r} is not a number")
+    for bound, test, word in (
+        ("gt", lambda v, b: v > b, ">"),
+        ("ge", lambda v, b: v >= b, ">="),
+        ("lt", lambda v, b: v < b, "<"),
+        ("le", lambda v, b: v <= b, "<="),
+    ):
+        b = meta.get(bound)
+        if b is not None and not test(value, b):
+            raise ConfigError(f"{path}: {value!r} is not {word} {b:g}")
+    return float(value) if tp is float else value
+
+
+def describe_keys() -> list[dict[str, str]]:
+    """List every key with its type, unit, default and constraints (for the README).
+
+    Returns
+    -------
+    list of dict
+        One row per key: ``key``, ``type``, ``unit``, ``default``, ``allowed``, ``doc``.
+    """
+    rows: list[dict[str, str]] = []
+    hints = typing.get_type_hints(Config)
+    for section in dataclasses.fields(Config):
+        sec_cls = hints[section.name]
+        sec_hints = typing.get_type_hints(sec_cls)
+        for f in dataclasses.fields(sec_cls):
+            tp = sec_hints[f.name]
+            allowed = _allowed_text(tp, f.metadata)
+            rows.append(
+                {
+                    "key": f"{section.name}.{f.name}",
+                    "type": _type_text(tp),
+                    "unit": f.metadata.get("unit", ""),
+                    "default": _toml_value(f.default),
+                    "allowed": allowed,
+                    "doc": f.metadata.get("doc", ""),
+                }
+            )
+    return rows
+
+
+def _type_text(tp: Any) -> str:
+    origin = typing.get_origin(tp)
+    if origin is Literal:
+        return "string" if isinstance(typing.get_args(tp)[0], str) else "integer"
+    if origin is tuple:
+        return f"array of {len(typing.get_args(tp))} numbers"
+    return {bool: "boolean", int: "integer", float: "number", str: "string"}[tp]
+
+
+def _allowed_text(tp: Any, meta: Mapping[str, Any]) -> str:
+    if typing.get_origin(tp) is Literal:
+        return ", ".join(_toml_value(a) for a in typing.get_args(tp))
+    words = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}
+    return ", ".join(f"{w} {meta[k]:g}" for k, w in words.items() if meta.get(k) is not None)
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return f'"{v}"'
+    if isinstance(v, tuple):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return f"{v:g}" if isinstance(v, float) else str(v)
+
+
+def config_to_dict(cfg: Config) -> dict[str, Any]:
+    """Return the configuration as plain dicts (JSON-able; for recorder attributes)."""
+    return dataclasses.asdict(cfg)
