@@ -1,0 +1,281 @@
+"""Preallocated ring of radar pulses, written in place by the decoder.
+
+The radar reader thread :meth:`EchoRing.reserve` s a slot, lets the decoder
+write the samples straight into ``slot.samples`` (no intermediate copy) and
+:meth:`EchoRing.commit` s it with the pulse metadata. The consumer (the
+aligner) looks at the oldest committed pulses with :meth:`EchoRing.peek_times`
+and takes them out with :meth:`EchoRing.pop`. The ring is bounded and never
+blocks the producer: when it is full, :meth:`EchoRing.reserve` returns
+``None``, counts a drop, and the next committed pulse carries
+:attr:`~sarmoco.daemon.flags.PulseFlag.DROPPED_BEFORE`.
+
+Pulses leave the ring in reservation order. Any number of producers may hold
+slots at once; a reserved slot that is neither committed nor aborted holds back
+the pulses reserved after it.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from sarmoco.daemon.flags import FLAG_DTYPE, PulseFlag
+from sarmoco.errors import ProcessingError
+from sarmoco.processing.types import IntArray
+
+SampleFormat = Literal["complex64", "int16"]
+"""How samples are held: ``complex64`` (float32 I/Q) or ``int16`` I/Q pairs (last axis I, Q)."""
+
+_FREE, _RESERVED, _COMMITTED, _ABORTED = 0, 1, 2, 3
+
+
+def sample_shape(n_samples: int, sample_format: SampleFormat) -> tuple[int, ...]:
+    """Shape of one pulse's samples in a given format: ``(S,)`` or ``(S, 2)`` for int16 I/Q."""
+    return (n_samples,) if sample_format == "complex64" else (n_samples, 2)
+
+
+def sample_dtype(sample_format: SampleFormat) -> np.dtype[np.generic]:
+    """numpy dtype of the samples in a given format."""
+    return np.dtype(np.complex64) if sample_format == "complex64" else np.dtype(np.int16)
+
+
+def to_complex64(samples: npt.NDArray[np.generic]) -> npt.NDArray[np.complex64]:
+    """Samples of either format as complex64 (int16 I/Q scaled by 1, i.e. in ADC counts).
+
+    Parameters
+    ----------
+    samples : ndarray
+        complex64 ``(..., S)`` (returned as is) or int16 ``(..., S, 2)``.
+    """
+    if samples.dtype == np.complex64:
+        return samples  # type: ignore[return-value]
+    out = np.empty(samples.shape[:-1], dtype=np.complex64)
+    out.real = samples[..., 0]
+    out.imag = samples[..., 1]
+    return out
+
+
+@dataclass(frozen=True)
+class Slot:
+    """A reserved ring slot.
+
+    Attributes
+    ----------
+    seq : int
+        Running reservation number (ring position = ``seq % capacity``).
+    samples : ndarray
+        View of the slot's row: complex64 ``(S,)`` or int16 ``(S, 2)``. The
+        decoder writes the pulse here before :meth:`EchoRing.commit`; rows it
+        does not fill keep whatever an earlier pulse left.
+    """
+
+    seq: int
+    samples: npt.NDArray[np.generic]
+
+
+@dataclass(frozen=True)
+class EchoBatch:
+    """Pulses taken out of the ring (copies, oldest first).
+
+    Attributes
+    ----------
+    samples : ndarray
+        complex64 ``(P, S)`` or int16 ``(P, S, 2)``, as held in the ring.
+    t_ns : ndarray of int64, shape (P,)
+        Transmit time, GPS ns.
+    pulse_id : ndarray of int64, shape (P,)
+        Running pulse number given by the producer.
+    channel : ndarray of int32, shape (P,)
+        Receive channel (VITA 49 stream ID).
+    flags : ndarray of uint32, shape (P,)
+        :class:`~sarmoco.daemon.flags.PulseFlag` bits.
+    """
+
+    samples: npt.NDArray[np.generic]
+    t_ns: IntArray
+    pulse_id: IntArray
+    channel: npt.NDArray[np.int32]
+    flags: npt.NDArray[np.uint32]
+
+    def __len__(self) -> int:
+        return int(self.t_ns.shape[0])
+
+    def complex_samples(self) -> npt.NDArray[np.complex64]:
+        """The samples as complex64 ``(P, S)`` (int16 I/Q converted, in ADC counts)."""
+        return to_complex64(self.samples)
+
+
+class EchoRing:
+    """Bounded ring of pulses with per-pulse time, id, channel and flags.
+
+    Parameters
+    ----------
+    capacity : int
+        Number of pulse slots (all memory is allocated here, once).
+    n_samples : int
+        Complex samples per pulse.
+    sample_format : {"complex64", "int16"}
+        Sample storage (:data:`SampleFormat`).
+
+    Attributes
+    ----------
+    dropped : int
+        Pulses refused because the ring was full.
+    committed_total, aborted_total, popped_total : int
+        Running counts of committed, aborted and consumed slots.
+    """
+
+    def __init__(
+        self, capacity: int, n_samples: int, sample_format: SampleFormat = "complex64"
+    ) -> None:
+        if capacity < 1 or n_samples < 1:
+            raise ProcessingError(
+                f"EchoRing: capacity {capacity} and n_samples {n_samples} must be >= 1"
+            )
+        if sample_format not in ("complex64", "int16"):
+            raise ProcessingError(
+                f"EchoRing: sample_format {sample_format!r} is not complex64 or int16"
+            )
+        self.capacity = capacity
+        self.n_samples = n_samples
+        self.sample_format: SampleFormat = sample_format
+        self._samples = np.zeros(
+            (capacity, *sample_shape(n_samples, sample_format)), dtype=sample_dtype(sample_format)
+        )
+        self._t_ns = np.zeros(capacity, dtype=np.int64)
+        self._pulse_id = np.zeros(capacity, dtype=np.int64)
+        self._channel = np.zeros(capacity, dtype=np.int32)
+        self._flags = np.zeros(capacity, dtype=FLAG_DTYPE)
+        self._state = np.full(capacity, _FREE, dtype=np.uint8)
+        self._head = 0  # next seq to reserve
+        self._tail = 0  # oldest seq not yet consumed
+        self._ready = 0  # committed slots at the tail, in order, not yet consumed
+        self._drop_pending = False
+        self._lock = threading.Lock()
+        self.dropped = 0
+        self.committed_total = 0
+        self.aborted_total = 0
+        self.popped_total = 0
+
+    def reserve(self) -> Slot | None:
+        """Reserve the next slot for one pulse; ``None`` (and a counted drop) when full."""
+        with self._lock:
+            if self._head - self._tail >= self.capacity:
+                self.dropped += 1
+                self._drop_pending = True
+                return None
+            seq = self._head
+            self._head += 1
+            self._state[seq % self.capacity] = _RESERVED
+        return Slot(seq, self._samples[seq % self.capacity])
+
+    def commit(
+        self, slot: Slot, t_ns: int, pulse_id: int, channel: int = 0, flags: int = PulseFlag.NONE
+    ) -> None:
+        """Publish a filled slot with its metadata.
+
+        Parameters
+        ----------
+        slot : Slot
+            From :meth:`reserve`, its samples written.
+        t_ns : int
+            Transmit time, GPS ns.
+        pulse_id : int
+            Running pulse number.
+        channel : int
+            Receive channel.
+        flags : int
+            :class:`~sarmoco.daemon.flags.PulseFlag` bits known at decode time.
+        """
+        i = self._check(slot)
+        self._t_ns[i] = t_ns
+        self._pulse_id[i] = pulse_id
+        self._channel[i] = channel
+        with self._lock:
+            if self._drop_pending:
+                flags |= PulseFlag.DROPPED_BEFORE
+                self._drop_pending = False
+            self._flags[i] = flags
+            self._state[i] = _COMMITTED
+            self.committed_total += 1
+            self._advance_ready()
+
+    def abort(self, slot: Slot) -> None:
+        """Give a reserved slot back unpublished (the decoder rejected the packet)."""
+        i = self._check(slot)
+        with self._lock:
+            self._state[i] = _ABORTED
+            self.aborted_total += 1
+            self._advance_ready()
+
+    def __len__(self) -> int:
+        """Committed pulses ready to be taken, oldest first, in order."""
+        with self._lock:
+            return self._ready
+
+    def peek_times(self, max_n: int | None = None) -> IntArray:
+        """Transmit times (GPS ns) of the ready pulses, oldest first (a copy).
+
+        Parameters
+        ----------
+        max_n : int, optional
+            Look at no more than this many pulses.
+        """
+        with self._lock:
+            n = self._ready if max_n is None else min(max_n, self._ready)
+            idx = self._indices(n)
+            return self._t_ns[idx].copy()
+
+    def pop(self, n: int) -> EchoBatch:
+        """Take the ``n`` oldest ready pulses out of the ring (copied, slots freed).
+
+        Raises
+        ------
+        ProcessingError
+            If fewer than ``n`` pulses are ready.
+        """
+        with self._lock:
+            if n > self._ready:
+                raise ProcessingError(f"EchoRing.pop: {n} pulses asked, {self._ready} ready")
+            idx = self._indices(n)
+        batch = EchoBatch(
+            samples=self._samples[idx],
+            t_ns=self._t_ns[idx],
+            pulse_id=self._pulse_id[idx],
+            channel=self._channel[idx],
+            flags=self._flags[idx],
+        )
+        with self._lock:
+            self._state[idx] = _FREE
+            self._tail += n
+            self._ready -= n
+            self.popped_total += n
+            self._advance_ready()
+        return batch
+
+    def _indices(self, n: int) -> npt.NDArray[np.intp]:
+        """Ring positions of the first ``n`` ready pulses (lock held)."""
+        return (self._tail + np.arange(n)) % self.capacity
+
+    def _advance_ready(self) -> None:
+        """Count newly ready slots at the tail; free aborted ones there (lock held)."""
+        while self._tail + self._ready < self._head:
+            i = (self._tail + self._ready) % self.capacity
+            state = self._state[i]
+            if state == _COMMITTED:
+                self._ready += 1
+            elif state == _ABORTED and self._ready == 0:  # ready runs hold no holes
+                self._state[i] = _FREE
+                self._tail += 1
+            else:
+                break
+
+    def _check(self, slot: Slot) -> int:
+        i = slot.seq % self.capacity
+        if self._state[i] != _RESERVED or not self._tail <= slot.seq < self._head:
+            raise ProcessingError(f"EchoRing: slot {slot.seq} is not reserved")
+        return int(i)

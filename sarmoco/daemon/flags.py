@@ -1,0 +1,70 @@
+"""Per-pulse quality flags, one bit each, recorded with every pulse.
+
+A flag never changes the data: it says what the daemon knows about a pulse
+(navigation missing, receiver trouble, pulses lost before it). The processor
+decides what to do with flagged pulses; the recorder keeps the flags as
+``uint32`` (:data:`FLAG_DTYPE`).
+"""
+
+from __future__ import annotations
+
+import enum
+
+import numpy as np
+
+from sarmoco.drivers.samples import EchoPacket
+
+FLAG_DTYPE = np.dtype(np.uint32)
+"""Storage type of the flags in the ring and in the store."""
+
+
+class PulseFlag(enum.IntFlag):
+    """Quality bits of one pulse."""
+
+    NONE = 0
+    NAV_GAP = 1 << 0
+    """The INS samples around the pulse are further apart than the allowed gap
+    (dropout, samples rejected for a clock inconsistency, before the first or after
+    a break): the navigation is not interpolated (NaN), never bridged."""
+    NAV_TIMEOUT = 1 << 1
+    """No INS sample at or after the pulse arrived within the latency budget:
+    the navigation is not interpolated (NaN)."""
+    INVALID_DATA = 1 << 2
+    """The radar said the samples are not valid (VITA 49 trailer valid-data bit)."""
+    SAMPLE_LOSS = 1 << 3
+    """The radar lost samples inside this pulse (VITA 49 trailer)."""
+    OVER_RANGE = 1 << 4
+    """The receiver was over range (VITA 49 trailer)."""
+    LOST_BEFORE = 1 << 5
+    """Radar packets of this channel were lost on the link before this pulse."""
+    DROPPED_BEFORE = 1 << 6
+    """The echo ring was full: the daemon dropped pulses before this one."""
+
+    @classmethod
+    def from_packet(cls, packet: EchoPacket) -> PulseFlag:
+        """The receiver and link flags of a decoded radar packet.
+
+        Parameters
+        ----------
+        packet : EchoPacket
+            Metadata returned by the radar decoder.
+
+        Returns
+        -------
+        PulseFlag
+            ``INVALID_DATA``, ``SAMPLE_LOSS``, ``OVER_RANGE`` and ``LOST_BEFORE`` as they apply.
+        """
+        flags = cls.NONE
+        if not packet.valid_data:
+            flags |= cls.INVALID_DATA
+        if packet.sample_loss:
+            flags |= cls.SAMPLE_LOSS
+        if packet.over_range:
+            flags |= cls.OVER_RANGE
+        if packet.lost_before:
+            flags |= cls.LOST_BEFORE
+        return flags
+
+
+NAV_UNUSABLE = PulseFlag.NAV_GAP | PulseFlag.NAV_TIMEOUT
+"""Flags under which a pulse has no navigation solution (NaN motion)."""
