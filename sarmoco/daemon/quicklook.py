@@ -1,0 +1,113 @@
+"""Quicklook PNGs for an operator: the image in dB, the motion solution, autofocus estimates.
+
+Drawn with matplotlib's object API (``Figure``, no pyplot state, no display).
+Axes are in metres and seconds.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+from matplotlib.figure import Figure
+
+DYNAMIC_RANGE_DB = 40.0
+"""Intensity range shown below the image peak, dB."""
+
+
+def _nice_length(span_m: float) -> float:
+    """A 1-2-5 length close to a fifth of ``span_m`` (for the scale bar), m."""
+    target = span_m / 5.0
+    exponent = np.floor(np.log10(target))
+    for mult in (1.0, 2.0, 5.0, 10.0):
+        if mult * 10**exponent >= target:
+            return float(mult * 10**exponent)
+    return float(10 ** (exponent + 1))
+
+
+def plot_image(
+    data: npt.NDArray[np.generic],
+    axis0_m: npt.NDArray[np.float64],
+    axis1_m: npt.NDArray[np.float64],
+    path: Path,
+    title: str,
+    axis_names: tuple[str, str] = ("along-track x (m)", "cross-track / range (m)"),
+) -> Path:
+    """Write a complex image as a dB quicklook with metre axes and a scale bar.
+
+    Parameters
+    ----------
+    data : ndarray, shape (n0, n1)
+        Complex or magnitude image; axis 0 is plotted vertically.
+    axis0_m, axis1_m : ndarray
+        Pixel-centre coordinates, m.
+    path : Path
+        PNG to write.
+    title : str
+        Figure title.
+    axis_names : tuple of str
+        Labels of axis 0 and axis 1.
+    """
+    power = np.abs(np.asarray(data)) ** 2
+    peak = float(power.max()) if power.size and power.max() > 0 else 1.0
+    db = 10.0 * np.log10(np.maximum(power / peak, 10 ** (-DYNAMIC_RANGE_DB / 10)))
+    fig = Figure(figsize=(7, 6), dpi=110)
+    ax = fig.subplots()
+    extent = (float(axis1_m[0]), float(axis1_m[-1]), float(axis0_m[0]), float(axis0_m[-1]))
+    im = ax.imshow(
+        db,
+        origin="lower",
+        extent=extent,
+        cmap="gray",
+        vmin=-DYNAMIC_RANGE_DB,
+        vmax=0.0,
+        aspect="equal",
+        interpolation="nearest",
+    )
+    fig.colorbar(im, ax=ax, label="intensity (dB re peak)")
+    bar = _nice_length(extent[1] - extent[0])
+    x0 = extent[0] + 0.05 * (extent[1] - extent[0])
+    y0 = extent[2] + 0.05 * (extent[3] - extent[2])
+    ax.plot([x0, x0 + bar], [y0, y0], color="yellow", linewidth=3)
+    ax.text(x0 + bar / 2, y0, f"{bar:g} m", color="yellow", ha="center", va="bottom")
+    ax.set_xlabel(axis_names[1])
+    ax.set_ylabel(axis_names[0])
+    ax.set_title(title)
+    fig.tight_layout()
+    fig.savefig(path)
+    return path
+
+
+def plot_series(
+    t_s: npt.NDArray[np.float64],
+    series: Mapping[str, npt.NDArray[np.float64]],
+    path: Path,
+    title: str,
+) -> Path:
+    """Plot named time series one panel each (label carries the unit), against time in s.
+
+    Parameters
+    ----------
+    t_s : ndarray
+        Time axis, s from the start of the run.
+    series : mapping of str to ndarray
+        Panel label (with unit, e.g. ``"d_los (m)"``) to values, same length as ``t_s``.
+    path : Path
+        PNG to write.
+    title : str
+        Figure title.
+    """
+    n = max(len(series), 1)
+    fig = Figure(figsize=(8, 2.0 * n + 0.8), dpi=100)
+    axes = fig.subplots(n, 1, sharex=True, squeeze=False)
+    for ax, (label, values) in zip(axes[:, 0], series.items(), strict=False):
+        ax.plot(t_s, values, linewidth=0.9)
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("time (s)")
+    axes[0, 0].set_title(title)
+    fig.tight_layout()
+    fig.savefig(path)
+    return path
