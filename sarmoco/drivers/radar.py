@@ -1,0 +1,236 @@
+"""Radar echo sources: VITA 49.2 packets over UDP, TCP or from a ``.vrt`` file.
+
+All three share one call, :meth:`RadarSource.read_into`, which decodes the
+packets available within a timeout straight into the rows of a caller-provided
+array (the daemon's echo ring buffer) and returns one :class:`EchoPacket` per
+row written.
+"""
+
+from __future__ import annotations
+
+import logging
+import select
+import socket
+from abc import ABC, abstractmethod
+from pathlib import Path
+from types import TracebackType
+from typing import BinaryIO
+
+import numpy as np
+import numpy.typing as npt
+
+from sarmoco.drivers.samples import EchoPacket
+from sarmoco.drivers.vita49 import VitaDecoder, VitaStreamFramer
+from sarmoco.errors import DriverError
+
+log = logging.getLogger(__name__)
+
+DEFAULT_RCVBUF_BYTES = 64 * 1024 * 1024
+"""Socket receive buffer asked for (the kernel caps it at net.core.rmem_max)."""
+
+
+class RadarSource(ABC):
+    """A source of radar pulses decoded by a :class:`VitaDecoder`.
+
+    Attributes
+    ----------
+    decoder : VitaDecoder
+        Holds the counters (``decoder.counters``) and the last context values.
+    eof : bool
+        True once a file source is exhausted or a TCP peer closed the stream.
+    """
+
+    def __init__(self, decoder: VitaDecoder) -> None:
+        self.decoder = decoder
+        self.eof = False
+
+    @abstractmethod
+    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.1) -> list[EchoPacket]:
+        """Decode the pulses available within ``timeout_s`` into ``out[0], out[1], ...``.
+
+        Parameters
+        ----------
+        out : ndarray
+            Preallocated rows, shape (rows, n_samples) complex64 (or
+            (rows, n_samples, 2) int16 for int16 payloads). At most ``rows``
+            pulses are read.
+        timeout_s : float
+            Longest wait for the first packet, s.
+
+        Returns
+        -------
+        list of EchoPacket
+            Metadata of the pulses written, in row order.
+        """
+
+    @abstractmethod
+    def close(self) -> None:
+        """Release the link; idempotent."""
+
+    def __enter__(self) -> RadarSource:
+        return self
+
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
+        self.close()
+
+
+class RadarUdpSource(RadarSource):
+    """Receives one packet per datagram on a UDP port.
+
+    Parameters
+    ----------
+    host, port : str, int
+        Local address to bind (port 0 picks a free one; see :attr:`address`).
+    decoder : VitaDecoder
+        Decoder configured with the radar's profile.
+    rcvbuf_bytes : int
+        Socket receive buffer requested.
+    """
+
+    def __init__(
+        self, host: str, port: int, decoder: VitaDecoder, rcvbuf_bytes: int = DEFAULT_RCVBUF_BYTES
+    ) -> None:
+        super().__init__(decoder)
+        try:
+            self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf_bytes)
+            self._sock.bind((host, port))
+        except OSError as exc:
+            raise DriverError(f"radar udp {host}:{port}: cannot bind: {exc}") from exc
+        self._sock.setblocking(False)
+        self.address: tuple[str, int] = self._sock.getsockname()
+        self.rcvbuf_bytes = self._sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        self._buf = bytearray(decoder.max_packet_bytes + 4)
+        self._view = memoryview(self._buf)
+
+    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.1) -> list[EchoPacket]:
+        got: list[EchoPacket] = []
+        rows = out.shape[0]
+        if rows == 0 or not select.select([self._sock], [], [], timeout_s)[0]:
+            return got
+        recv_into, decode, view = self._sock.recv_into, self.decoder.decode_into, self._view
+        while len(got) < rows:
+            try:
+                n = recv_into(self._buf)
+            except BlockingIOError:
+                break
+            except OSError as exc:
+                raise DriverError(f"radar udp {self.address}: {exc}") from exc
+            pkt = decode(view[:n], out[len(got)])
+            if pkt is not None:
+                got.append(pkt)
+        return got
+
+    def close(self) -> None:
+        self._view.release()
+        self._sock.close()
+
+
+class _StreamRadarSource(RadarSource):
+    """Common part of the byte-stream sources: read chunks, frame, decode."""
+
+    chunk_bytes = 1 << 20
+
+    def __init__(self, decoder: VitaDecoder) -> None:
+        super().__init__(decoder)
+        self._framer = VitaStreamFramer(decoder)
+
+    @abstractmethod
+    def _read_chunk(self, timeout_s: float) -> bytes | None:
+        """Bytes read (b"" at end of stream) or None if nothing arrived in time."""
+
+    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.1) -> list[EchoPacket]:
+        got: list[EchoPacket] = []
+        rows = out.shape[0]
+        waited = False
+        while len(got) < rows:
+            packet = self._framer.next_packet()
+            if packet is None:
+                if self.eof or (waited and got):
+                    break
+                chunk = self._read_chunk(0.0 if waited else timeout_s)
+                waited = True
+                if chunk is None:
+                    break
+                if not chunk:
+                    self.eof = True
+                    break
+                self._framer.feed(chunk)
+                continue
+            pkt = self.decoder.decode_into(packet, out[len(got)])
+            self._framer.consume(packet, self.decoder.last_ok)
+            if pkt is not None:
+                got.append(pkt)
+        return got
+
+
+class RadarTcpSource(_StreamRadarSource):
+    """Connects to a radar (or simulator) serving packets back to back over TCP.
+
+    Parameters
+    ----------
+    host, port : str, int
+        Address of the server.
+    decoder : VitaDecoder
+        Decoder configured with the radar's profile.
+    connect_timeout_s : float
+        Longest wait for the connection, s.
+    """
+
+    def __init__(
+        self, host: str, port: int, decoder: VitaDecoder, connect_timeout_s: float = 5.0
+    ) -> None:
+        super().__init__(decoder)
+        try:
+            self._sock = socket.create_connection((host, port), timeout=connect_timeout_s)
+            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, DEFAULT_RCVBUF_BYTES)
+        except OSError as exc:
+            raise DriverError(f"radar tcp {host}:{port}: cannot connect: {exc}") from exc
+        self._sock.setblocking(False)
+        self._name = f"{host}:{port}"
+
+    def _read_chunk(self, timeout_s: float) -> bytes | None:
+        if not select.select([self._sock], [], [], timeout_s)[0]:
+            return None
+        try:
+            data = self._sock.recv(self.chunk_bytes)
+        except BlockingIOError:
+            return None
+        except OSError as exc:
+            raise DriverError(f"radar tcp {self._name}: {exc}") from exc
+        if not data:
+            log.info("radar tcp %s: peer closed the stream", self._name)
+        return data
+
+    def close(self) -> None:
+        self._sock.close()
+
+
+class RadarFileSource(_StreamRadarSource):
+    """Reads a ``.vrt`` file: the same packets back to back.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    decoder : VitaDecoder
+        Decoder configured with the radar's profile.
+    """
+
+    def __init__(self, path: str | Path, decoder: VitaDecoder) -> None:
+        super().__init__(decoder)
+        try:
+            self._file: BinaryIO = open(path, "rb")
+        except OSError as exc:
+            raise DriverError(f"radar file {path}: cannot open: {exc}") from exc
+
+    def _read_chunk(self, timeout_s: float) -> bytes | None:
+        return self._file.read(self.chunk_bytes)
+
+    def close(self) -> None:
+        self._file.close()

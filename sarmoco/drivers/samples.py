@@ -1,0 +1,171 @@
+"""Typed, timestamped samples produced by every driver.
+
+Drivers do not depend on :mod:`sarmoco.processing`; the daemon converts these
+records into its own arrays. Conventions (METHODS §1): SI units, velocities in
+local NED (north, east, down) m/s, quaternions scalar-first ``(w, x, y, z)``
+rotating body-frame vectors into NED, times in GPS ns since 1980-01-06
+(:mod:`sarmoco.drivers.clock`).
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+
+class Validity(enum.IntFlag):
+    """What the source says is trustworthy in a sample."""
+
+    NONE = 0
+    ATTITUDE = 1
+    """Roll and pitch are valid."""
+    HEADING = 2
+    """Heading (yaw) is valid."""
+    VELOCITY = 4
+    """Velocity is valid."""
+    POSITION = 8
+    """Position is valid."""
+    TIME = 16
+    """The sample time is mapped onto GPS time by a synchronised clock."""
+
+
+@dataclass(frozen=True, slots=True)
+class VelocitySample:
+    """Velocity (and position when the message has one) of the INS.
+
+    Attributes
+    ----------
+    t_gps_ns : int
+        Sample time, GPS ns.
+    vel_ned_mps : tuple of 3 float
+        Velocity north, east, down, m/s.
+    valid : Validity
+        Validity flags from the source's solution status.
+    source : str
+        Message it came from, e.g. ``"sbg.EKF_NAV"``, ``"mavlink.LOCAL_POSITION_NED"``.
+    device_time_ns : int
+        The same instant on the device's own clock (boot time), ns.
+    pos_ned_m : tuple of 3 float or None
+        Local NED position, m, when the message carries one.
+    vel_std_mps : tuple of 3 float or None
+        1-sigma velocity accuracy, m/s, when the message carries one.
+    """
+
+    t_gps_ns: int
+    vel_ned_mps: tuple[float, float, float]
+    valid: Validity
+    source: str
+    device_time_ns: int
+    pos_ned_m: tuple[float, float, float] | None = None
+    vel_std_mps: tuple[float, float, float] | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class AttitudeSample:
+    """Attitude of the INS body frame.
+
+    Attributes
+    ----------
+    t_gps_ns : int
+        Sample time, GPS ns.
+    quat_wxyz : tuple of 4 float
+        Unit quaternion, scalar first, rotating body to NED (3-2-1 yaw, pitch, roll).
+    valid : Validity
+        Validity flags.
+    source : str
+        Message it came from.
+    device_time_ns : int
+        The same instant on the device clock, ns.
+    """
+
+    t_gps_ns: int
+    quat_wxyz: tuple[float, float, float, float]
+    valid: Validity
+    source: str
+    device_time_ns: int
+
+
+@dataclass(frozen=True, slots=True)
+class EventSample:
+    """A time-stamped external event (sync-in edge, e.g. a radar trigger).
+
+    Attributes
+    ----------
+    t_gps_ns : int
+        Event time, GPS ns.
+    channel : str
+        Input that saw it, e.g. ``"A"``.
+    valid : Validity
+        ``TIME`` when the event time is on a synchronised clock.
+    source : str
+        Message it came from.
+    device_time_ns : int
+        Event time on the device clock, ns.
+    """
+
+    t_gps_ns: int
+    channel: str
+    valid: Validity
+    source: str
+    device_time_ns: int
+
+
+@dataclass(frozen=True, slots=True)
+class TimeSample:
+    """A device-clock → GPS time pair reported by the device (SBG UTC_TIME, SYSTEM_TIME...).
+
+    Attributes
+    ----------
+    t_gps_ns : int
+        GPS time, ns.
+    device_time_ns : int
+        The same instant on the device clock, ns.
+    valid : Validity
+        ``TIME`` when the device says its clock is valid.
+    source : str
+        Message it came from.
+    """
+
+    t_gps_ns: int
+    device_time_ns: int
+    valid: Validity
+    source: str
+
+
+Sample = VelocitySample | AttitudeSample | EventSample | TimeSample
+"""Any navigation-side sample a driver yields."""
+
+
+@dataclass(frozen=True, slots=True)
+class EchoPacket:
+    """Metadata of one radar pulse decoded into a caller's array row.
+
+    Attributes
+    ----------
+    stream_id : int
+        VITA 49 stream ID = receive channel.
+    t_gps_ns : int
+        Transmit time of the pulse, GPS ns.
+    packet_count : int
+        The 4-bit VITA 49 packet count (0..15).
+    n_samples : int
+        Complex samples written.
+    valid_data : bool
+        Trailer valid-data indicator (True when the trailer does not enable it).
+    sample_loss : bool
+        Trailer sample-loss indicator.
+    over_range : bool
+        Trailer over-range indicator.
+    lost_before : int
+        Packets missing between the previous packet of this stream and this one
+        (from the 4-bit count, so modulo 16).
+    """
+
+    stream_id: int
+    t_gps_ns: int
+    packet_count: int
+    n_samples: int
+    valid_data: bool
+    sample_loss: bool
+    over_range: bool
+    lost_before: int

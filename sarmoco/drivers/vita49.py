@@ -1,0 +1,517 @@
+"""VITA 49.2 radar echo packets: the pure encoder and decoder (no I/O).
+
+Profile (what sarmoco reads and what its simulator writes; README "Radar wire format"):
+
+* Signal data packet with stream ID (packet type 1), one pulse per packet,
+  stream ID = receive channel. Class ID present (any OUI accepted), trailer present.
+* TSI = 1 (UTC: POSIX seconds since 1970-01-01) or 2 (GPS: seconds since
+  1980-01-06); TSF = 2 (real-time picoseconds within the second). The timestamp is
+  the **transmit time** of the pulse; the range-gate delay comes from configuration.
+* 4-bit packet count per stream, checked for loss.
+* Payload: interleaved I/Q, signed 16-bit or IEEE-754 float32, big-endian.
+* Trailer: valid-data (enable bit 30 / indicator bit 18), over-range (25 / 13) and
+  sample-loss (24 / 12) indicators are read when enabled.
+* Context packets (type 4) with CIF0 bandwidth (bit 29), RF reference frequency
+  (bit 27) and sample rate (bit 21), each 64-bit two's complement with 20
+  fractional bits, Hz; checked against configuration when expectations are given.
+
+Every length in a header is checked against the packet before anything is sliced;
+the payload is converted by numpy straight into the caller's preallocated row.
+"""
+
+from __future__ import annotations
+
+import logging
+import struct
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+import numpy.typing as npt
+
+from sarmoco.drivers.clock import NS_PER_S, gps_ns_to_unix_ns, unix_ns_to_gps_ns
+from sarmoco.drivers.counters import BurstLog, DriverCounters
+from sarmoco.drivers.samples import EchoPacket
+from sarmoco.errors import ConfigError
+
+log = logging.getLogger(__name__)
+
+PayloadFormat = Literal["int16", "float32"]
+TimeBase = Literal["gps", "utc"]
+
+TYPE_SIGNAL_SID = 1
+TYPE_CONTEXT = 4
+TSI_UTC = 1
+TSI_GPS = 2
+TSF_REALTIME_PS = 2
+PS_PER_NS = 1000
+MAX_CONTEXT_WORDS = 64
+"""Largest context packet accepted, 32-bit words (the profile's needs ~20)."""
+
+_CIF0_BANDWIDTH = 29
+_CIF0_RF_REF = 27
+_CIF0_SAMPLE_RATE = 21
+# Words of each CIF0 field from bit 30 down to bit 21 (the profile reads no further).
+_CIF0_FIELD_WORDS = {30: 1, 29: 2, 28: 2, 27: 2, 26: 2, 25: 2, 24: 1, 23: 1, 22: 1, 21: 2}
+_CIF_EXTRA_WORD_BITS = (1, 2, 3, 7)
+_RADIX = float(1 << 20)
+
+_TR_CAL_TIME = (31, 19)
+_TR_VALID = (30, 18)
+_TR_OVER_RANGE = (25, 13)
+_TR_SAMPLE_LOSS = (24, 12)
+
+_U32 = struct.Struct(">I")
+_Q64 = struct.Struct(">Q")
+_Q64S = struct.Struct(">q")
+
+_SRC_DTYPES: dict[str, np.dtype] = {"int16": np.dtype(">i2"), "float32": np.dtype(">f4")}
+
+
+def _timestamp_words(t_gps_ns: int, time_base: TimeBase, leap_s: int) -> tuple[int, int]:
+    t = gps_ns_to_unix_ns(t_gps_ns, leap_s) if time_base == "utc" else int(t_gps_ns)
+    seconds, ns = divmod(t, NS_PER_S)
+    return seconds, ns * PS_PER_NS
+
+
+def _header_word(ptype: int, trailer: bool, tsi: int, count: int, size_words: int) -> int:
+    return (
+        (ptype << 28)
+        | (1 << 27)
+        | (int(trailer) << 26)
+        | (tsi << 22)
+        | (TSF_REALTIME_PS << 20)
+        | ((count & 0xF) << 16)
+        | size_words
+    )
+
+
+def encode_signal_packet(
+    stream_id: int,
+    t_gps_ns: int,
+    count: int,
+    iq: npt.NDArray[np.generic],
+    payload: PayloadFormat = "int16",
+    *,
+    time_base: TimeBase = "gps",
+    leap_s: int = 18,
+    oui: int = 0,
+    valid_data: bool = True,
+    sample_loss: bool = False,
+    over_range: bool = False,
+) -> bytes:
+    """Encode one pulse as a VITA 49.2 signal data packet of this profile.
+
+    Parameters
+    ----------
+    stream_id : int
+        Receive channel, 32-bit.
+    t_gps_ns : int
+        Transmit time of the pulse, GPS ns.
+    count : int
+        Packet count of this stream (taken modulo 16).
+    iq : ndarray
+        Complex samples (any complex dtype, shape (n,)) or interleaved real
+        pairs (shape (n, 2) or (2n,)).
+    payload : {"int16", "float32"}
+        Wire format of I and Q. Complex input is rounded to int16 when ``int16``.
+    time_base : {"gps", "utc"}
+        TSI written (2 = GPS, 1 = UTC POSIX seconds).
+    leap_s : int
+        GPS − UTC, s (only used for ``utc``).
+    oui : int
+        24-bit OUI of the class ID.
+    valid_data, sample_loss, over_range : bool
+        Trailer indicators (all enabled).
+    """
+    arr = np.asarray(iq)
+    flat = arr.view(arr.real.dtype).reshape(-1) if np.iscomplexobj(arr) else arr.reshape(-1)
+    if payload == "int16":
+        flat = np.rint(flat) if flat.dtype.kind == "f" else flat
+    body = np.ascontiguousarray(flat, dtype=_SRC_DTYPES[payload]).tobytes()
+    seconds, ps = _timestamp_words(t_gps_ns, time_base, leap_s)
+    size_words = 7 + len(body) // 4 + 1
+    tsi = TSI_UTC if time_base == "utc" else TSI_GPS
+    enables = (1 << _TR_CAL_TIME[0]) | (1 << _TR_VALID[0]) | (1 << _TR_OVER_RANGE[0])
+    enables |= 1 << _TR_SAMPLE_LOSS[0]
+    ind = (1 << _TR_CAL_TIME[1]) | (int(valid_data) << _TR_VALID[1])
+    ind |= (int(over_range) << _TR_OVER_RANGE[1]) | (int(sample_loss) << _TR_SAMPLE_LOSS[1])
+    packet_class = 1 if payload == "int16" else 2
+    head = struct.pack(
+        ">IIIIIQ",
+        _header_word(TYPE_SIGNAL_SID, True, tsi, count, size_words),
+        stream_id & 0xFFFFFFFF,
+        oui & 0xFFFFFF,
+        packet_class,
+        seconds & 0xFFFFFFFF,
+        ps,
+    )
+    return head + body + _U32.pack(enables | ind)
+
+
+def encode_context_packet(
+    stream_id: int,
+    t_gps_ns: int,
+    count: int,
+    *,
+    bandwidth_hz: float,
+    rf_reference_hz: float,
+    sample_rate_hz: float,
+    time_base: TimeBase = "gps",
+    leap_s: int = 18,
+    oui: int = 0,
+) -> bytes:
+    """Encode a context packet (type 4) with CIF0 bandwidth, RF reference frequency, sample rate.
+
+    Frequencies are in Hz and quantised to 2^-20 Hz.
+    """
+    cif0 = (1 << _CIF0_BANDWIDTH) | (1 << _CIF0_RF_REF) | (1 << _CIF0_SAMPLE_RATE)
+    fields = b"".join(
+        _Q64S.pack(round(v * _RADIX)) for v in (bandwidth_hz, rf_reference_hz, sample_rate_hz)
+    )
+    seconds, ps = _timestamp_words(t_gps_ns, time_base, leap_s)
+    size_words = 7 + 1 + len(fields) // 4
+    tsi = TSI_UTC if time_base == "utc" else TSI_GPS
+    head = struct.pack(
+        ">IIIIIQI",
+        _header_word(TYPE_CONTEXT, False, tsi, count, size_words),
+        stream_id & 0xFFFFFFFF,
+        oui & 0xFFFFFF,
+        0,
+        seconds & 0xFFFFFFFF,
+        ps,
+        cif0,
+    )
+    return head + fields
+
+
+@dataclass(frozen=True)
+class ContextExpectation:
+    """Radar parameters from configuration that context packets must agree with.
+
+    Attributes
+    ----------
+    bandwidth_hz, rf_reference_hz, sample_rate_hz : float
+        Expected values, Hz.
+    rel_tol : float
+        Allowed relative difference.
+    """
+
+    bandwidth_hz: float
+    rf_reference_hz: float
+    sample_rate_hz: float
+    rel_tol: float = 1e-6
+
+
+@dataclass(frozen=True)
+class ContextValues:
+    """Values read from the last context packet of a stream (None when absent)."""
+
+    stream_id: int
+    t_gps_ns: int
+    bandwidth_hz: float | None
+    rf_reference_hz: float | None
+    sample_rate_hz: float | None
+
+
+class VitaDecoder:
+    """Decodes packets of this profile into rows of a caller-provided array.
+
+    Parameters
+    ----------
+    n_samples : int
+        Complex samples per pulse (from configuration); a packet with another
+        payload size is rejected.
+    payload : {"int16", "float32"}
+        Wire format of I and Q.
+    leap_s : int
+        GPS − UTC, s, for packets stamped in UTC.
+    expect : ContextExpectation or None
+        If given, each context packet is checked against it.
+    link : str
+        Name used in log messages.
+
+    Notes
+    -----
+    Bad packets are counted in :attr:`counters` and logged once per burst; they
+    never raise. A context packet that disagrees with ``expect`` raises
+    :class:`~sarmoco.errors.ConfigError` naming the field: the radar is not
+    configured as sarmoco believes, and focusing would be wrong.
+    """
+
+    def __init__(
+        self,
+        n_samples: int,
+        payload: PayloadFormat = "int16",
+        *,
+        leap_s: int = 18,
+        expect: ContextExpectation | None = None,
+        link: str = "vita49",
+    ) -> None:
+        if n_samples < 1:
+            raise ConfigError(f"radar.n_samples: {n_samples!r} is not >= 1")
+        if payload not in _SRC_DTYPES:
+            raise ConfigError(f"radar.payload: {payload!r} is not one of 'int16', 'float32'")
+        self.n_samples = n_samples
+        self.payload: PayloadFormat = payload
+        self.leap_s = leap_s
+        self.expect = expect
+        self.counters = DriverCounters()
+        self.context: dict[int, ContextValues] = {}
+        self._src_dtype = _SRC_DTYPES[payload]
+        self._payload_bytes = 2 * n_samples * self._src_dtype.itemsize
+        self._last_count: dict[tuple[int, int], int] = {}
+        self._burst = BurstLog(log, link)
+        self.last_ok = False
+        """Whether the last packet given to :meth:`decode_into` was accepted."""
+
+    @property
+    def max_packet_bytes(self) -> int:
+        """Largest packet this decoder accepts, bytes (the frame limit)."""
+        return max(4 * 8 + self._payload_bytes, 4 * MAX_CONTEXT_WORDS)
+
+    def expected_words(self, header: int) -> int | None:
+        """Packet size in words implied by a header word, or None if it is not of this profile.
+
+        Used by stream framers to resynchronise: only headers announcing
+        exactly the size this profile produces are plausible.
+        """
+        ptype = header >> 28
+        size = header & 0xFFFF
+        if ptype == TYPE_SIGNAL_SID:
+            words = 2 + 2 * ((header >> 27) & 1) + 3 + ((header >> 26) & 1)
+            return size if size == words + self._payload_bytes // 4 else None
+        if ptype == TYPE_CONTEXT:
+            return size if 3 <= size <= MAX_CONTEXT_WORDS else None
+        return None
+
+    def check_row(self, out_row: npt.NDArray[np.generic]) -> npt.NDArray[np.generic]:
+        """Validate a destination row and return the flat real view written into."""
+        if not out_row.flags.c_contiguous:
+            raise ConfigError(f"radar ring row: {out_row.shape} is not C-contiguous")
+        flat: npt.NDArray[np.generic]
+        if out_row.dtype == np.complex64:
+            flat = out_row.view(np.float32)
+        elif out_row.dtype == np.int16 and self.payload == "int16":
+            flat = out_row.reshape(-1)
+        else:
+            raise ConfigError(
+                f"radar ring dtype: {out_row.dtype} cannot hold {self.payload} I/Q "
+                "(use complex64, or int16 for int16 payloads)"
+            )
+        if flat.size != 2 * self.n_samples:
+            raise ConfigError(
+                f"radar ring row: {out_row.shape} {out_row.dtype} is not a row of "
+                f"{self.n_samples} complex samples"
+            )
+        return flat
+
+    def _bad(self, kind: str, detail: str) -> None:
+        self.counters.parse_errors += 1
+        self._burst.error(kind, detail)
+
+    def _time(self, tsi: int, seconds: int, ps: int) -> int:
+        t = seconds * NS_PER_S + (ps + PS_PER_NS // 2) // PS_PER_NS
+        return unix_ns_to_gps_ns(t, self.leap_s) if tsi == TSI_UTC else t
+
+    def _count(self, ptype: int, stream_id: int, count: int) -> int:
+        key = (ptype, stream_id)
+        last = self._last_count.get(key)
+        self._last_count[key] = count
+        if last is None:
+            return 0
+        lost = (count - last - 1) & 0xF
+        if lost:
+            self.counters.gaps += 1
+            self.counters.drops += lost
+        return lost
+
+    def decode_into(
+        self, packet: bytes | bytearray | memoryview, out_row: npt.NDArray[np.generic]
+    ) -> EchoPacket | None:
+        """Decode one packet; signal data go into ``out_row``.
+
+        Parameters
+        ----------
+        packet : bytes-like
+            Exactly one packet (a datagram, or a slice from a stream framer).
+        out_row : ndarray
+            Destination: complex64 of shape (n_samples,), or int16 of shape
+            (n_samples, 2) for int16 payloads. Written only when a signal packet
+            is accepted.
+
+        Returns
+        -------
+        EchoPacket or None
+            Metadata of the pulse; None for a context packet or a rejected packet.
+        """
+        n = len(packet)
+        self.counters.bytes += n
+        self.last_ok = False
+        if n < 20 or n % 4:
+            self._bad("short packet", f"{n} bytes")
+            return None
+        w0 = _U32.unpack_from(packet, 0)[0]
+        ptype, size = w0 >> 28, w0 & 0xFFFF
+        if size * 4 != n:
+            self._bad("length", f"header says {size * 4} bytes, packet has {n}")
+            return None
+        if ptype not in (TYPE_SIGNAL_SID, TYPE_CONTEXT):
+            self._bad("packet type", f"type {ptype} is not in the profile (1, 4)")
+            return None
+        tsi, tsf = (w0 >> 22) & 3, (w0 >> 20) & 3
+        if tsi not in (TSI_UTC, TSI_GPS) or tsf != TSF_REALTIME_PS:
+            self._bad("timestamp", f"TSI {tsi} / TSF {tsf} is not UTC|GPS / real-time ps")
+            return None
+        has_class = (w0 >> 27) & 1
+        trailer = (w0 >> 26) & 1 if ptype == TYPE_SIGNAL_SID else 0
+        pos = 8 + 8 * has_class
+        if pos + 12 + 4 * trailer > n:
+            self._bad("length", f"{n} bytes cannot hold the announced header")
+            return None
+        stream_id = _U32.unpack_from(packet, 4)[0]
+        seconds = _U32.unpack_from(packet, pos)[0]
+        ps = _Q64.unpack_from(packet, pos + 4)[0]
+        if ps >= 1_000_000_000_000:
+            self._bad("timestamp", f"fractional {ps} ps is not < 1 s")
+            return None
+        t_ns = self._time(tsi, seconds, ps)
+        pos += 12
+        count = (w0 >> 16) & 0xF
+        if ptype == TYPE_CONTEXT:
+            if self._context(packet, pos, stream_id, t_ns):
+                self._count(ptype, stream_id, count)
+                self.last_ok = True
+            return None
+        if n - pos - 4 * trailer != self._payload_bytes:
+            self._bad(
+                "payload size",
+                f"{n - pos - 4 * trailer} bytes, configured {self._payload_bytes} "
+                f"({self.n_samples} {self.payload} I/Q samples)",
+            )
+            return None
+        valid, loss, over = True, False, False
+        if trailer:
+            tr = _U32.unpack_from(packet, n - 4)[0]
+            valid = _indicator(tr, _TR_VALID, True)
+            loss = _indicator(tr, _TR_SAMPLE_LOSS, False)
+            over = _indicator(tr, _TR_OVER_RANGE, False)
+        flat = self.check_row(out_row)
+        src = np.frombuffer(packet, dtype=self._src_dtype, count=2 * self.n_samples, offset=pos)
+        np.copyto(flat, src, casting="same_kind")
+        lost = self._count(ptype, stream_id, count)
+        self.counters.frames += 1
+        self._burst.ok()
+        self.last_ok = True
+        return EchoPacket(stream_id, t_ns, count, self.n_samples, valid, loss, over, lost)
+
+    def _context(self, packet: bytes | bytearray | memoryview, pos: int, sid: int, t: int) -> bool:
+        n = len(packet)
+        if pos + 4 > n:
+            self._bad("context", "no CIF0 word")
+            return False
+        cif0 = _U32.unpack_from(packet, pos)[0]
+        pos += 4 + 4 * sum((cif0 >> b) & 1 for b in _CIF_EXTRA_WORD_BITS)
+        values: dict[int, float] = {}
+        for bit in range(30, 20, -1):
+            if not (cif0 >> bit) & 1:
+                continue
+            words = _CIF0_FIELD_WORDS[bit]
+            if pos + 4 * words > n:
+                self._bad("context", f"CIF0 bit {bit} field runs past the packet end")
+                return False
+            if words == 2:
+                values[bit] = _Q64S.unpack_from(packet, pos)[0] / _RADIX
+            pos += 4 * words
+        ctx = ContextValues(
+            sid,
+            t,
+            values.get(_CIF0_BANDWIDTH),
+            values.get(_CIF0_RF_REF),
+            values.get(_CIF0_SAMPLE_RATE),
+        )
+        self.context[sid] = ctx
+        self.counters.frames += 1
+        self._burst.ok()
+        if self.expect is not None:
+            self._check_context(ctx)
+        return True
+
+    def _check_context(self, ctx: ContextValues) -> None:
+        assert self.expect is not None
+        for name in ("bandwidth_hz", "rf_reference_hz", "sample_rate_hz"):
+            got = getattr(ctx, name)
+            want = getattr(self.expect, name)
+            if got is not None and abs(got - want) > self.expect.rel_tol * abs(want):
+                self.counters.rejected += 1
+                raise ConfigError(
+                    f"radar.{name}: configured {want!r} Hz but the radar's context packet "
+                    f"(stream 0x{ctx.stream_id:08x}) says {got!r} Hz"
+                )
+
+
+def _indicator(trailer: int, bits: tuple[int, int], default: bool) -> bool:
+    enable, indicator = bits
+    if not (trailer >> enable) & 1:
+        return default
+    return bool((trailer >> indicator) & 1)
+
+
+class VitaStreamFramer:
+    """Cuts a byte stream (TCP, ``.vrt`` file) into packets and resynchronises after damage.
+
+    Parameters
+    ----------
+    decoder : VitaDecoder
+        Supplies the plausibility test for headers and counts skipped bytes.
+
+    Notes
+    -----
+    A header is plausible only if it announces exactly the size this profile
+    produces; otherwise the framer slides one byte. When the decoder refuses a
+    candidate (``consume(..., ok=False)``) the framer also slides one byte, so
+    a valid packet that starts inside a damaged one is still found. New bytes
+    are fed only when no complete candidate is left, so the buffer never holds
+    more than one maximal packet plus one read.
+    """
+
+    def __init__(self, decoder: VitaDecoder) -> None:
+        self._decoder = decoder
+        self._buf = bytearray()
+        self._pos = 0
+
+    def feed(self, data: bytes) -> None:
+        """Append bytes read from the stream (release candidates first)."""
+        if self._pos:
+            del self._buf[: self._pos]
+            self._pos = 0
+        self._buf += data
+
+    def next_packet(self) -> memoryview | None:
+        """The next plausible packet (not consumed yet), or None if more bytes are needed."""
+        buf, end = self._buf, len(self._buf)
+        while end - self._pos >= 4:
+            words = self._decoder.expected_words(_U32.unpack_from(buf, self._pos)[0])
+            if words is None:
+                self._pos += 1
+                self._decoder.counters.skipped_bytes += 1
+                continue
+            if end - self._pos < 4 * words:
+                return None
+            return memoryview(buf)[self._pos : self._pos + 4 * words]
+        return None
+
+    def consume(self, packet: memoryview, ok: bool) -> None:
+        """Release ``packet``; step past it if it decoded, else one byte further."""
+        n = len(packet)
+        packet.release()
+        if ok:
+            self._pos += n
+        else:
+            self._pos += 1
+            self._decoder.counters.skipped_bytes += 1
+
+    @property
+    def pending_bytes(self) -> int:
+        """Bytes buffered and not yet consumed."""
+        return len(self._buf) - self._pos
