@@ -1,0 +1,427 @@
+"""INS-only per-pulse motion compensation (METHODS.md §2, THz paper eqs. 14-32).
+
+The APC deviation from the reference track is the trapezoidal integral of the
+INS velocity (imaging frame y, z) over the actual pulse times::
+
+    ΔY(1) = 0,   ΔY(k) = ΔY(k-1) + ½ (v_y(k-1) + v_y(k)) (t_k - t_{k-1})      (same for Z)
+    d_los(k) = ΔY(k) sin β + ΔZ(k) cos β          (positive toward the scene)
+
+The echo of pulse k carries exp(+j 4π d_los(k) / λ); compensation multiplies
+by exp(-j 4π d_los(k) / λ). Because d_los is linear in (sin β, cos β) the
+running state is the pair (ΔY, ΔZ), which also serves every range bin.
+
+- ``order=1``: one β, the scene centre's, for all range bins.
+- ``order=2``: β per range bin, cos β = H / r, and the range-variant term of
+  eq. 29: the displacement is seen by a target at range r under the squint
+  ``v0 τ / r`` (τ = t - t_center), so its range error is
+  ``-d_los cos(squint) ≈ -d_los (1 - v0² τ² / (2 r²))``; the extra phase
+  ``2π v0² τ² d_los / (λ r²)`` of eq. 29 is applied with that physical sign.
+- Envelope: where |d_los| at the scene centre exceeds ``envelope_fraction``
+  of the range resolution cell, the pulse is resampled in range (linear phase
+  in range frequency, sub-sample, circular) so that the range error
+  ΔR = -d_los is removed: its content moves by +d_los toward far range.
+
+Inputs are range-compressed pulses (P, S) whose bin i lies at slant range
+``range_axis_m[i]``; times are GPS ns (``int64``); velocities NED m/s.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import numpy as np
+
+from sarmoco.errors import ProcessingError
+from sarmoco.processing.geometry import (
+    ReferenceTrack,
+    lever_arm_ned,
+    look_angle,
+    vector_to_imaging,
+)
+from sarmoco.processing.types import ComplexArray, FloatArray, IntArray, RadarParams
+
+
+@dataclass(frozen=True)
+class LosGeometry:
+    """Radar and scene constants of the line-of-sight correction.
+
+    Build it with :meth:`build`.
+
+    Parameters
+    ----------
+    wavelength_m : float
+        Carrier wavelength, m.
+    range_axis_m : ndarray of float64, shape (S,)
+        Slant range of each range-compressed bin (uniform spacing), m.
+    range_cell_m : float
+        Range resolution cell c / 2B, m (unit of ``envelope_fraction``).
+    beta_c_rad : float
+        Look angle of the scene centre, rad.
+    beta_bins_rad : ndarray of float64, shape (S,)
+        Look angle of each range bin (``order=2``; NaN-free), rad.
+    scene_range_m : float
+        Slant range of the scene centre, m.
+    v0_mps : float
+        Reference along-track speed, m/s.
+    t_center_ns : int or None
+        Broadside time of the scene centre (τ = 0 of eq. 29), GPS ns; None
+        leaves the range-variant term out.
+    order : {1, 2}
+        Scene-centre β (1) or β per bin plus the eq. 29 term (2).
+    envelope_fraction : float or None
+        Fraction of a range cell above which a pulse is shifted in range;
+        None never shifts.
+    """
+
+    wavelength_m: float
+    range_axis_m: FloatArray
+    range_cell_m: float
+    beta_c_rad: float
+    beta_bins_rad: FloatArray
+    scene_range_m: float
+    v0_mps: float
+    t_center_ns: int | None
+    order: Literal[1, 2]
+    envelope_fraction: float | None
+
+    @classmethod
+    def build(
+        cls,
+        radar: RadarParams,
+        range_axis_m: FloatArray,
+        ground_depth_m: float,
+        scene_range_m: float,
+        v0_mps: float,
+        *,
+        order: Literal[1, 2] = 1,
+        t_center_ns: int | None = None,
+        envelope_fraction: float | None = 0.25,
+    ) -> LosGeometry:
+        """Derive the look angles from flat ground at ``ground_depth_m`` below the track.
+
+        Parameters
+        ----------
+        radar : RadarParams
+            Carrier and bandwidth.
+        range_axis_m : ndarray, shape (S,)
+            Slant range of each compressed bin, m (uniform spacing).
+        ground_depth_m : float
+            Depth H of the flat ground below the reference track, m.
+        scene_range_m : float
+            Slant range of the scene centre, m.
+        v0_mps : float
+            Reference along-track speed, m/s.
+        order, t_center_ns, envelope_fraction
+            See the class parameters.
+        """
+        axis = np.asarray(range_axis_m, dtype=np.float64)
+        if axis.ndim != 1 or axis.shape[0] < 2:
+            raise ProcessingError("LosGeometry: range_axis_m must be 1-D with >= 2 bins")
+        step = np.diff(axis)
+        if not np.allclose(step, step[0], rtol=1e-6, atol=0.0) or not step[0] > 0:
+            raise ProcessingError("LosGeometry: range_axis_m is not uniform and increasing")
+        if order not in (1, 2):
+            raise ProcessingError(f"LosGeometry: order {order!r} is not 1 or 2")
+        if envelope_fraction is not None and not envelope_fraction >= 0.0:
+            raise ProcessingError(f"LosGeometry: envelope_fraction {envelope_fraction!r} < 0")
+        beta_bins = look_angle(axis, ground_depth_m) if order == 2 else np.zeros(0)
+        return cls(
+            wavelength_m=radar.wavelength_m,
+            range_axis_m=axis,
+            range_cell_m=radar.range_resolution_m,
+            beta_c_rad=float(look_angle(scene_range_m, ground_depth_m)),
+            beta_bins_rad=beta_bins,
+            scene_range_m=float(scene_range_m),
+            v0_mps=float(v0_mps),
+            t_center_ns=t_center_ns,
+            order=order,
+            envelope_fraction=envelope_fraction,
+        )
+
+    @property
+    def bin_spacing_m(self) -> float:
+        """Slant-range spacing of the compressed bins, m."""
+        return float(self.range_axis_m[1] - self.range_axis_m[0])
+
+
+@dataclass(frozen=True)
+class MocompSolution:
+    """Per-pulse motion solution, as the recorder stores it.
+
+    Parameters
+    ----------
+    t_ns : ndarray of int64, shape (P,)
+        Pulse times, GPS ns.
+    disp_yz_m : ndarray of float64, shape (P, 2)
+        APC deviation (ΔY, ΔZ) from the reference track, imaging frame, m.
+    d_los_m : ndarray of float64, shape (P,)
+        Line-of-sight displacement at the scene-centre look angle, m
+        (positive toward the scene).
+    phase_rad : ndarray of float64, shape (P,)
+        Compensation phase at the scene centre, rad (the pulse was multiplied
+        by exp(-j phase_rad); with ``order=2`` other bins got their own value).
+    range_shift_m : ndarray of float64, shape (P,)
+        Envelope shift applied toward far range, m (0 where none).
+    """
+
+    t_ns: IntArray
+    disp_yz_m: FloatArray
+    d_los_m: FloatArray
+    phase_rad: FloatArray
+    range_shift_m: FloatArray
+
+
+def shift_range(echo: ComplexArray, shift_bins: FloatArray) -> ComplexArray:
+    """Delay each row by a fractional number of bins (toward higher index), circularly.
+
+    Parameters
+    ----------
+    echo : ndarray of complex, shape (P, S)
+        Range-compressed pulses.
+    shift_bins : ndarray of float64, shape (P,)
+        Shift of each pulse in bins (positive: toward far range).
+    """
+    n = echo.shape[1]
+    ramp = np.exp(-2j * np.pi * np.fft.fftfreq(n)[None, :] * shift_bins[:, None])
+    spec = np.fft.fft(echo, axis=1) * ramp.astype(np.complex64)
+    return np.fft.ifft(spec, axis=1).astype(echo.dtype, copy=False)
+
+
+def _squint_factor(geom: LosGeometry, t_ns: IntArray, r_m: FloatArray) -> FloatArray:
+    """cos(squint) ≈ 1 - v0² τ² / (2 r²) (eq. 29), broadcast over pulses × ``r_m``."""
+    if geom.t_center_ns is None:
+        return np.ones((t_ns.shape[0], 1))
+    tau = (t_ns.astype(np.int64) - geom.t_center_ns) * 1e-9
+    return 1.0 - (geom.v0_mps * tau[:, None]) ** 2 / (2.0 * np.asarray(r_m)[None, :] ** 2)
+
+
+def correct_los(
+    echo: ComplexArray, t_ns: IntArray, disp_yz_m: FloatArray, geom: LosGeometry
+) -> tuple[ComplexArray, MocompSolution]:
+    """Apply the envelope shift and the phase of a known APC deviation.
+
+    Parameters
+    ----------
+    echo : ndarray of complex, shape (P, S)
+        Range-compressed pulses (bins on ``geom.range_axis_m``).
+    t_ns : ndarray of int64, shape (P,)
+        Pulse times, GPS ns.
+    disp_yz_m : ndarray of float64, shape (P, 2)
+        APC deviation (ΔY, ΔZ) from the reference track, imaging frame, m.
+    geom : LosGeometry
+        Radar and scene constants.
+
+    Returns
+    -------
+    out : ndarray of complex64, shape (P, S)
+        Compensated pulses.
+    solution : MocompSolution
+        What was applied.
+    """
+    if echo.ndim != 2 or echo.shape[0] != t_ns.shape[0] or disp_yz_m.shape != (t_ns.shape[0], 2):
+        raise ProcessingError(
+            f"correct_los: echo {echo.shape}, t_ns {t_ns.shape}, disp {disp_yz_m.shape} disagree"
+        )
+    if echo.shape[1] != geom.range_axis_m.shape[0]:
+        raise ProcessingError(
+            f"correct_los: {echo.shape[1]} range bins but the axis has {geom.range_axis_m.shape[0]}"
+        )
+    dy, dz = disp_yz_m[:, 0], disp_yz_m[:, 1]
+    d_c = dy * np.sin(geom.beta_c_rad) + dz * np.cos(geom.beta_c_rad)
+    out = np.asarray(echo, dtype=np.complex64)
+    shift_m = np.zeros_like(d_c)
+    if geom.envelope_fraction is not None:
+        rows = np.flatnonzero(np.abs(d_c) > geom.envelope_fraction * geom.range_cell_m)
+        if rows.size:
+            shift_m[rows] = d_c[rows]
+            out = out.copy() if out is echo else out  # never write into the caller's array
+            out[rows] = shift_range(out[rows], d_c[rows] / geom.bin_spacing_m)
+    k = 4.0 * np.pi / geom.wavelength_m
+    scene_r = np.array([geom.scene_range_m])
+    if geom.order == 1:
+        phase_c = k * d_c
+        out = out * np.exp(-1j * phase_c).astype(np.complex64)[:, None]
+    else:
+        phase_c = k * d_c * _squint_factor(geom, t_ns, scene_r)[:, 0]
+        d_bins = dy[:, None] * np.sin(geom.beta_bins_rad) + dz[:, None] * np.cos(geom.beta_bins_rad)
+        d_bins = d_bins * _squint_factor(geom, t_ns, geom.range_axis_m)
+        out = out * np.exp(-1j * k * d_bins).astype(np.complex64)
+    solution = MocompSolution(
+        t_ns=np.asarray(t_ns, dtype=np.int64),
+        disp_yz_m=np.asarray(disp_yz_m, dtype=np.float64),
+        d_los_m=d_c,
+        phase_rad=phase_c,
+        range_shift_m=shift_m,
+    )
+    return out, solution
+
+
+def displacement_from_positions(
+    t_ns: IntArray, pos_ned: FloatArray, track: ReferenceTrack
+) -> FloatArray:
+    """APC deviation (ΔY, ΔZ) from known positions (the GPS/position-based baseline), (P, 2), m."""
+    return track.deviation(t_ns, pos_ned)[:, 1:3]
+
+
+@dataclass(frozen=True)
+class LosState:
+    """What the streaming compensator carries from one block to the next.
+
+    Parameters
+    ----------
+    last_t_ns : int or None
+        Time of the last pulse seen, GPS ns (None before the first pulse).
+    last_vel_yz : ndarray, shape (2,)
+        Imaging-frame (v_y, v_z) at that pulse, m/s.
+    disp_yz_m : ndarray, shape (2,)
+        Running (ΔY, ΔZ) at that pulse, m.
+    lever_ref_m : ndarray, shape (3,) or None
+        Rotated lever arm at the first pulse, imaging frame, m (None without a lever arm).
+    """
+
+    last_t_ns: int | None = None
+    last_vel_yz: FloatArray = field(default_factory=lambda: np.zeros(2))
+    disp_yz_m: FloatArray = field(default_factory=lambda: np.zeros(2))
+    lever_ref_m: FloatArray | None = None
+
+
+def integrate_los(
+    t_ns: IntArray, vel_yz: FloatArray, state: LosState
+) -> tuple[FloatArray, LosState]:
+    """Trapezoidal running (ΔY, ΔZ) over the actual pulse times (eqs. 30-31).
+
+    Parameters
+    ----------
+    t_ns : ndarray of int64, shape (P,)
+        Pulse times, strictly increasing and after ``state.last_t_ns``, GPS ns.
+    vel_yz : ndarray of float64, shape (P, 2)
+        Imaging-frame (v_y, v_z) at each pulse, m/s.
+    state : LosState
+        Carried state (a fresh one starts the aperture: ΔD(1) = 0).
+
+    Returns
+    -------
+    disp : ndarray of float64, shape (P, 2)
+        (ΔY, ΔZ) at each pulse, m (without lever arm).
+    state : LosState
+        State after the last pulse.
+    """
+    t = np.asarray(t_ns, dtype=np.int64)
+    if t.shape[0] == 0:
+        return np.zeros((0, 2)), state
+    first = state.last_t_ns is None
+    t_prev = np.concatenate([[t[0] if first else state.last_t_ns], t]).astype(np.int64)
+    v_prev = np.concatenate([vel_yz[:1] if first else state.last_vel_yz[None, :], vel_yz])
+    dt_ns = np.diff(t_prev)
+    if np.any(dt_ns[int(first) :] <= 0):
+        raise ProcessingError("integrate_los: pulse times are not strictly increasing")
+    inc = 0.5 * (v_prev[1:] + v_prev[:-1]) * (dt_ns * 1e-9)[:, None]
+    disp = np.cumsum(inc, axis=0) + state.disp_yz_m
+    new = LosState(
+        last_t_ns=int(t[-1]),
+        last_vel_yz=np.array(vel_yz[-1], dtype=np.float64),
+        disp_yz_m=disp[-1].copy(),
+        lever_ref_m=state.lever_ref_m,
+    )
+    return disp, new
+
+
+class InsMotionCompensator:
+    """Streaming INS-only compensation with explicit carried state.
+
+    Feeding an aperture block by block gives the same output as one call on
+    the whole aperture (to float tolerance), because the only coupling between
+    pulses is the running (ΔY, ΔZ) sum, the last pulse's time and velocity,
+    and the first pulse's lever arm, all held in :attr:`state`.
+
+    Parameters
+    ----------
+    track : ReferenceTrack
+        Reference track (rotation NED → imaging frame).
+    geometry : LosGeometry
+        Radar and scene constants.
+    lever_arm_body_m : ndarray, shape (3,), optional
+        APC minus IMU in the body frame, m; then ``quat`` must be given to
+        :meth:`compensate` and the APC displacement includes R(q_k) l - R(q_1) l.
+    state : LosState, optional
+        Resume from a saved state.
+    """
+
+    def __init__(
+        self,
+        track: ReferenceTrack,
+        geometry: LosGeometry,
+        lever_arm_body_m: FloatArray | None = None,
+        state: LosState | None = None,
+    ) -> None:
+        self.track = track
+        self.geometry = geometry
+        self.lever_arm_body_m = (
+            None if lever_arm_body_m is None else np.asarray(lever_arm_body_m, dtype=np.float64)
+        )
+        self.state = LosState() if state is None else state
+
+    def displacement(
+        self, t_ns: IntArray, vel_ned: FloatArray, quat: FloatArray | None = None
+    ) -> FloatArray:
+        """(ΔY, ΔZ) of the APC at each pulse and advance the state, (P, 2), m.
+
+        Parameters
+        ----------
+        t_ns : ndarray of int64, shape (P,)
+            Pulse times, GPS ns.
+        vel_ned : ndarray of float64, shape (P, 3)
+            INS velocity interpolated to the pulses, NED, m/s.
+        quat : ndarray of float64, shape (P, 4), optional
+            Attitude at the pulses (needed with a lever arm).
+        """
+        vel_img = vector_to_imaging(vel_ned, self.track)
+        disp, state = integrate_los(t_ns, vel_img[:, 1:3], self.state)
+        if self.lever_arm_body_m is not None and t_ns.shape[0]:
+            if quat is None:
+                raise ProcessingError("InsMotionCompensator: a lever arm needs the attitude")
+            lever = vector_to_imaging(lever_arm_ned(quat, self.lever_arm_body_m), self.track)
+            ref = lever[0] if state.lever_ref_m is None else state.lever_ref_m
+            disp = disp + (lever - ref)[:, 1:3]
+            state = LosState(state.last_t_ns, state.last_vel_yz, state.disp_yz_m, ref)
+        self.state = state
+        return disp
+
+    def compensate(
+        self,
+        echo: ComplexArray,
+        t_ns: IntArray,
+        vel_ned: FloatArray,
+        quat: FloatArray | None = None,
+    ) -> tuple[ComplexArray, MocompSolution]:
+        """Compensate one block of range-compressed pulses and advance the state.
+
+        Parameters
+        ----------
+        echo : ndarray of complex, shape (P, S)
+            Range-compressed pulses.
+        t_ns, vel_ned, quat
+            As in :meth:`displacement`.
+
+        Returns
+        -------
+        out : ndarray of complex64, shape (P, S)
+        solution : MocompSolution
+        """
+        disp = self.displacement(np.asarray(t_ns, dtype=np.int64), vel_ned, quat)
+        return correct_los(echo, np.asarray(t_ns, dtype=np.int64), disp, self.geometry)
+
+
+def compensate_aperture(
+    echo: ComplexArray,
+    t_ns: IntArray,
+    vel_ned: FloatArray,
+    track: ReferenceTrack,
+    geometry: LosGeometry,
+    quat: FloatArray | None = None,
+    lever_arm_body_m: FloatArray | None = None,
+) -> tuple[ComplexArray, MocompSolution]:
+    """One-call INS-only compensation of a whole aperture (see :class:`InsMotionCompensator`)."""
+    comp = InsMotionCompensator(track, geometry, lever_arm_body_m)
+    return comp.compensate(echo, t_ns, vel_ned, quat)

@@ -1,0 +1,163 @@
+"""INS-only motion compensation (METHODS §2): trapezoid D_los, phase, envelope, streaming."""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from sarmoco.errors import ProcessingError
+from sarmoco.processing.geometry import ReferenceTrack, look_angle
+from sarmoco.processing.mocomp import (
+    InsMotionCompensator,
+    LosGeometry,
+    LosState,
+    compensate_aperture,
+    correct_los,
+    integrate_los,
+    shift_range,
+)
+from sarmoco.processing.types import RadarParams
+
+RADAR = RadarParams(
+    carrier_hz=200e9,
+    bandwidth_hz=1.1e9,
+    pulse_width_s=10e-6,
+    sample_rate_hz=13e6,
+    prf_hz=20e3,
+    n_samples=256,
+    range_gate_delay_s=2 * 1490.0 / 299_792_458.0,
+)
+DEPTH_M = 1000.0
+SCENE_R_M = 1500.0
+NORTH = ReferenceTrack.from_velocity(np.zeros(3), np.array([60.0, 0.0, 0.0]), 0)
+
+
+def _axis(n: int = 256, spacing: float = 0.1) -> np.ndarray:
+    return SCENE_R_M - n // 2 * spacing + spacing * np.arange(n)
+
+
+def _pulse_times(rng: np.random.Generator, n: int) -> np.ndarray:
+    """Non-uniform PRT: 50 µs ± 5 µs jitter, GPS ns."""
+    return (10**15 + np.cumsum(rng.integers(45_000, 55_000, size=n))).astype(np.int64)
+
+
+def _dirichlet(n: int, pos_bins: np.ndarray, half_band: int) -> np.ndarray:
+    """Periodic band-limited peaks at fractional bins ``pos_bins`` (P,), shape (P, n)."""
+    m = np.arange(-half_band, half_band + 1)
+    lag = (np.arange(n)[None, :, None] - pos_bins[:, None, None]) / n
+    arg = 2j * np.pi * m[None, None, :] * lag
+    return np.exp(arg).sum(axis=2) / m.shape[0]
+
+
+def test_trapezoid_is_exact_for_constant_acceleration_on_non_uniform_times() -> None:
+    rng = np.random.default_rng(5)
+    t_ns = _pulse_times(rng, 2000)
+    t = (t_ns - t_ns[0]) * 1e-9
+    acc = np.array([0.8, -0.3])
+    vel0 = np.array([0.2, 0.05])
+    disp, state = integrate_los(t_ns, vel0 + np.outer(t, acc), LosState())
+    np.testing.assert_allclose(disp, np.outer(t, vel0) + 0.5 * np.outer(t**2, acc), atol=1e-12)
+    np.testing.assert_array_equal(disp[0], 0.0)  # ΔD(1) = 0
+    assert state.last_t_ns == int(t_ns[-1])
+    with pytest.raises(ProcessingError):
+        integrate_los(t_ns[::-1], np.zeros((2000, 2)), LosState())
+    with pytest.raises(ProcessingError):  # the next block must start after the last pulse
+        integrate_los(t_ns[:5], np.zeros((5, 2)), state)
+
+
+def test_phase_and_envelope_bring_every_pulse_back_to_the_reference_track() -> None:
+    """Band-limited pulses of a target at the scene centre, APC displaced by up to 3 cells."""
+    rng = np.random.default_rng(6)
+    n, dr, p = 256, 0.1, 64
+    axis = _axis(n, dr)
+    lam = RADAR.wavelength_m
+    beta = float(look_angle(SCENE_R_M, DEPTH_M))
+    disp = np.stack([rng.uniform(-0.3, 0.3, p), rng.uniform(-0.2, 0.2, p)], axis=1)
+    disp[0] = 0.0
+    d = disp[:, 0] * np.sin(beta) + disp[:, 1] * np.cos(beta)
+    r_k = SCENE_R_M - d  # the APC moved toward the scene by d
+    echo = _dirichlet(n, (r_k - axis[0]) / dr, 50) * np.exp(-4j * np.pi * r_k / lam)[:, None]
+    ref = _dirichlet(n, np.array([(SCENE_R_M - axis[0]) / dr]), 50)[0]
+    ref = ref * np.exp(-4j * np.pi * SCENE_R_M / lam)
+    geom = LosGeometry.build(RADAR, axis, DEPTH_M, SCENE_R_M, 60.0, envelope_fraction=0.0)
+    t_ns = _pulse_times(rng, p)
+    out, sol = correct_los(echo.astype(np.complex64), t_ns, disp, geom)
+    assert np.max(np.abs(out - ref[None, :])) < 2e-5
+    np.testing.assert_allclose(sol.d_los_m, d, atol=1e-15)
+    np.testing.assert_allclose(sol.range_shift_m, d, atol=1e-15)
+    np.testing.assert_allclose(sol.phase_rad, 4 * np.pi * d / lam, rtol=1e-14)
+    # without the envelope step only the phase at the (moved) peak is right
+    geom_no = LosGeometry.build(RADAR, axis, DEPTH_M, SCENE_R_M, 60.0, envelope_fraction=None)
+    out_no, sol_no = correct_los(echo.astype(np.complex64), t_ns, disp, geom_no)
+    assert np.all(sol_no.range_shift_m == 0.0)
+    peak = np.argmax(np.abs(out_no), axis=1)
+    assert np.ptp(peak) >= 4  # the envelope wanders over several bins
+    # the threshold: only pulses with |d_los| above 0.25 cell are shifted
+    geom_q = LosGeometry.build(RADAR, axis, DEPTH_M, SCENE_R_M, 60.0, envelope_fraction=0.25)
+    _, sol_q = correct_los(echo.astype(np.complex64), t_ns, disp, geom_q)
+    moved = np.abs(d) > 0.25 * RADAR.range_resolution_m
+    np.testing.assert_array_equal(sol_q.range_shift_m != 0.0, moved)
+
+
+def test_shift_range_is_a_sub_sample_delay() -> None:
+    x = _dirichlet(128, np.array([40.0, 40.0]), 30)
+    y = shift_range(x.astype(np.complex64), np.array([2.5, -7.25]))
+    np.testing.assert_allclose(y, _dirichlet(128, np.array([42.5, 32.75]), 30), atol=2e-6)
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_block_by_block_equals_whole_aperture(order: int) -> None:
+    """Acceptance 3: the same output and solution for any block split."""
+    rng = np.random.default_rng(7 + order)
+    p, n = 700, 96
+    t_ns = _pulse_times(rng, p)
+    t = (t_ns - t_ns[0]) * 1e-9
+    vel = np.stack(
+        [60 + 0.3 * np.sin(9 * t), 0.8 * np.sin(23 * t) + 3.0, 0.5 * np.cos(17 * t) + 2.0], axis=1
+    )
+    quat = np.stack([np.cos(0.05 * t), 0.02 * np.sin(31 * t), 0.01 * t, 0.03 * np.cos(7 * t)], 1)
+    echo = (rng.normal(size=(p, n)) + 1j * rng.normal(size=(p, n))).astype(np.complex64)
+    geom = LosGeometry.build(
+        RADAR,
+        _axis(n, 0.12),
+        DEPTH_M,
+        SCENE_R_M,
+        60.0,
+        order=order,  # type: ignore[arg-type]
+        t_center_ns=int(t_ns[p // 2]),
+        envelope_fraction=0.3,
+    )
+    lever = np.array([0.4, -0.2, 0.3])
+    whole, sol = compensate_aperture(echo, t_ns, vel, NORTH, geom, quat, lever)
+    assert np.count_nonzero(sol.range_shift_m) > p // 4  # the envelope step is exercised
+    comp = InsMotionCompensator(NORTH, geom, lever)
+    edges = [0, 1, 2, 50, 51, 333, 500, 699, p]
+    parts = [
+        comp.compensate(echo[a:b], t_ns[a:b], vel[a:b], quat[a:b])
+        for a, b in itertools.pairwise(edges)
+    ]
+    blocks = np.concatenate([o for o, _ in parts])
+    np.testing.assert_allclose(blocks, whole, rtol=0, atol=1e-5 * np.abs(whole).max())
+    for name in ("d_los_m", "phase_rad", "range_shift_m"):
+        got = np.concatenate([getattr(s, name) for _, s in parts])
+        np.testing.assert_allclose(got, getattr(sol, name), rtol=1e-12, atol=1e-12)
+    # a new compensator resumed from a saved state carries on identically
+    first = InsMotionCompensator(NORTH, geom, lever)
+    first.compensate(echo[:400], t_ns[:400], vel[:400], quat[:400])
+    resumed = InsMotionCompensator(NORTH, geom, lever, state=first.state)
+    rest, _ = resumed.compensate(echo[400:], t_ns[400:], vel[400:], quat[400:])
+    np.testing.assert_allclose(rest, whole[400:], rtol=0, atol=1e-5 * np.abs(whole).max())
+    with pytest.raises(ProcessingError):
+        InsMotionCompensator(NORTH, geom, lever).compensate(echo, t_ns, vel)  # no attitude
+
+
+def test_geometry_rejects_bad_inputs() -> None:
+    with pytest.raises(ProcessingError):
+        LosGeometry.build(RADAR, np.array([1500.0, 1500.1, 1500.3]), DEPTH_M, SCENE_R_M, 60.0)
+    with pytest.raises(ProcessingError):
+        LosGeometry.build(RADAR, _axis(), DEPTH_M, SCENE_R_M, 60.0, order=3)  # type: ignore[arg-type]
+    geom = LosGeometry.build(RADAR, _axis(), DEPTH_M, SCENE_R_M, 60.0)
+    with pytest.raises(ProcessingError):
+        correct_los(np.zeros((3, 10), np.complex64), np.arange(3), np.zeros((3, 2)), geom)
