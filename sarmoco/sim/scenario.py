@@ -1,0 +1,415 @@
+"""Simulated acquisition scenarios: radar, nominal flight line, scene, loaded from TOML presets.
+
+Nominal geometry (all positions in local NED, m): the platform flies due north (+x) at
+``speed_mps`` at depth ``-altitude_m`` (the ground is the plane ``z_ned = 0``), along the line
+``east = 0``, and looks to the right (east, +y). The scene centre is at north 0, east
+``sqrt(R_c**2 - H**2)``; the track starts at ``track_start_north_m`` so that the scene is at
+broadside mid-aperture. Simulation time ``t_s`` counts seconds from the first pulse, whose GPS
+time is ``t0_ns``.
+
+Presets (``sarmoco/sim/presets/*.toml``) hold the papers' numbers (METHODS §6) and say in
+comments which values are our own choices. ``scale`` (0 < scale <= 1) shrinks the swath, the
+pulse width (hence the fast-time samples) and the PRF (down to twice the Doppler bandwidth) for
+fast tests, keeping carrier, bandwidth, sample rate, integration angle and therefore both
+resolutions; the aperture time is set by the azimuth resolution and is not shrunk, except for
+the part a stripmap aperture spends on the (scaled) along-track extent of the scene.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, fields
+from importlib import resources
+from typing import Any, Literal
+
+import numpy as np
+
+from sarmoco.errors import ConfigError
+from sarmoco.processing.types import C_MPS, FloatArray, RadarParams
+
+PRESETS = ("thz-spotlight", "ku-vehicle", "ku-microuav")
+"""Names of the shipped scenario presets."""
+
+DEFAULT_T0_NS = 1_400_000_000 * 1_000_000_000
+"""GPS time of the first pulse of a simulated run, ns (2024-05-18)."""
+
+RANGE_MARGIN_FRACTION = 0.05
+"""Extra slant range kept on each side of the swath in the range window, fraction of its extent."""
+
+RANGE_MARGIN_M = 3.0
+"""Extra slant range kept on each side of the swath (motion deviations), m."""
+
+PRF_OVERSAMPLING = 2.0
+"""A scaled PRF never drops below this multiple of the scene's Doppler bandwidth."""
+
+
+@dataclass(frozen=True)
+class Target:
+    """A point scatterer.
+
+    Parameters
+    ----------
+    pos_ned : tuple of float
+        Position in local NED, m.
+    amplitude : complex
+        Complex reflectivity (echo amplitude per sample before compression, unit = SNR reference).
+    """
+
+    pos_ned: tuple[float, float, float]
+    amplitude: complex = 1.0
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One simulated acquisition (see the module docstring for the geometry).
+
+    Parameters
+    ----------
+    name : str
+        Preset name.
+    radar : RadarParams
+        Waveform and receiver.
+    speed_mps : float
+        Nominal ground speed along +north, m/s.
+    altitude_m : float
+        APC height above the flat ground, m.
+    center_slant_range_m : float
+        Broadside slant range to the scene centre, m.
+    swath_m : float
+        Ground-range extent of the scene, m (scaled).
+    mode : {"stripmap", "spotlight"}
+        Stripmap: fixed broadside rect beam of ``integration_angle_rad``; spotlight: the beam
+        follows the scene centre and every target is lit during the whole aperture.
+    aperture_s : float
+        Simulated duration, s.
+    targets : tuple of Target
+        Point scatterers.
+    snr_db : float or None
+        Per-sample SNR of a unit target before compression, dB; None: no noise.
+    scale : float
+        The scale the preset was loaded with.
+    scene_center_ned : tuple of float
+        Scene centre, NED, m.
+    integration_angle_rad : float
+        Azimuth angle spanned by the synthetic aperture, rad (stripmap: the rect real beam).
+    track_start_north_m : float
+        North position of the nominal APC at the first pulse, m.
+    t0_ns : int
+        GPS time of the first pulse, ns.
+    """
+
+    name: str
+    radar: RadarParams
+    speed_mps: float
+    altitude_m: float
+    center_slant_range_m: float
+    swath_m: float
+    mode: Literal["stripmap", "spotlight"]
+    aperture_s: float
+    targets: tuple[Target, ...]
+    snr_db: float | None
+    scale: float
+    scene_center_ned: tuple[float, float, float]
+    integration_angle_rad: float
+    track_start_north_m: float
+    t0_ns: int = DEFAULT_T0_NS
+    notes: dict[str, float] = field(default_factory=dict, compare=False)
+
+    @property
+    def n_pulses(self) -> int:
+        """Number of pulses in the aperture at the nominal PRF."""
+        return math.floor(self.aperture_s * self.radar.prf_hz) + 1
+
+    @property
+    def azimuth_resolution_m(self) -> float:
+        """Azimuth resolution lambda / (4 sin(theta/2)) of the integration angle, m."""
+        return self.radar.wavelength_m / (4.0 * math.sin(self.integration_angle_rad / 2.0))
+
+    @property
+    def grazing_rad(self) -> float:
+        """Grazing angle at the scene centre, rad."""
+        return math.asin(self.altitude_m / self.center_slant_range_m)
+
+    def ideal_track(self, t_s: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Nominal straight, level, constant-speed APC track.
+
+        Parameters
+        ----------
+        t_s : ndarray of float64, shape (P,)
+            Time since the first pulse, s.
+
+        Returns
+        -------
+        pos_ned, vel_ned : ndarray of float64, shape (P, 3)
+            Position (m) and velocity (m/s) in NED.
+        """
+        t = np.asarray(t_s, dtype=np.float64)
+        pos = np.zeros((t.size, 3))
+        pos[:, 0] = self.track_start_north_m + self.speed_mps * t
+        pos[:, 2] = -self.altitude_m
+        vel = np.zeros((t.size, 3))
+        vel[:, 0] = self.speed_mps
+        return pos, vel
+
+    def targets_array(self) -> tuple[FloatArray, np.ndarray]:
+        """Targets as arrays: positions (K, 3) NED in m, complex amplitudes (K,)."""
+        pos = np.array([t.pos_ned for t in self.targets], dtype=np.float64).reshape(-1, 3)
+        amp = np.array([t.amplitude for t in self.targets], dtype=np.complex128)
+        return pos, amp
+
+    def illumination(self, apc_ned: FloatArray, targets_ned: FloatArray) -> FloatArray:
+        """Two-way antenna weight of each target at each pulse (rect beam).
+
+        Stripmap: 1 where the target's squint from the nominal broadside (east) direction,
+        ``asin(d_north / R)``, is within half the integration angle, else 0. The beam is fixed
+        to the nominal heading (attitude errors do not steer it). Spotlight: 1 everywhere.
+
+        Parameters
+        ----------
+        apc_ned : ndarray, shape (P, 3)
+            APC positions, NED, m.
+        targets_ned : ndarray, shape (K, 3)
+            Target positions, NED, m.
+
+        Returns
+        -------
+        ndarray of float64, shape (P, K)
+        """
+        if self.mode == "spotlight":
+            return np.ones((apc_ned.shape[0], targets_ned.shape[0]))
+        d = targets_ned[None, :, :] - apc_ned[:, None, :]
+        sin_squint = d[..., 0] / np.linalg.norm(d, axis=-1)
+        return (np.abs(sin_squint) <= math.sin(self.integration_angle_rad / 2.0)).astype(float)
+
+
+def scene_targets(scn: Scenario, n: int, rng: np.random.Generator) -> tuple[Target, ...]:
+    """Random distributed scene: ``n`` scatterers with circular-Gaussian amplitudes.
+
+    Positions are uniform on the ground over the swath (east) and over the same extent along
+    track (north), centred on the scene centre; amplitudes have unit mean power.
+
+    Returns
+    -------
+    tuple of Target
+    """
+    north = scn.scene_center_ned[0] + (rng.random(n) - 0.5) * scn.swath_m
+    east = scn.scene_center_ned[1] + (rng.random(n) - 0.5) * scn.swath_m
+    amp = (rng.standard_normal(n) + 1j * rng.standard_normal(n)) / math.sqrt(2.0)
+    return tuple(
+        Target((float(x), float(y), 0.0), complex(a))
+        for x, y, a in zip(north, east, amp, strict=True)
+    )
+
+
+_RADAR_KEYS = {f.name for f in fields(RadarParams)}
+_SCENARIO_KEYS = {f.name for f in fields(Scenario)} - {
+    "radar",
+    "name",
+    "scale",
+    "notes",
+    "scene_center_ned",
+}
+_PRESET_KEYS = {"azimuth_resolution_m", "beamwidth_rad"}
+
+
+def _read_preset(name: str) -> dict[str, Any]:
+    if name not in PRESETS:
+        raise ConfigError(f"scenario: {name!r} is not one of {', '.join(PRESETS)}")
+    text = resources.files("sarmoco.sim").joinpath("presets", f"{name}.toml").read_text()
+    return tomllib.loads(text)
+
+
+def _integration_angle(raw: dict[str, Any], wavelength_m: float) -> float:
+    if "integration_angle_rad" in raw:
+        return float(raw["integration_angle_rad"])
+    if "azimuth_resolution_m" in raw:
+        return 2.0 * math.asin(wavelength_m / (4.0 * float(raw["azimuth_resolution_m"])))
+    raise ConfigError(
+        "scenario: preset gives neither integration_angle_rad nor azimuth_resolution_m"
+    )
+
+
+def _aperture_s(p: dict[str, Any], targets_ned: FloatArray, ground_centre_m: float) -> float:
+    half = math.tan(p["integration_angle_rad"] / 2.0)
+    slant = np.hypot(targets_ned[:, 1], targets_ned[:, 2] + p["altitude_m"])
+    if p["mode"] == "spotlight":
+        r_c = math.hypot(ground_centre_m, p["altitude_m"])
+        return 2.0 * r_c * half / p["speed_mps"]
+    north = targets_ned[:, 0]
+    length = float(np.max(north + slant * half) - np.min(north - slant * half))
+    return 1.02 * length / p["speed_mps"]
+
+
+def _track_start(p: dict[str, Any], targets_ned: FloatArray) -> float:
+    mid = 0.5 * float(np.min(targets_ned[:, 0]) + np.max(targets_ned[:, 0]))
+    return mid - 0.5 * p["speed_mps"] * p["aperture_s"]
+
+
+def _doppler_bandwidth_hz(p: dict[str, Any], targets_ned: FloatArray, wavelength_m: float) -> float:
+    """Two-sided Doppler bandwidth of all targets over the aperture, Hz."""
+    if p["mode"] == "stripmap":
+        return 4.0 * p["speed_mps"] * math.sin(p["integration_angle_rad"] / 2.0) / wavelength_m
+    x0 = p["track_start_north_m"]
+    x1 = x0 + p["speed_mps"] * p["aperture_s"]
+    sins = []
+    for x_apc in (x0, x1):
+        d = targets_ned - np.array([x_apc, 0.0, -p["altitude_m"]])
+        sins.append(d[:, 0] / np.linalg.norm(d, axis=1))
+    s = np.concatenate(sins)
+    return 2.0 * p["speed_mps"] * float(s.max() - s.min()) / wavelength_m
+
+
+def _slant_window_m(
+    p: dict[str, Any], targets_ned: FloatArray, ground_centre_m: float
+) -> tuple[float, float]:
+    """Slant-range interval [near, far] the receive window must hold, m."""
+    h = p["altitude_m"]
+    edges = np.array([ground_centre_m - p["swath_m"] / 2.0, ground_centre_m + p["swath_m"] / 2.0])
+    ranges = [np.hypot(np.maximum(edges, 0.0), h)]
+    for x_apc in (
+        p["track_start_north_m"],
+        p["track_start_north_m"] + p["speed_mps"] * p["aperture_s"],
+    ):
+        d = targets_ned - np.array([x_apc, 0.0, -h])
+        ranges.append(np.linalg.norm(d, axis=1))
+    ranges.append(np.hypot(targets_ned[:, 1], targets_ned[:, 2] + h))
+    r = np.concatenate(ranges)
+    margin = RANGE_MARGIN_FRACTION * float(r.max() - r.min()) + RANGE_MARGIN_M
+    return float(r.min()) - margin, float(r.max()) + margin
+
+
+def _receiver(p: dict[str, Any], near_m: float, far_m: float, r_c: float) -> tuple[int, float]:
+    """n_samples and range_gate_delay_s for the receive chain (explicit values win)."""
+    fs, tp = p["sample_rate_hz"], p["pulse_width_s"]
+    if p["receive"] == "matched":
+        if fs < p["bandwidth_hz"]:
+            raise ConfigError(
+                f"scenario.sample_rate_hz: {fs!r} is below the bandwidth {p['bandwidth_hz']!r} "
+                "(matched-filter receive samples the whole chirp)"
+            )
+        gate = p.get("range_gate_delay_s", 2.0 * near_m / C_MPS)
+        n = p.get("n_samples", 2 * math.ceil((2.0 * (far_m - near_m) / C_MPS + tp) * fs / 2.0))
+        return int(n), float(gate)
+    gate = p.get("range_gate_delay_s", 2.0 * r_c / C_MPS)
+    ref_m = C_MPS * gate / 2.0
+    max_dev_s = 2.0 * max(ref_m - near_m, far_m - ref_m) / C_MPS
+    n = int(p.get("n_samples", 2 * math.ceil((tp + 2.0 * max_dev_s) * fs / 2.0)))
+    chirp_rate = p["bandwidth_hz"] / tp
+    half_window_s = min((n / fs - tp) / 2.0, fs / (2.0 * chirp_rate))
+    if half_window_s < max_dev_s:
+        raise ConfigError(
+            f"scenario.receive: dechirp window +-{C_MPS * half_window_s / 2:.2f} m about "
+            f"{ref_m:.2f} m does not hold the scene ({near_m:.2f} .. {far_m:.2f} m); "
+            "raise n_samples or sample_rate_hz"
+        )
+    return n, float(gate)
+
+
+def load_preset(name: str, scale: float = 1.0, **overrides: Any) -> Scenario:
+    """Load a shipped scenario preset.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`PRESETS`.
+    scale : float
+        0 < scale <= 1: shrinks swath, pulse width (samples) and PRF, keeping the resolutions.
+    **overrides
+        Any :class:`RadarParams` field (e.g. ``prf_hz``, ``receive``, ``n_samples``) or
+        :class:`Scenario` field (e.g. ``snr_db``, ``targets``, ``aperture_s``, ``mode``),
+        applied after scaling; derived values (range gate, samples, aperture) follow them
+        unless given themselves.
+
+    Returns
+    -------
+    Scenario
+
+    Raises
+    ------
+    ConfigError
+        Unknown preset or override key, bad scale, a geometry the receiver cannot hold.
+    """
+    if not 0.0 < scale <= 1.0:
+        raise ConfigError(f"scenario.scale: {scale!r} is not in (0, 1]")
+    unknown = set(overrides) - _RADAR_KEYS - _SCENARIO_KEYS
+    if unknown:
+        raise ConfigError(f"scenario: unknown override(s) {sorted(unknown)}")
+    raw = _read_preset(name)
+    radar_raw = dict(raw["radar"])
+    p: dict[str, Any] = {
+        "speed_mps": float(raw["speed_mps"]),
+        "altitude_m": float(raw["altitude_m"]),
+        "center_slant_range_m": float(raw["center_slant_range_m"]),
+        "swath_m": float(raw["swath_m"]) * scale,
+        "mode": raw["mode"],
+        "snr_db": raw.get("snr_db"),
+        "t0_ns": DEFAULT_T0_NS,
+        "carrier_hz": float(radar_raw["carrier_hz"]),
+        "bandwidth_hz": float(radar_raw["bandwidth_hz"]),
+        "pulse_width_s": float(radar_raw["pulse_width_s"]) * scale,
+        "sample_rate_hz": float(radar_raw["sample_rate_hz"]),
+        "receive": radar_raw["receive"],
+    }
+    if "n_samples" in radar_raw:
+        p["n_samples"] = 2 * round(int(radar_raw["n_samples"]) * scale / 2.0)
+    wavelength = C_MPS / p["carrier_hz"]
+    p["integration_angle_rad"] = _integration_angle(raw, wavelength)
+    p.update(overrides)
+    wavelength = C_MPS / p["carrier_hz"]
+    if p["center_slant_range_m"] <= p["altitude_m"]:
+        raise ConfigError(
+            f"scenario.center_slant_range_m: {p['center_slant_range_m']} is not > altitude "
+            f"{p['altitude_m']}"
+        )
+    ground_c = math.sqrt(p["center_slant_range_m"] ** 2 - p["altitude_m"] ** 2)
+    if "targets" not in p:
+        tg = raw["targets"]
+        p["targets"] = tuple(
+            Target((fn * p["swath_m"], ground_c + fe * p["swath_m"], 0.0))
+            for fn, fe in zip(tg["north_frac"], tg["east_frac"], strict=True)
+        )
+    targets = tuple(p["targets"])
+    t_ned = np.array([t.pos_ned for t in targets], dtype=np.float64).reshape(-1, 3)
+    if t_ned.shape[0] == 0:
+        raise ConfigError("scenario.targets: empty")
+    p.setdefault("aperture_s", _aperture_s(p, t_ned, ground_c))
+    p.setdefault("track_start_north_m", _track_start(p, t_ned))
+    if "prf_hz" not in p:
+        floor = PRF_OVERSAMPLING * _doppler_bandwidth_hz(p, t_ned, wavelength)
+        full = float(radar_raw["prf_hz"])
+        p["prf_hz"] = max(full * scale, min(full, floor))
+    near, far = _slant_window_m(p, t_ned, ground_c)
+    n_samples, gate = _receiver(p, near, far, p["center_slant_range_m"])
+    radar = RadarParams(
+        carrier_hz=p["carrier_hz"],
+        bandwidth_hz=p["bandwidth_hz"],
+        pulse_width_s=p["pulse_width_s"],
+        sample_rate_hz=p["sample_rate_hz"],
+        prf_hz=p["prf_hz"],
+        n_samples=n_samples,
+        range_gate_delay_s=gate,
+        receive=p["receive"],
+    )
+    if p["mode"] not in ("stripmap", "spotlight"):
+        raise ConfigError(f"scenario.mode: {p['mode']!r} is not 'stripmap' or 'spotlight'")
+    notes = {k: float(raw[k]) for k in _PRESET_KEYS if k in raw}
+    notes["slant_window_near_m"], notes["slant_window_far_m"] = near, far
+    return Scenario(
+        name=name,
+        radar=radar,
+        speed_mps=p["speed_mps"],
+        altitude_m=p["altitude_m"],
+        center_slant_range_m=p["center_slant_range_m"],
+        swath_m=p["swath_m"],
+        mode=p["mode"],
+        aperture_s=float(p["aperture_s"]),
+        targets=targets,
+        snr_db=None if p["snr_db"] is None else float(p["snr_db"]),
+        scale=scale,
+        scene_center_ned=(0.0, ground_c, 0.0),
+        integration_angle_rad=float(p["integration_angle_rad"]),
+        track_start_north_m=float(p["track_start_north_m"]),
+        t0_ns=int(p["t0_ns"]),
+        notes=notes,
+    )
