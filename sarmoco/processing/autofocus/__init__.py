@@ -1,0 +1,26 @@
+"""Echo-based autofocus: sliding-subaperture two-step method (METHODS §3) and PGA.
+
+Public entry points: :class:`SlidingSubapertureAutofocus` (streaming),
+:func:`autofocus_offline` (whole aperture), :func:`pga` (refinement), and the records in
+:mod:`.report`.
+"""
+
+from sarmoco.processing.autofocus.report import AutofocusReport, LineRates, SubapertureReport
+from sarmoco.processing.autofocus.streaming import (
+    AutofocusConfig,
+    AutofocusGeometry,
+    Corrections,
+    SlidingSubapertureAutofocus,
+    autofocus_offline,
+)
+
+__all__ = [
+    "AutofocusConfig",
+    "AutofocusGeometry",
+    "AutofocusReport",
+    "Corrections",
+    "LineRates",
+    "SlidingSubapertureAutofocus",
+    "SubapertureReport",
+    "autofocus_offline",
+]

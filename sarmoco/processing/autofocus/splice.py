@@ -1,0 +1,120 @@
+"""Splicing of per-subaperture estimates into continuous series, their double integration, and
+the corrections built from them (range shift of the envelope, phase per range bin)."""
+
+from __future__ import annotations
+
+from typing import Literal
+
+import numpy as np
+
+from sarmoco.errors import ProcessingError
+from sarmoco.processing.types import ComplexArray, FloatArray
+
+Pin = Literal["mean_trend", "start"]
+
+
+def splice(t_centers_s: FloatArray, values: FloatArray, t_s: FloatArray) -> FloatArray:
+    """Piecewise-linear series through per-subaperture values, held constant beyond the ends.
+
+    Parameters
+    ----------
+    t_centers_s : ndarray, shape (J,)
+        Subaperture centre times, s, increasing.
+    values : ndarray, shape (J, n)
+        Estimates at the centres (any unit).
+    t_s : ndarray, shape (P,)
+        Output times, s.
+
+    Returns
+    -------
+    ndarray, shape (P, n)
+    """
+    v = np.asarray(values, dtype=float).reshape(len(t_centers_s), -1)
+    if v.shape[0] == 0:
+        raise ProcessingError("splice: no subaperture estimates")
+    return np.column_stack([np.interp(t_s, t_centers_s, v[:, i]) for i in range(v.shape[1])])
+
+
+def integrate_twice(
+    t_s: FloatArray, second_derivative: FloatArray, value0: FloatArray, slope0: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Integrate a series twice (trapezoid rule on the actual sample times) from given start.
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (P,)
+        Sample times, s.
+    second_derivative : ndarray, shape (P, n)
+        E.g. accelerations in m/s² or rates in Hz/s.
+    value0, slope0 : ndarray, shape (n,)
+        Value and first derivative at ``t_s[0]``.
+
+    Returns
+    -------
+    value, slope : ndarray, shape (P, n)
+        The twice- and once-integrated series (m and m/s for m/s²; cycles and Hz for Hz/s).
+    """
+    f = np.asarray(second_derivative, dtype=float).reshape(len(t_s), -1)
+    dt = np.diff(t_s)[:, None]
+    zero = np.zeros((1, f.shape[1]))
+    slope = slope0 + np.vstack([zero, np.cumsum(0.5 * dt * (f[1:] + f[:-1]), axis=0)])
+    value = value0 + np.vstack([zero, np.cumsum(0.5 * dt * (slope[1:] + slope[:-1]), axis=0)])
+    return value, slope
+
+
+def double_integrate(t_s: FloatArray, second_derivative: FloatArray, pin: Pin) -> FloatArray:
+    """Integrate twice with the unobservable constant and linear terms pinned.
+
+    ``pin="mean_trend"`` removes the least-squares line (zero mean and zero trend over the
+    span: the offline choice); ``pin="start"`` starts with zero value and slope (the
+    streaming choice). Shapes and units as :func:`integrate_twice`.
+    """
+    f = np.asarray(second_derivative, dtype=float).reshape(len(t_s), -1)
+    zero = np.zeros(f.shape[1])
+    out = integrate_twice(t_s, f, zero, zero)[0]
+    if pin == "mean_trend":
+        out = out - line_fit(t_s, out)
+    elif pin != "start":
+        raise ProcessingError(f"double_integrate: pin {pin!r} is not 'mean_trend' or 'start'")
+    return out
+
+
+def line_fit(t_s: FloatArray, y: FloatArray) -> FloatArray:
+    """Least-squares line ``a + b t`` through each column of ``y`` (P, n), evaluated at t."""
+    design = np.column_stack([np.ones_like(t_s), t_s - t_s.mean()])
+    coef = np.linalg.lstsq(design, y, rcond=None)[0]
+    return np.asarray(design @ coef, dtype=float)
+
+
+def shift_range(rc: ComplexArray, shift_m: FloatArray, bin_m: float) -> ComplexArray:
+    """Move every pulse's envelope by ``shift_m`` (a peak at R goes to R + shift).
+
+    A linear phase in range frequency; the carrier phase of a compressed peak is kept.
+
+    Parameters
+    ----------
+    rc : ndarray, shape (P, S)
+        Range-compressed pulses on a uniform range axis of spacing ``bin_m``.
+    shift_m : ndarray, shape (P,)
+        Shift of each pulse, m.
+    """
+    n = rc.shape[1]
+    pad = int(2 ** np.ceil(np.log2(n + 16)))
+    f = np.fft.fftfreq(pad, d=bin_m)
+    spec = np.fft.fft(rc, pad, axis=1)
+    spec *= np.exp(-2j * np.pi * f[None, :] * np.asarray(shift_m, dtype=float)[:, None])
+    return np.fft.ifft(spec, axis=1)[:, :n].astype(rc.dtype)
+
+
+def phase_screen(cycles_per_order: FloatArray, delta_range_m: FloatArray) -> FloatArray:
+    """Phase error per pulse and range bin, rad: ``2π (Φ0 + Φ1 Δd + Φ2 Δd²)``.
+
+    Parameters
+    ----------
+    cycles_per_order : ndarray, shape (P, 3)
+        Double integrals of κ0, κ1, κ2 (cycles, cycles/m, cycles/m²).
+    delta_range_m : ndarray, shape (S,)
+        ``R - R_c`` of each range bin, m.
+    """
+    powers = np.vstack([np.ones_like(delta_range_m), delta_range_m, delta_range_m**2])
+    return np.asarray(2.0 * np.pi * (cycles_per_order @ powers), dtype=float)
