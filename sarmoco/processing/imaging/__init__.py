@@ -1,0 +1,26 @@
+"""Image formation: range-Doppler (stripmap), polar format (spotlight), backprojection.
+
+Each imager returns a :class:`sarmoco.processing.types.Image` with its grid.
+"""
+
+from sarmoco.processing.imaging.backprojection import backproject
+from sarmoco.processing.imaging.grid import PlaneGrid, facing_heading
+from sarmoco.processing.imaging.pfa import PfaSupport, pfa_support, polar_format, validity_radius_m
+from sarmoco.processing.imaging.phase_history import (
+    compressed_from_phase_history,
+    phase_history_from_compressed,
+)
+from sarmoco.processing.imaging.rda import range_doppler
+
+__all__ = [
+    "PfaSupport",
+    "PlaneGrid",
+    "backproject",
+    "compressed_from_phase_history",
+    "facing_heading",
+    "pfa_support",
+    "phase_history_from_compressed",
+    "polar_format",
+    "range_doppler",
+    "validity_radius_m",
+]
