@@ -49,6 +49,9 @@ class VelocitySample:
         Local NED position, m, when the message carries one.
     vel_std_mps : tuple of 3 float or None
         1-sigma velocity accuracy, m/s, when the message carries one.
+    lat_lon_alt : tuple of 3 float or None
+        Latitude, longitude (deg, WGS 84) and altitude above mean sea level (m),
+        when the message carries a global position.
     """
 
     t_gps_ns: int
@@ -58,6 +61,7 @@ class VelocitySample:
     device_time_ns: int
     pos_ned_m: tuple[float, float, float] | None = None
     vel_std_mps: tuple[float, float, float] | None = None
+    lat_lon_alt: tuple[float, float, float] | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -1,0 +1,252 @@
+"""Clock models that map a device's own clock onto GPS time.
+
+* :class:`LinearClockFit` — offset and skew from (device time, reference time)
+  pairs over a sliding window, with outlier rejection; used for SBG UTC_TIME,
+  MAVLink SYSTEM_TIME and dataflash GPS records.
+* :class:`TimesyncEstimator` — the MAVLink TIMESYNC exchange: round-trip
+  filtering (only the fastest round trips are trusted), offset and skew,
+  outlier rejection, reset on reboot, and a stated error bound.
+* :class:`CounterUnwrapper` — extends a wrapping device counter and detects reboots.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from sarmoco.errors import ClockError
+
+
+class CounterUnwrapper:
+    """Extends an ``bits``-wide wrapping counter to an unbounded one.
+
+    Parameters
+    ----------
+    bits : int
+        Counter width (32 for SBG microseconds).
+    reboot_backstep : int
+        A step backwards larger than this (counter units) that is not a wrap is
+        a reboot: :meth:`unwrap` returns it with ``reset=True``.
+    """
+
+    def __init__(self, bits: int, reboot_backstep: int) -> None:
+        self._mod = 1 << bits
+        self._backstep = reboot_backstep
+        self._wraps = 0
+        self._last: int | None = None
+
+    def unwrap(self, raw: int) -> tuple[int, bool]:
+        """Extended value of ``raw`` and whether the device rebooted before it."""
+        reset = False
+        if self._last is not None:
+            step = raw - self._last
+            if step < -self._mod // 2:
+                self._wraps += 1
+            elif -self._mod // 2 <= step < -self._backstep:
+                self._wraps = 0
+                reset = True
+            elif step > self._mod // 2 and self._wraps:
+                return self._wraps * self._mod - self._mod + raw, False  # late pre-wrap value
+        self._last = raw
+        return self._wraps * self._mod + raw, reset
+
+
+class LinearClockFit:
+    """``reference = offset + (1 + skew) · device`` from a sliding window of pairs.
+
+    Parameters
+    ----------
+    window : int
+        Pairs kept.
+    outlier_ns : int
+        A pair further than this from the current fit is rejected (counted in
+        :attr:`rejected`) once the fit has ``min_pairs`` pairs; a run of
+        ``window // 2`` consecutive rejections means the reference stepped and
+        the fit restarts from the new pairs.
+    min_pairs : int
+        Pairs needed before the skew is estimated (offset only before that).
+    """
+
+    def __init__(self, window: int = 16, outlier_ns: int = 2_000_000, min_pairs: int = 3) -> None:
+        self._dev: deque[int] = deque(maxlen=window)
+        self._ref: deque[int] = deque(maxlen=window)
+        self._outlier_ns = outlier_ns
+        self._min_pairs = min_pairs
+        self._run: list[tuple[int, int]] = []
+        self._coef: tuple[int, int, float] | None = None
+        self.rejected = 0
+        self.residual_ns = 0.0
+        """RMS residual of the current fit, ns."""
+
+    @property
+    def ready(self) -> bool:
+        """Whether at least one pair is in the fit."""
+        return self._coef is not None
+
+    def reset(self) -> None:
+        """Forget every pair (device reboot, reference step)."""
+        self._dev.clear()
+        self._ref.clear()
+        self._run.clear()
+        self._coef = None
+
+    def add(self, device_ns: int, reference_ns: int) -> bool:
+        """Add one pair; returns False when it is rejected as an outlier."""
+        if self._coef is not None and len(self._dev) >= self._min_pairs:
+            if abs(self.map(device_ns) - reference_ns) > self._outlier_ns:
+                self.rejected += 1
+                self._run.append((device_ns, reference_ns))
+                if len(self._run) >= max(2, (self._dev.maxlen or 2) // 2):
+                    run = self._run
+                    self.reset()
+                    for d, r in run:
+                        self._append(d, r)
+                    self._refit()
+                return False
+        self._run.clear()
+        self._append(device_ns, reference_ns)
+        self._refit()
+        return True
+
+    def _append(self, device_ns: int, reference_ns: int) -> None:
+        self._dev.append(device_ns)
+        self._ref.append(reference_ns)
+
+    def _refit(self) -> None:
+        d0, r0 = self._dev[-1], self._ref[-1]
+        if len(self._dev) < self._min_pairs:
+            offsets = [r - d for d, r in zip(self._dev, self._ref, strict=True)]
+            self._coef = (d0, d0 + int(np.median(offsets)), 0.0)
+            self.residual_ns = float(np.std(offsets))
+            return
+        x = np.array(self._dev, dtype=np.float64) - d0
+        y = np.array(self._ref, dtype=np.float64) - r0 - x
+        skew, intercept = np.polyfit(x, y, 1)
+        self._coef = (d0, r0 + round(intercept), float(skew))
+        self.residual_ns = float(np.sqrt(np.mean((y - (intercept + skew * x)) ** 2)))
+
+    def map(self, device_ns: int) -> int:
+        """Reference time of a device time, ns.
+
+        Raises
+        ------
+        ClockError
+            If no pair has been added yet.
+        """
+        if self._coef is None:
+            raise ClockError("device clock not synchronised yet (no time reference received)")
+        d0, r0, skew = self._coef
+        dx = device_ns - d0
+        return r0 + dx + round(skew * dx)
+
+
+@dataclass(frozen=True)
+class TimesyncExchange:
+    """One TIMESYNC round trip.
+
+    Attributes
+    ----------
+    local_send_ns, local_recv_ns : int
+        Local clock at request send and response receive, ns.
+    remote_ns : int
+        Remote clock in the response (``tc1``), ns.
+    """
+
+    local_send_ns: int
+    local_recv_ns: int
+    remote_ns: int
+
+    @property
+    def rtt_ns(self) -> int:
+        """Round-trip time, ns."""
+        return self.local_recv_ns - self.local_send_ns
+
+    @property
+    def midpoint_ns(self) -> int:
+        """Local time assumed to match ``remote_ns`` (symmetric path), ns."""
+        return (self.local_send_ns + self.local_recv_ns) // 2
+
+
+class TimesyncEstimator:
+    """Maps a remote (autopilot boot) clock onto the local clock from TIMESYNC exchanges.
+
+    Parameters
+    ----------
+    window : int
+        Exchanges kept.
+    keep_fraction : float
+        Only exchanges whose round trip is within the fastest ``keep_fraction``
+        of the window enter the fit (slow round trips carry queueing asymmetry).
+    max_rtt_ns : int
+        Exchanges slower than this are discarded outright.
+    outlier_ns : int
+        Exchanges whose offset disagrees with the fit by more than this plus
+        their own half round trip are rejected.
+
+    Notes
+    -----
+    With a symmetric path the remote instant lies within ±RTT/2 of the
+    midpoint; :attr:`bound_ns` is half the slowest round trip admitted to the
+    fit plus three times the fit's RMS residual. A remote clock that goes
+    backwards (reboot) resets the estimate.
+    """
+
+    def __init__(
+        self,
+        window: int = 32,
+        keep_fraction: float = 0.5,
+        max_rtt_ns: int = 200_000_000,
+        outlier_ns: int = 5_000_000,
+    ) -> None:
+        self._window: deque[TimesyncExchange] = deque(maxlen=window)
+        self._keep = keep_fraction
+        self._max_rtt = max_rtt_ns
+        self._outlier = outlier_ns
+        self._fit = LinearClockFit(window=window, outlier_ns=1 << 62, min_pairs=4)
+        self._fit_rtt_ns = 0
+        self.rejected = 0
+        self.resets = 0
+
+    @property
+    def ready(self) -> bool:
+        """Whether at least one exchange has been accepted."""
+        return self._fit.ready
+
+    @property
+    def bound_ns(self) -> int:
+        """Stated bound on the error of :meth:`to_local`, ns."""
+        return self._fit_rtt_ns // 2 + round(3 * self._fit.residual_ns)
+
+    def reset(self) -> None:
+        """Forget every exchange (remote reboot)."""
+        self._window.clear()
+        self._fit.reset()
+        self.resets += 1
+
+    def add(self, ex: TimesyncExchange) -> bool:
+        """Add one exchange; returns False when it is discarded or rejected."""
+        if ex.rtt_ns < 0 or ex.rtt_ns > self._max_rtt:
+            self.rejected += 1
+            return False
+        if self._window and ex.remote_ns < self._window[-1].remote_ns:
+            self.reset()
+        if self._fit.ready:
+            err = abs(self._fit.map(ex.remote_ns) - ex.midpoint_ns)
+            if err > self._outlier + ex.rtt_ns // 2:
+                self.rejected += 1
+                return False
+        self._window.append(ex)
+        rtts = sorted(e.rtt_ns for e in self._window)
+        cut = rtts[max(0, int(len(rtts) * self._keep) - 1)]
+        best = [e for e in self._window if e.rtt_ns <= cut]
+        self._fit.reset()
+        for e in best:
+            self._fit.add(e.remote_ns, e.midpoint_ns)
+        self._fit_rtt_ns = cut
+        return True
+
+    def to_local(self, remote_ns: int) -> int:
+        """Local clock time of a remote clock time, ns (raises ClockError before the first sync)."""
+        return self._fit.map(remote_ns)
