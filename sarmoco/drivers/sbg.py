@@ -3,7 +3,7 @@
 The decoder maps the device clock (µs since power-up, 32-bit) onto GPS time
 with the UTC_TIME log: each UTC_TIME pairs a device time with UTC (ns
 resolution) and the GPS time of week; a sliding offset-and-skew fit
-(:class:`~sarmoco.drivers.timesync.LinearClockFit`) maps every other log.
+(:class:`~sarmoco.drivers.devclock.DeviceClock`) maps every other log.
 GPS − UTC comes from configuration and is confirmed (or corrected, with a
 warning) by the GPS time of week the device reports. Logs that arrive before
 the first valid UTC_TIME wait in a bounded queue.
@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import logging
 import math
-from collections import deque
 from pathlib import Path
 from typing import BinaryIO
 
@@ -28,21 +27,18 @@ from sarmoco.drivers.clock import (
     unix_ns_to_gps_ns,
     utc_calendar_to_unix_ns,
 )
+from sarmoco.drivers.devclock import DeviceClock
 from sarmoco.drivers.samples import (
     AttitudeSample,
     EventSample,
     Sample,
-    TimeSample,
     Validity,
     VelocitySample,
 )
 from sarmoco.drivers.source import Source
-from sarmoco.drivers.timesync import CounterUnwrapper, LinearClockFit
 from sarmoco.errors import ClockError, DriverError
 
 log = logging.getLogger(__name__)
-
-_REBOOT_BACKSTEP_US = 2_000_000
 
 
 def _flags(status: int) -> Validity:
@@ -71,22 +67,13 @@ class SbgDecoder:
         GPS − UTC, s (configuration; checked against the device's GPS time of week).
     link : str
         Name used in log messages.
-    max_pending : int
-        Logs kept while waiting for the first valid UTC_TIME; older ones are
-        dropped (counted in ``counters.drops``).
     """
 
-    def __init__(
-        self, leap_s: int = GPS_LEAP_SECONDS_DEFAULT, link: str = "sbg", max_pending: int = 2000
-    ) -> None:
+    def __init__(self, leap_s: int = GPS_LEAP_SECONDS_DEFAULT, link: str = "sbg") -> None:
         self.leap_s = leap_s
         self.sniffer, self.counters = codec.new_sniffer(link)
-        self.clock = LinearClockFit(window=16, outlier_ns=1_000_000)
-        self._unwrap = CounterUnwrapper(32, _REBOOT_BACKSTEP_US)
-        self._pending: deque[tuple[int, codec.Message]] = deque()
-        self._max_pending = max_pending
+        self.clock = DeviceClock(link, self.counters)
         self._leap_warned = False
-        self._clock_valid = False
 
     def feed(self, data: bytes, final: bool = False) -> list[Sample]:
         """Decode ``data`` (any slice of the byte stream); never raises on bad bytes.
@@ -96,30 +83,38 @@ class SbgDecoder:
         out: list[Sample] = []
         for frame in self.sniffer.feed(data, final):
             msg = codec.decode_payload(frame)
-            if msg is None:
-                continue
-            dev_us, reset = self._unwrap.unwrap(msg.time_us)
-            if reset:
-                log.warning("sbg: device clock went backwards: INS rebooted, clock fit reset")
-                self.clock.reset()
-                self.counters.gaps += 1
-            dev_ns = dev_us * 1000
-            if isinstance(msg, codec.UtcTime):
-                self._utc(msg, dev_ns, out)
-            if not self.clock.ready:
-                self._pending.append((dev_ns, msg))
-                if len(self._pending) > self._max_pending:
-                    self._pending.popleft()
-                    self.counters.drops += 1
-                continue
-            self._flush(out)
-            self._emit(msg, dev_ns, out)
+            if msg is not None:
+                self._message(msg, self.clock.device_ns(msg.time_us), out)
         return out
 
-    def _flush(self, out: list[Sample]) -> None:
-        while self._pending:
-            dev_ns, msg = self._pending.popleft()
-            self._emit(msg, dev_ns, out)
+    def _message(self, msg: codec.Message, dev_ns: int, out: list[Sample]) -> None:
+        if isinstance(msg, codec.UtcTime):
+            self._utc(msg, dev_ns, out)
+        elif isinstance(msg, codec.EkfNav):
+            if not _finite(msg.vel_ned_mps):
+                self.counters.parse_errors += 1
+                return
+            sample = VelocitySample(
+                0, msg.vel_ned_mps, _flags(msg.status), "sbg.EKF_NAV", dev_ns,
+                vel_std_mps=msg.vel_std_mps, lat_lon_alt=msg.lat_lon_alt,
+            )  # fmt: skip
+            self.clock.stamp(sample, out)
+        elif isinstance(msg, codec.EkfQuat | codec.EkfEuler):
+            if isinstance(msg, codec.EkfQuat):
+                q, name = normalized(msg.quat_wxyz), "sbg.EKF_QUAT"
+            else:
+                q = normalized(euler_to_quat(*msg.euler_rad)) if _finite(msg.euler_rad) else None
+                name = "sbg.EKF_EULER"
+            if q is None:
+                self.counters.parse_errors += 1
+                return
+            self.clock.stamp(AttitudeSample(0, q, _flags(msg.status), name, dev_ns), out)
+        else:
+            if msg.status & codec.EVENT_OVERFLOW:
+                self.counters.drops += 1
+            for ev_us in msg.event_times_us:
+                ev_ns = dev_ns + (ev_us - msg.time_us) * 1000
+                self.clock.stamp(EventSample(0, "A", Validity.NONE, "sbg.EVENT_A", ev_ns), out)
 
     def _utc(self, msg: codec.UtcTime, dev_ns: int, out: list[Sample]) -> None:
         if msg.clock_state not in (codec.CLOCK_STEERING, codec.CLOCK_VALID) or not msg.utc_status:
@@ -144,46 +139,9 @@ class SbgDecoder:
                     self.leap_s + leap_fix,
                     self.leap_s,
                 )
-        self._clock_valid = msg.clock_state == codec.CLOCK_VALID
-        if not self.clock.add(dev_ns, gps):
-            return
-        valid = Validity.TIME if self._clock_valid else Validity.NONE
-        out.append(TimeSample(gps, dev_ns, valid, "sbg.UTC_TIME"))
-
-    def _emit(self, msg: codec.Message, dev_ns: int, out: list[Sample]) -> None:
-        t = self.clock.map(dev_ns)
-        tflag = Validity.TIME if self._clock_valid else Validity.NONE
-        if isinstance(msg, codec.EkfNav):
-            if not _finite(msg.vel_ned_mps):
-                self.counters.parse_errors += 1
-                return
-            out.append(
-                VelocitySample(
-                    t,
-                    msg.vel_ned_mps,
-                    _flags(msg.status) | tflag,
-                    "sbg.EKF_NAV",
-                    dev_ns,
-                    vel_std_mps=msg.vel_std_mps,
-                    lat_lon_alt=msg.lat_lon_alt,
-                )
-            )
-        elif isinstance(msg, codec.EkfQuat | codec.EkfEuler):
-            if isinstance(msg, codec.EkfQuat):
-                q, name = normalized(msg.quat_wxyz), "sbg.EKF_QUAT"
-            else:
-                q = normalized(euler_to_quat(*msg.euler_rad)) if _finite(msg.euler_rad) else None
-                name = "sbg.EKF_EULER"
-            if q is None:
-                self.counters.parse_errors += 1
-                return
-            out.append(AttitudeSample(t, q, _flags(msg.status) | tflag, name, dev_ns))
-        elif isinstance(msg, codec.Event):
-            if msg.status & codec.EVENT_OVERFLOW:
-                self.counters.drops += 1
-            for ev_us in msg.event_times_us:
-                ev_ns = dev_ns + (ev_us - msg.time_us) * 1000
-                out.append(EventSample(self.clock.map(ev_ns), "A", tflag, "sbg.EVENT_A", ev_ns))
+        ts = self.clock.reference(dev_ns, gps, msg.clock_state == codec.CLOCK_VALID, "sbg.UTC_TIME")
+        if ts is not None:
+            self.clock.stamp(ts, out)
 
 
 class _SbgSource(Source):

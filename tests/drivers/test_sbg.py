@@ -138,7 +138,7 @@ def test_logs_before_first_utc_wait_and_reboot_resets() -> None:
     nav = codec.EkfNav(d1, (1.0, 2.0, 3.0), (0,) * 3, (0,) * 3, 0.0, (0,) * 3, OK_STATUS)
     assert dec.feed(codec.encode_message(nav)) == []
     out = dec.feed(codec.encode_message(utc_msg(d1 + 1000)))
-    assert [type(s).__name__ for s in out] == ["TimeSample", "VelocitySample"]
+    assert [type(s).__name__ for s in out] == ["VelocitySample", "TimeSample"]
     reboot = codec.EkfNav(5_000_000, (1.0, 2.0, 3.0), (0,) * 3, (0,) * 3, 0.0, (0,) * 3, 0)
     assert dec.feed(codec.encode_message(reboot)) == [] and dec.counters.gaps == 1
 
