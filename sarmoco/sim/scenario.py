@@ -351,11 +351,12 @@ def load_preset(name: str, scale: float = 1.0, **overrides: Any) -> Scenario:
         "sample_rate_hz": float(radar_raw["sample_rate_hz"]),
         "receive": radar_raw["receive"],
     }
-    if "n_samples" in radar_raw:
-        p["n_samples"] = 2 * round(int(radar_raw["n_samples"]) * scale / 2.0)
     wavelength = C_MPS / p["carrier_hz"]
     p["integration_angle_rad"] = _integration_angle(raw, wavelength)
     p.update(overrides)
+    if "n_samples" in radar_raw and "n_samples" not in p and p["receive"] == radar_raw["receive"]:
+        # the preset's sample count belongs to its own receive chain only
+        p["n_samples"] = 2 * round(int(radar_raw["n_samples"]) * scale / 2.0)
     wavelength = C_MPS / p["carrier_hz"]
     if p["center_slant_range_m"] <= p["altitude_m"]:
         raise ConfigError(
