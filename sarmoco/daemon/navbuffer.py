@@ -217,12 +217,12 @@ class NavStream:
         after[ok] = t[i_after[ok]]
         return before, after
 
-    def window(self, t0_ns: int, t1_ns: int) -> tuple[IntArray, FloatArray]:
-        """Copies of the samples in ``[t0_ns, t1_ns]`` and one strictly beyond each end, if held."""
+    def window(self, t0_ns: int, t1_ns: int, extra: int = 1) -> tuple[IntArray, FloatArray]:
+        """Copies of the samples in ``[t0_ns, t1_ns]`` and ``extra`` beyond each end, if held."""
         with self._lock:
             t = self.t_ns
-            lo = max(int(np.searchsorted(t, t0_ns, side="left")) - 1, 0)
-            hi = min(int(np.searchsorted(t, t1_ns, side="right")) + 1, len(t))
+            lo = max(int(np.searchsorted(t, t0_ns, side="left")) - extra, 0)
+            hi = min(int(np.searchsorted(t, t1_ns, side="right")) + extra, len(t))
             return t[lo:hi].copy(), self.values[lo:hi].copy()
 
 

@@ -1,0 +1,224 @@
+"""Release pulses with their navigation once the INS brackets them.
+
+The aligner sits between the echo ring and the processor. A pulse leaves the
+ring (in order) as soon as INS kinematics and attitude samples bracket it with
+no more than ``max_gap_ns`` between them (with a lever arm, also once one more
+attitude sample has arrived, so that the arm's rate is a central difference).
+If that has not happened
+``latency_budget_ns`` after the pulse time, the pulse leaves anyway, flagged:
+:attr:`~sarmoco.daemon.flags.PulseFlag.NAV_GAP` when navigation exists after the
+pulse but the samples around it are too far apart (a dropout, refused samples),
+:attr:`~sarmoco.daemon.flags.PulseFlag.NAV_TIMEOUT` when the INS has not
+reached the pulse time yet. Flagged pulses get NaN navigation: gaps are never
+bridged. Waiting the whole budget before calling a gap a gap lets reordered
+samples fill it.
+
+"Now" is whatever clock the caller runs on, in GPS ns: the host's GPS time
+live, the virtual clock of a replay (e.g. the time of the newest item fed).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from sarmoco.daemon.echoring import EchoBatch, EchoRing
+from sarmoco.daemon.flags import PulseFlag
+from sarmoco.daemon.navbuffer import NO_TIME, NavBuffer, NavStream
+from sarmoco.errors import ProcessingError
+from sarmoco.processing.geometry import lever_arm_ned
+from sarmoco.processing.navinterp import PulseNav, interpolate_nav
+from sarmoco.processing.types import FloatArray, IntArray, NavSamples
+
+BoolArray = npt.NDArray[np.bool_]
+
+
+@dataclass(frozen=True)
+class AlignedBlock:
+    """Pulses released together, oldest first.
+
+    Attributes
+    ----------
+    echoes : EchoBatch
+        Samples and metadata out of the ring; ``echoes.flags`` include the
+        navigation flags set here.
+    nav : PulseNav
+        Navigation at each pulse time: position (NaN when the INS gives none),
+        velocity and attitude of the antenna phase centre when a lever arm is
+        configured, else of the IMU; NED, m, m/s. NaN and ``valid`` False where
+        flagged.
+    """
+
+    echoes: EchoBatch
+    nav: PulseNav
+
+    def __len__(self) -> int:
+        return len(self.echoes)
+
+
+def _covered(stream: NavStream, t_ns: IntArray, max_gap_ns: int) -> tuple[BoolArray, BoolArray]:
+    """Per pulse: bracketed within the gap, and whether any sample at or after it exists."""
+    before, after = stream.bracket(t_ns)
+    has_after = after != NO_TIME
+    ok = (before != NO_TIME) & has_after & (after - before <= max_gap_ns)
+    return ok, has_after
+
+
+class Aligner:
+    """Takes pulses out of an :class:`EchoRing` with navigation from a :class:`NavBuffer`.
+
+    Parameters
+    ----------
+    ring : EchoRing
+        Where the radar reader commits pulses.
+    nav : NavBuffer
+        Where the INS reader pushes samples.
+    max_gap_ns : int
+        Longest INS sample interval interpolated across, ns (a few INS periods).
+    latency_budget_ns : int
+        Longest a pulse waits for the INS, ns.
+    lever_arm_body_m : tuple of 3 float, optional
+        APC minus IMU in the body frame (x forward, y right, z down), m. With it,
+        positions and velocities are of the antenna phase centre.
+    max_block : int
+        Most pulses released by one :meth:`poll`.
+
+    Attributes
+    ----------
+    released, nav_gap, nav_timeout : int
+        Pulses released in all, and of them flagged for a gap or a timeout.
+    """
+
+    def __init__(
+        self,
+        ring: EchoRing,
+        nav: NavBuffer,
+        max_gap_ns: int,
+        latency_budget_ns: int,
+        lever_arm_body_m: tuple[float, float, float] | None = None,
+        max_block: int = 256,
+    ) -> None:
+        if max_gap_ns <= 0 or latency_budget_ns < 0 or max_block < 1:
+            raise ProcessingError(
+                f"Aligner: max_gap_ns {max_gap_ns} must be > 0, latency_budget_ns "
+                f"{latency_budget_ns} >= 0, max_block {max_block} >= 1"
+            )
+        self.ring = ring
+        self.nav = nav
+        self.max_gap_ns = max_gap_ns
+        self.latency_budget_ns = latency_budget_ns
+        self.lever_arm_body_m = (
+            None if lever_arm_body_m is None else np.asarray(lever_arm_body_m, dtype=np.float64)
+        )
+        self.max_block = max_block
+        self.released = 0
+        self.nav_gap = 0
+        self.nav_timeout = 0
+
+    def poll(self, now_ns: int) -> AlignedBlock | None:
+        """Release the oldest pulses that are bracketed or out of time, if any.
+
+        Parameters
+        ----------
+        now_ns : int
+            Current time, GPS ns (see the module doc).
+
+        Returns
+        -------
+        AlignedBlock or None
+            Up to ``max_block`` pulses, in order; None when the oldest pulse must wait.
+        """
+        t = self.ring.peek_times(self.max_block)
+        if t.shape[0] == 0:
+            return None
+        ok, settled = self._status(t)
+        decided = (ok & self._lookahead(t)) | (now_ns - t > self.latency_budget_ns)
+        n = t.shape[0] if decided.all() else int(np.argmin(decided))
+        if n == 0:
+            return None
+        return self._release(n, ok[:n], settled[:n])
+
+    def flush(self) -> AlignedBlock | None:
+        """Release every pulse in the ring now (end of a run), flagging the uncovered ones."""
+        n = len(self.ring)
+        if n == 0:
+            return None
+        t = self.ring.peek_times(n)
+        ok, settled = self._status(t)
+        return self._release(n, ok, settled)
+
+    def _status(self, t: IntArray) -> tuple[BoolArray, BoolArray]:
+        ok_k, after_k = _covered(self.nav.kinematics, t, self.max_gap_ns)
+        ok_a, after_a = _covered(self.nav.attitude, t, self.max_gap_ns)
+        return ok_k & ok_a, after_k & after_a
+
+    def _lookahead(self, t: IntArray) -> BoolArray:
+        """With a lever arm: an attitude sample beyond the bracket exists (for the arm's rate)."""
+        if self.lever_arm_body_m is None:
+            return np.ones(t.shape[0], dtype=bool)
+        _, after = self.nav.attitude.bracket(t)
+        _, beyond = self.nav.attitude.bracket(np.where(after == NO_TIME, t, after + 1))
+        return (after != NO_TIME) & (beyond != NO_TIME)
+
+    def _release(self, n: int, ok: BoolArray, settled: BoolArray) -> AlignedBlock:
+        echoes = self.ring.pop(n)
+        nav = self._interpolate(echoes.t_ns, ok)
+        gap = ~nav.valid & settled
+        timeout = ~nav.valid & ~settled
+        echoes.flags[gap] |= np.uint32(PulseFlag.NAV_GAP)
+        echoes.flags[timeout] |= np.uint32(PulseFlag.NAV_TIMEOUT)
+        self.released += n
+        self.nav_gap += int(gap.sum())
+        self.nav_timeout += int(timeout.sum())
+        return AlignedBlock(echoes, nav)
+
+    def _interpolate(self, t: IntArray, ok: BoolArray) -> PulseNav:
+        """Navigation at the pulse times; NaN and invalid where ``ok`` is False."""
+        p = t.shape[0]
+        pos, vel, quat = np.full((p, 3), np.nan), np.full((p, 3), np.nan), np.full((p, 4), np.nan)
+        valid = ok.copy()
+        if ok.any():
+            tq = t[ok]
+            tk, vk = self.nav.kinematics.window(int(tq.min()), int(tq.max()))
+            ta, qa = self.nav.attitude.window(int(tq.min()), int(tq.max()), extra=2)
+            has_pos = not np.isnan(vk[:, 3:]).any()
+            identity = np.tile([1.0, 0.0, 0.0, 0.0], (tk.shape[0], 1))
+            kin_nav = NavSamples(tk, vk[:, :3], identity, vk[:, 3:] if has_pos else None)
+            att_nav = self._lever_track(ta, qa)
+            kin = interpolate_nav(kin_nav, tq, self.max_gap_ns, strict=False)
+            att = interpolate_nav(att_nav, tq, self.max_gap_ns, strict=False)
+            pos_q, vel_q = kin.pos_ned, kin.vel_ned
+            if self.lever_arm_body_m is not None:
+                pos_q = pos_q + att.pos_ned
+                vel_q = vel_q + att.vel_ned
+            pos[ok] = pos_q if has_pos else np.nan
+            vel[ok] = vel_q
+            quat[ok] = att.quat
+            valid[ok] = kin.valid & att.valid
+        pos[~valid] = vel[~valid] = quat[~valid] = np.nan
+        return PulseNav(t_ns=t, pos_ned=pos, vel_ned=vel, quat=quat, valid=valid)
+
+    def _lever_track(self, ta: IntArray, qa: FloatArray) -> NavSamples:
+        """Attitude samples carrying the rotated lever arm as a position track.
+
+        Position: ``R(q) l`` at each attitude sample, NED m (zero without a lever
+        arm); velocity: its rate from the chords to both neighbours (the
+        non-uniform three-point derivative; one-sided at the ends and next to a
+        gap), so that :func:`interpolate_nav` gives the lever arm and its rate at
+        the pulses by the same Hermite cubic as the IMU track.
+        """
+        n = ta.shape[0]
+        if self.lever_arm_body_m is None or n < 2:
+            return NavSamples(ta, np.zeros((n, 3)), qa, np.zeros((n, 3)))
+        arm = lever_arm_ned(qa, self.lever_arm_body_m)
+        h = (np.diff(ta) * 1e-9)[:, None]
+        chord = np.diff(arm, axis=0) / h
+        rate = np.empty_like(arm)
+        rate[0], rate[-1] = chord[0], chord[-1]
+        h1, h2, c1, c2 = h[:-1], h[1:], chord[:-1], chord[1:]
+        rate[1:-1] = (h1 * c2 + h2 * c1) / (h1 + h2)
+        gap = self.max_gap_ns * 1e-9
+        rate[1:-1] = np.where(h1 > gap, c2, np.where(h2 > gap, c1, rate[1:-1]))
+        return NavSamples(ta, rate, qa, arm)
