@@ -143,7 +143,11 @@ def _first_null(p: FloatArray, i_peak: int, step: int) -> int:
 
 
 def cut_metrics(
-    cut: ComplexArray, spacing_m: float, origin_m: float = 0.0, upsample: int = 16
+    cut: ComplexArray,
+    spacing_m: float,
+    origin_m: float = 0.0,
+    upsample: int = 16,
+    peak_index: int | None = None,
 ) -> CutMetrics:
     """PSLR, ISLR, IRW and peak position of a 1-D complex cut through a point target.
 
@@ -158,6 +162,9 @@ def cut_metrics(
         Coordinate of ``cut[0]``, m.
     upsample : int
         FFT upsampling factor used before measuring.
+    peak_index : int, optional
+        Sample of the cut nearest the target's peak; the peak is then sought
+        within one sample of it (default: the maximum of the whole cut).
 
     Returns
     -------
@@ -168,7 +175,11 @@ def cut_metrics(
     up = upsample_cut(cut, upsample)
     p = np.abs(up) ** 2
     d = spacing_m / upsample
-    i_pk = int(np.argmax(p))
+    if peak_index is None:
+        i_pk = int(np.argmax(p))
+    else:
+        lo_pk = max(0, (peak_index - 1) * upsample)
+        i_pk = lo_pk + int(np.argmax(p[lo_pk : (peak_index + 1) * upsample + 1]))
     # sub-sample peak: parabola through the three upsampled samples at the maximum
     if 0 < i_pk < p.shape[0] - 1:
         a, b, c = p[i_pk - 1], p[i_pk], p[i_pk + 1]
@@ -206,7 +217,9 @@ def point_target_metrics(
 ) -> PointTargetMetrics:
     """Measure the point target at the brightest pixel (near ``expected_m`` if given).
 
-    The cuts are the full image row and column through the brightest pixel.
+    The cuts are the full image row and column through the brightest pixel;
+    each is measured at that pixel's lobe (other targets on the cut are not
+    mistaken for it, though their sidelobes inside the window do count).
 
     Parameters
     ----------
@@ -230,8 +243,8 @@ def point_target_metrics(
         mag = np.where(d0**2 + d1**2 <= search_radius_m**2, mag, 0.0)
     i0, i1 = np.unravel_index(int(np.argmax(mag)), mag.shape)
     s0, s1 = image.spacing_m
-    m0 = cut_metrics(image.data[:, i1], s0, float(image.axis0_m[0]), upsample)
-    m1 = cut_metrics(image.data[i0, :], s1, float(image.axis1_m[0]), upsample)
+    m0 = cut_metrics(image.data[:, i1], s0, float(image.axis0_m[0]), upsample, int(i0))
+    m1 = cut_metrics(image.data[i0, :], s1, float(image.axis1_m[0]), upsample, int(i1))
     err = None
     if expected_m is not None:
         err = (m0.peak_m - expected_m[0], m1.peak_m - expected_m[1])
