@@ -18,10 +18,15 @@ Three kinds (:class:`MotionSpec`):
     so position, velocity and acceleration are exact analytic derivatives of one smooth
     function, defined for any time (and identical for any sampling of it).
 ``flightlog``
-    Deviations of a real ArduPilot flight from its own straight-line fit: LOCAL_POSITION_NED
-    (and ATTITUDE) from a MAVLink telemetry log, rotated so the segment's mean ground track is
-    north, detrended (linear fit per axis), and fitted by a cubic smoothing spline whose
-    derivatives give velocity and acceleration.
+    Real UAV motion from an ArduPilot MAVLink telemetry log (``*.tlog``): the velocities of
+    LOCAL_POSITION_NED during the airborne part of the first boot (ground speed above
+    ``AIRBORNE_SPEED_MPS``) are "straightened": resolved along and across the course smoothed
+    with a Gaussian of ``COURSE_SMOOTHING_S`` (so loiter turns become a straight line and only
+    the wander about the smoothed path remains), with their mean over the window removed. Each
+    channel is fitted by a cubic smoothing spline (GCV) whose integral and derivative give
+    position and acceleration, so the three are exact derivatives of one process; position
+    deviation is zero at the first pulse. Roll and pitch are the logged ATTITUDE; yaw is the
+    logged yaw minus the smoothed course (crab and heading wander).
 
 Frames: NED, m, s; ``t_s`` is time since the first pulse. Quaternions are scalar-first and
 rotate body to NED (3-2-1 yaw, pitch, roll; METHODS §1). The APC is taken as the IMU point
@@ -30,13 +35,16 @@ rotate body to NED (3-2-1 yaw, pitch, roll; METHODS §1). The APC is taken as th
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Literal, Protocol
 
 import numpy as np
+from scipy.interpolate import BSpline, make_smoothing_spline
+from scipy.ndimage import gaussian_filter1d
 
-from sarmoco.errors import ConfigError
+from sarmoco.errors import ConfigError, DataFileError, NavigationError
 from sarmoco.processing.types import FloatArray
 from sarmoco.sim.scenario import Scenario
 
@@ -68,7 +76,11 @@ class MotionSpec:
     log_path : Path or None
         MAVLink telemetry log (``*.tlog``) for ``flightlog``.
     log_start_s : float
-        Offset of the first pulse into the log's usable segment, s (flightlog).
+        Time of the first pulse after the start of the log's airborne segment, s (flightlog).
+    log_window_s : float
+        Length of the log window the deviations are fitted on, s (flightlog); the trajectory
+        is defined from ``LOG_MARGIN_S`` before the first pulse to ``log_window_s`` plus that
+        margin after it.
     """
 
     kind: Literal["ideal", "turbulence", "flightlog"] = "ideal"
@@ -76,10 +88,11 @@ class MotionSpec:
     vertical_rms_m: float = 0.3
     along_speed_rms_mps: float = 0.1
     attitude_rms_rad: float = 0.01
-    corner_hz: float = 0.5
+    corner_hz: float = 0.2
     seed: int = 0
     log_path: Path | None = None
-    log_start_s: float = 0.0
+    log_start_s: float = 10.0
+    log_window_s: float = 20.0
 
 
 @dataclass(frozen=True)
@@ -194,6 +207,163 @@ class TurbulenceDeviation:
         return pos, vel, acc, euler
 
 
+AIRBORNE_SPEED_MPS = 8.0
+"""Log samples with a ground speed above this belong to the airborne segment, m/s."""
+
+COURSE_SMOOTHING_S = 2.0
+"""Standard deviation of the Gaussian that smooths the logged course, s."""
+
+LOG_MARGIN_S = 2.0
+"""The flight-log trajectory extends this far beyond the window on each side, s."""
+
+
+@dataclass(frozen=True)
+class FlightLog:
+    """Airborne segment of a MAVLink log on the autopilot's boot clock.
+
+    Parameters
+    ----------
+    t_s : ndarray, shape (N,)
+        LOCAL_POSITION_NED time since boot, s, strictly increasing.
+    vel_ned : ndarray, shape (N, 3)
+        Logged velocity, NED, m/s.
+    euler_rad : ndarray, shape (N, 3)
+        ATTITUDE roll, pitch, unwrapped yaw interpolated to ``t_s``, rad.
+    """
+
+    t_s: FloatArray
+    vel_ned: FloatArray
+    euler_rad: FloatArray
+
+
+@functools.lru_cache(maxsize=4)
+def read_flight_log(path: str) -> FlightLog:
+    """Read the longest airborne run of the first boot from a MAVLink ``.tlog``.
+
+    Raises
+    ------
+    DataFileError
+        The file lacks LOCAL_POSITION_NED / ATTITUDE or has no airborne segment.
+    """
+    from pymavlink import mavutil
+
+    try:
+        conn = mavutil.mavlink_connection(path)
+    except OSError as exc:
+        raise DataFileError(f"flight log {path}: {exc}") from exc
+    pos_rows: list[tuple[float, float, float, float]] = []
+    att_rows: list[tuple[float, float, float, float]] = []
+    while (msg := conn.recv_match(type=["LOCAL_POSITION_NED", "ATTITUDE"])) is not None:
+        t = msg.time_boot_ms * 1e-3
+        if msg.get_type() == "LOCAL_POSITION_NED":
+            pos_rows.append((t, msg.vx, msg.vy, msg.vz))
+        else:
+            att_rows.append((t, msg.roll, msg.pitch, msg.yaw))
+    if len(pos_rows) < 10 or len(att_rows) < 10:
+        raise DataFileError(f"flight log {path}: too few LOCAL_POSITION_NED / ATTITUDE messages")
+    pos = _longest_increasing(np.array(pos_rows))
+    att = _longest_increasing(np.array(att_rows))
+    airborne = np.hypot(pos[:, 1], pos[:, 2]) > AIRBORNE_SPEED_MPS
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], airborne.astype(int), [0]))))
+    starts, stops = edges[::2], edges[1::2]
+    if starts.size == 0:
+        raise DataFileError(f"flight log {path}: no samples above {AIRBORNE_SPEED_MPS} m/s")
+    k = int(np.argmax(pos[stops - 1, 0] - pos[starts, 0]))
+    seg = pos[starts[k] : stops[k]]
+    euler = np.stack(
+        [np.interp(seg[:, 0], att[:, 0], a) for a in (att[:, 1], att[:, 2], np.unwrap(att[:, 3]))],
+        1,
+    )
+    return FlightLog(t_s=seg[:, 0], vel_ned=seg[:, 1:4], euler_rad=euler)
+
+
+def _longest_increasing(rows: FloatArray) -> FloatArray:
+    """Rows of the longest run with strictly increasing first column (one boot)."""
+    breaks = np.flatnonzero(np.diff(rows[:, 0]) <= 0) + 1
+    bounds = np.concatenate(([0], breaks, [rows.shape[0]]))
+    k = int(np.argmax(np.diff(bounds)))
+    return rows[bounds[k] : bounds[k + 1]]
+
+
+@dataclass(frozen=True)
+class FlightLogDeviation:
+    """Straightened deviations of a logged flight (see the module docstring).
+
+    Parameters
+    ----------
+    t_first_pulse_log_s : float
+        Log boot time of the first pulse, s.
+    t_lo_s, t_hi_s : float
+        Interval of simulation time the deviation is defined on, s.
+    vel : list of BSpline
+        Along (north), cross (east), down velocity deviation vs log time, m/s.
+    vel_mean : ndarray, shape (3,)
+        Mean of each spline over the fitted interval (removed), m/s.
+    att : list of BSpline
+        Roll, pitch, yaw deviation vs log time, rad.
+    """
+
+    t_first_pulse_log_s: float
+    t_lo_s: float
+    t_hi_s: float
+    vel: list[BSpline]
+    vel_mean: FloatArray
+    att: list[BSpline]
+
+    @classmethod
+    def from_spec(cls, spec: MotionSpec) -> FlightLogDeviation:
+        """Fit the deviations of the window ``spec`` selects in ``spec.log_path``."""
+        if spec.log_path is None:
+            raise ConfigError("motion.log_path: required for kind 'flightlog'")
+        log = read_flight_log(str(spec.log_path))
+        a = float(log.t_s[0]) + spec.log_start_s
+        lo, hi = a - LOG_MARGIN_S, a + spec.log_window_s + LOG_MARGIN_S
+        if lo < log.t_s[0] or hi > log.t_s[-1]:
+            raise ConfigError(
+                f"motion.log_start_s/log_window_s: {spec.log_start_s}/{spec.log_window_s} s need "
+                f"log time {lo:.1f}..{hi:.1f} s, the airborne segment is "
+                f"{log.t_s[0]:.1f}..{log.t_s[-1]:.1f} s (margins {LOG_MARGIN_S} s)"
+            )
+        dt = float(np.median(np.diff(log.t_s)))
+        course = np.unwrap(np.arctan2(log.vel_ned[:, 1], log.vel_ned[:, 0]))
+        course = gaussian_filter1d(course, COURSE_SMOOTHING_S / dt, mode="nearest")
+        c, s = np.cos(course), np.sin(course)
+        v = log.vel_ned
+        straight = np.stack([v[:, 0] * c + v[:, 1] * s, -v[:, 0] * s + v[:, 1] * c, v[:, 2]], 1)
+        yaw = np.unwrap(np.angle(np.exp(1j * (log.euler_rad[:, 2] - course))))
+        att = np.stack([log.euler_rad[:, 0], log.euler_rad[:, 1], yaw], 1)
+        sel = (log.t_s >= lo - 2 * dt) & (log.t_s <= hi + 2 * dt)
+        t = log.t_s[sel]
+        vel = [make_smoothing_spline(t, straight[sel, i]) for i in range(3)]
+        mean = np.array(
+            [(sp.antiderivative()(hi) - sp.antiderivative()(lo)) / (hi - lo) for sp in vel]
+        )
+        return cls(
+            a, lo - a, hi - a, vel, mean, [make_smoothing_spline(t, att[sel, i]) for i in range(3)]
+        )
+
+    def __call__(self, t_s: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+        t = np.asarray(t_s, dtype=np.float64)
+        if t.size and (t.min() < self.t_lo_s or t.max() > self.t_hi_s):
+            raise NavigationError(
+                f"flightlog trajectory covers {self.t_lo_s:.2f}..{self.t_hi_s:.2f} s, asked for "
+                f"{t.min():.2f}..{t.max():.2f} s (raise log_window_s)"
+            )
+        tl = t + self.t_first_pulse_log_s
+        t0 = self.t_first_pulse_log_s
+        pos = np.stack(
+            [
+                sp.antiderivative()(tl) - sp.antiderivative()(t0) - m * t
+                for sp, m in zip(self.vel, self.vel_mean, strict=True)
+            ],
+            1,
+        )
+        vel = np.stack([sp(tl) - m for sp, m in zip(self.vel, self.vel_mean, strict=True)], 1)
+        acc = np.stack([sp.derivative()(tl) for sp in self.vel], 1)
+        euler = np.stack([sp(tl) for sp in self.att], 1)
+        return pos, vel, acc, euler
+
+
 def _deviation(scn: Scenario, spec: MotionSpec) -> Deviation | None:
     if spec.kind == "ideal":
         return None
@@ -202,7 +372,7 @@ def _deviation(scn: Scenario, spec: MotionSpec) -> Deviation | None:
             raise ConfigError(f"motion.corner_hz: {spec.corner_hz!r} is not > 0")
         return TurbulenceDeviation(spec)
     if spec.kind == "flightlog":
-        raise ConfigError("motion.kind: 'flightlog' is not implemented yet")
+        return FlightLogDeviation.from_spec(spec)
     raise ConfigError(f"motion.kind: {spec.kind!r} is not 'ideal', 'turbulence' or 'flightlog'")
 
 
