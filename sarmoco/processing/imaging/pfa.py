@@ -131,7 +131,7 @@ def polar_format(
     p, f = ph.shape
     if freq_hz.shape != (f,) or apc_m.shape != (p, 3):
         raise ProcessingError(f"pfa: ph{ph.shape} freq{freq_hz.shape} apc{apc_m.shape}")
-    df = float(freq_hz[1] - freq_hz[0])
+    df = float(freq_hz[-1] - freq_hz[0]) / (f - 1)  # uniform; fitted over the band
     sup = pfa_support(freq_hz, apc_m, grid)
     g_r, g_c = _ground_los(apc_m, grid)
     # step 1: per pulse, frequency -> uniform kr

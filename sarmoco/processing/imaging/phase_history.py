@@ -87,17 +87,20 @@ def compressed_from_phase_history(
     range_axis_m : ndarray of float64, shape (F * upsample,)
         Range of each bin relative to the reference range, m, centred on zero.
     carrier_hz : float
-        The centre frequency ``fc`` of that phase, Hz: ``freq_hz[F // 2]``.
+        The centre frequency ``fc`` of that phase, Hz: ``f_0 + (F // 2) df`` with
+        ``f_0`` and ``df`` fitted to ``freq_hz``.
     """
     p, f = ph.shape
     if freq_hz.shape != (f,) or f < 2:
         raise ProcessingError(f"compressed_from_phase_history: ph{ph.shape} freq{freq_hz.shape}")
-    df = float(freq_hz[1] - freq_hz[0])
-    if not np.allclose(np.diff(freq_hz), df, rtol=1e-4, atol=0.0) or df <= 0:
+    # fit the spacing over the whole band (files may store frequencies in float32)
+    df = float(freq_hz[-1] - freq_hz[0]) / (f - 1)
+    fit = freq_hz[0] + np.arange(f) * df
+    if df <= 0 or np.max(np.abs(freq_hz - fit)) > 0.01 * df:
         raise ProcessingError("compressed_from_phase_history: frequencies not uniform ascending")
     n = f * upsample
     spec = np.zeros((p, n), dtype=np.complex128)
     spec[:, (np.arange(f) - f // 2) % n] = ph
     rc = np.fft.fftshift(np.fft.ifft(spec, axis=1) * n, axes=1)
     range_axis = (np.arange(n) - n // 2) * C_MPS / (2.0 * df * n)
-    return rc.astype(np.complex64), range_axis, float(freq_hz[f // 2])
+    return rc.astype(np.complex64), range_axis, float(fit[f // 2])
