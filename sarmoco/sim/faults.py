@@ -1,0 +1,238 @@
+"""Fault injection for the simulated links: what goes wrong on the wire and in the INS.
+
+Switches (``sarmoco sim --fault SPEC``, repeatable):
+
+================================  ===========================================================
+``loss=P[@LINK]``                 drop each packet (datagram, frame, CAN frame) with probability P
+``corrupt=P[@LINK]``              flip one random bit of each packet with probability P
+``dup=P[@LINK]``                  send each packet twice with probability P
+``reorder=P[@LINK]``              hold a packet back and send it after the next one, probability P
+``ins-dropout=START:DURATION``    the INS sends nothing for DURATION s from START s after the
+                                  first pulse (repeatable)
+``clock-offset=S``                INS device clock offset against GPS, s (its time messages
+                                  stay honest: a correct driver recovers GPS time)
+``clock-drift=PPM``               INS device clock rate error, ppm (time messages honest)
+``clock-step=AT:STEP``            the INS device clock jumps by STEP s at AT s after the first
+                                  pulse (repeatable; time messages follow the new clock)
+================================  ===========================================================
+
+``LINK`` is ``radar`` or ``ins``; without it the packet fault applies to both.
+A "packet" is the unit the protocol frames: a VITA 49 packet, a MAVLink
+message, an sbgECom frame, one CAN frame (slcan line, socketcand frame, log
+line). VITA 49 has no checksum: a bit flip in the payload is silent, one in the
+header is rejected by the decoder. Every injected fault is counted
+(:class:`FaultCounts`) and written to ``truth.json``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, replace
+
+import numpy as np
+
+from sarmoco.errors import ConfigError
+from sarmoco.processing.types import IntArray
+
+LINKS = ("radar", "ins")
+
+
+@dataclass(frozen=True)
+class PacketFaults:
+    """Per-packet fault probabilities of one link (each in [0, 1])."""
+
+    loss: float = 0.0
+    corrupt: float = 0.0
+    dup: float = 0.0
+    reorder: float = 0.0
+
+    @property
+    def any(self) -> bool:
+        """Whether any fault is switched on."""
+        return any(v > 0 for v in asdict(self).values())
+
+
+@dataclass(frozen=True)
+class Faults:
+    """Every fault of a simulated run.
+
+    Attributes
+    ----------
+    radar, ins : PacketFaults
+        Packet faults of the radar link and of the INS link(s).
+    ins_dropouts_s : tuple of (start_s, duration_s)
+        INS silences, s after the first pulse.
+    clock_offset_s : float
+        INS device clock offset, s.
+    clock_drift_ppm : float
+        INS device clock rate error, ppm.
+    clock_steps_s : tuple of (at_s, step_s)
+        INS device clock steps: at ``at_s`` after the first pulse the clock jumps by ``step_s``.
+    """
+
+    radar: PacketFaults = PacketFaults()
+    ins: PacketFaults = PacketFaults()
+    ins_dropouts_s: tuple[tuple[float, float], ...] = ()
+    clock_offset_s: float = 0.0
+    clock_drift_ppm: float = 0.0
+    clock_steps_s: tuple[tuple[float, float], ...] = ()
+
+    def to_dict(self) -> dict[str, object]:
+        """JSON-able form (for truth.json)."""
+        d = asdict(self)
+        d["ins_dropouts_s"] = [list(x) for x in self.ins_dropouts_s]
+        d["clock_steps_s"] = [list(x) for x in self.clock_steps_s]
+        return d
+
+
+_PACKET_KEYS = {"loss": "loss", "corrupt": "corrupt", "dup": "dup", "reorder": "reorder"}
+
+
+def _number(spec: str, text: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise ConfigError(f"--fault {spec!r}: {text!r} is not a number") from None
+
+
+def _pair(spec: str, text: str) -> tuple[float, float]:
+    parts = text.split(":")
+    if len(parts) != 2:
+        raise ConfigError(f"--fault {spec!r}: want two numbers as A:B, got {text!r}")
+    return _number(spec, parts[0]), _number(spec, parts[1])
+
+
+def parse_faults(specs: list[str] | None) -> Faults:
+    """Build :class:`Faults` from ``--fault`` strings (module docstring gives the syntax)."""
+    faults = Faults()
+    for spec in specs or []:
+        key, sep, value = spec.partition("=")
+        if not sep:
+            raise ConfigError(f"--fault {spec!r}: want KEY=VALUE")
+        if key in _PACKET_KEYS:
+            text, _, link = value.partition("@")
+            p = _number(spec, text)
+            if not 0.0 <= p <= 1.0:
+                raise ConfigError(f"--fault {spec!r}: probability {p} is not in [0, 1]")
+            if link and link not in LINKS:
+                raise ConfigError(f"--fault {spec!r}: link {link!r} is not one of {LINKS}")
+            if link in ("", "radar"):
+                faults = replace(faults, radar=replace(faults.radar, **{_PACKET_KEYS[key]: p}))
+            if link in ("", "ins"):
+                faults = replace(faults, ins=replace(faults.ins, **{_PACKET_KEYS[key]: p}))
+        elif key == "ins-dropout":
+            start, duration = _pair(spec, value)
+            if not duration > 0:
+                raise ConfigError(f"--fault {spec!r}: duration {duration} is not > 0")
+            faults = replace(faults, ins_dropouts_s=(*faults.ins_dropouts_s, (start, duration)))
+        elif key == "clock-offset":
+            faults = replace(faults, clock_offset_s=_number(spec, value))
+        elif key == "clock-drift":
+            faults = replace(faults, clock_drift_ppm=_number(spec, value))
+        elif key == "clock-step":
+            faults = replace(faults, clock_steps_s=(*faults.clock_steps_s, _pair(spec, value)))
+        else:
+            known = ", ".join([*_PACKET_KEYS, "ins-dropout", "clock-offset", "clock-drift"])
+            raise ConfigError(
+                f"--fault {spec!r}: unknown fault {key!r} (known: {known}, clock-step)"
+            )
+    return faults
+
+
+def dropout_keep(
+    t_ns: IntArray, t0_ns: int, dropouts_s: tuple[tuple[float, float], ...]
+) -> np.ndarray:
+    """Mask of the INS samples that survive the dropouts (True = sent).
+
+    Parameters
+    ----------
+    t_ns : ndarray of int64
+        Sample times, GPS ns.
+    t0_ns : int
+        GPS time of the first pulse, ns (dropouts are relative to it).
+    dropouts_s : tuple of (start_s, duration_s)
+        Silences; a sample at ``start <= t - t0 < start + duration`` is not sent.
+    """
+    keep = np.ones(t_ns.shape, dtype=bool)
+    for start_s, duration_s in dropouts_s:
+        a = t0_ns + round(start_s * 1e9)
+        b = a + round(duration_s * 1e9)
+        keep &= ~((t_ns >= a) & (t_ns < b))
+    return keep
+
+
+@dataclass
+class FaultCounts:
+    """Faults injected on one link (packets as the protocol frames them)."""
+
+    packets: int = 0
+    """Packets offered to the link."""
+    lost: int = 0
+    corrupted: int = 0
+    duplicated: int = 0
+    reordered: int = 0
+
+
+@dataclass
+class PacketFaultInjector:
+    """Applies :class:`PacketFaults` to each packet as it is sent.
+
+    Parameters
+    ----------
+    faults : PacketFaults
+        Probabilities.
+    seed : int
+        Seed of this link's random stream (a run with the same seed injects the
+        same faults into the same packets).
+
+    Notes
+    -----
+    Each offered packet draws the same four uniforms whatever the outcome, so
+    which packets are hit does not depend on the outcome of earlier draws.
+    A lost packet is neither corrupted, duplicated nor reordered; a reordered
+    packet is held and sent right after the next packet that is sent (or at
+    :meth:`flush`).
+    """
+
+    faults: PacketFaults
+    seed: int
+    counts: FaultCounts = field(default_factory=FaultCounts)
+
+    def __post_init__(self) -> None:
+        self._rng = np.random.default_rng(self.seed)
+        self._held: bytes | None = None
+
+    def send(self, data: bytes, write: Callable[[bytes], None]) -> None:
+        """Offer one packet; ``write`` is called for each copy that goes on the wire."""
+        f = self.faults
+        self.counts.packets += 1
+        if not f.any:
+            write(data)
+            return
+        u_loss, u_corrupt, u_dup, u_reorder = self._rng.random(4)
+        where = int(self._rng.integers(0, 8 * len(data))) if data else 0
+        if u_loss < f.loss:
+            self.counts.lost += 1
+            return
+        if u_corrupt < f.corrupt and data:
+            buf = bytearray(data)
+            buf[where // 8] ^= 1 << (where % 8)
+            data = bytes(buf)
+            self.counts.corrupted += 1
+        copies = 2 if u_dup < f.dup else 1
+        self.counts.duplicated += copies - 1
+        if u_reorder < f.reorder and self._held is None:
+            self._held = data
+            self.counts.reordered += 1
+            if copies == 2:
+                write(data)
+            return
+        for _ in range(copies):
+            write(data)
+        self.flush(write)
+
+    def flush(self, write: Callable[[bytes], None]) -> None:
+        """Send a packet still held back for reordering."""
+        if self._held is not None:
+            held, self._held = self._held, None
+            write(held)
