@@ -117,9 +117,9 @@ class LinearClockFit:
     def _refit(self) -> None:
         d0, r0 = self._dev[-1], self._ref[-1]
         if len(self._dev) < self._min_pairs:
-            offsets = [r - d for d, r in zip(self._dev, self._ref, strict=True)]
-            self._coef = (d0, d0 + int(np.median(offsets)), 0.0)
-            self.residual_ns = float(np.std(offsets))
+            offsets = sorted(r - d for d, r in zip(self._dev, self._ref, strict=True))
+            self._coef = (d0, d0 + offsets[len(offsets) // 2], 0.0)
+            self.residual_ns = float(np.std(np.array(offsets) - offsets[0]))
             return
         x = np.array(self._dev, dtype=np.float64) - d0
         y = np.array(self._ref, dtype=np.float64) - r0 - x

@@ -1,0 +1,431 @@
+"""MAVLink autopilots through pymavlink: live links (UDP, TCP, serial) and ``.tlog`` replay.
+
+Velocity from LOCAL_POSITION_NED (also GLOBAL_POSITION_INT and ODOMETRY),
+attitude from ATTITUDE_QUATERNION (or ATTITUDE). Autopilot boot time is mapped
+onto GPS time by :class:`BootClockModel`:
+
+* TIMESYNC (live links): the source sends a request every ``timesync_period_s``;
+  :class:`~sarmoco.drivers.timesync.TimesyncEstimator` fits boot time → host
+  clock from the fastest round trips. The host clock (``time.time_ns``) must be
+  UTC-disciplined (chrony/PTP/GPS); GPS = host + leap seconds. The estimate's
+  stated error bound is :attr:`MavlinkSource.time_bound_ns`.
+* SYSTEM_TIME (always; the only reference in replay): pairs of
+  ``time_boot_ms`` and the autopilot's GPS-derived UNIX time, fitted with
+  outlier rejection.
+
+A boot time that goes backwards (reboot) resets both. The wanted message rates
+are requested with MAV_CMD_SET_MESSAGE_INTERVAL when the autopilot's first
+HEARTBEAT arrives and again after a reboot. With a signing key, unsigned and
+badly signed packets are rejected and counted in ``counters.rejected``.
+
+pymavlink picks MAVLink 1 or 2 from the ``MAVLINK20`` environment variable at
+import time; this module sets it (to MAVLink 2) unless the caller already did.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("MAVLINK20", "1")
+
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+from sarmoco.drivers.attitude import euler_to_quat, normalized
+from sarmoco.drivers.clock import (
+    GPS_LEAP_SECONDS_DEFAULT,
+    unix_ns_to_gps_ns,
+)
+from sarmoco.drivers.devclock import DeviceClock
+from sarmoco.drivers.samples import (
+    AttitudeSample,
+    Sample,
+    Validity,
+    VelocitySample,
+)
+from sarmoco.drivers.source import Source
+from sarmoco.drivers.timesync import (
+    LinearClockFit,
+    TimesyncEstimator,
+    TimesyncExchange,
+)
+from sarmoco.errors import ClockError, ConfigError, DriverError
+
+log = logging.getLogger(__name__)
+
+DEFAULT_RATES_HZ: dict[str, float] = {
+    "LOCAL_POSITION_NED": 50.0,
+    "ATTITUDE_QUATERNION": 50.0,
+    "SYSTEM_TIME": 2.0,
+}
+"""Message rates the source asks for, Hz."""
+UNIX_USEC_THRESHOLD = 10**15
+"""MAVLink ``time_usec`` above this is UNIX time, below it time since boot, µs."""
+_ALL_VALID = Validity.ATTITUDE | Validity.HEADING | Validity.VELOCITY | Validity.POSITION
+_SYSTIME_OUTLIER_NS = 50_000_000
+_SYSTIME_JITTER_NS = 1_000_000
+
+
+class BootClockModel:
+    """Autopilot boot time (ns) → GPS time (ns), from TIMESYNC or SYSTEM_TIME.
+
+    Parameters
+    ----------
+    leap_s : int
+        GPS − UTC, s.
+    use_timesync : bool
+        Whether the host clock is UTC-disciplined so TIMESYNC can map boot
+        time to GPS time (live links); otherwise only SYSTEM_TIME is used.
+    """
+
+    def __init__(self, leap_s: int, use_timesync: bool) -> None:
+        self.leap_s = leap_s
+        self.use_timesync = use_timesync
+        self.timesync = TimesyncEstimator()
+        self.systime = LinearClockFit(window=32, outlier_ns=_SYSTIME_OUTLIER_NS)
+
+    @property
+    def _by_timesync(self) -> bool:
+        return self.use_timesync and self.timesync.ready
+
+    @property
+    def ready(self) -> bool:
+        """Whether boot time can be mapped."""
+        return self._by_timesync or self.systime.ready
+
+    @property
+    def bound_ns(self) -> int:
+        """Stated error bound of :meth:`map`, ns (TIMESYNC bound, or SYSTEM_TIME jitter)."""
+        if self._by_timesync:
+            return self.timesync.bound_ns
+        return _SYSTIME_JITTER_NS + round(3 * self.systime.residual_ns)
+
+    def add(self, device_ns: int, reference_ns: int) -> bool:
+        """Add a SYSTEM_TIME pair (boot ns, GPS ns)."""
+        return self.systime.add(device_ns, reference_ns)
+
+    def map(self, device_ns: int) -> int:
+        """GPS ns of a boot time (ns); raises ClockError before any reference."""
+        if self._by_timesync:
+            return unix_ns_to_gps_ns(self.timesync.to_local(device_ns), self.leap_s)
+        return self.systime.map(device_ns)
+
+    def reset(self) -> None:
+        """Forget both references (autopilot reboot)."""
+        self.systime.reset()
+        self.timesync.reset()
+
+
+class MavlinkDecoder:
+    """MAVLink messages in, samples on GPS time out.
+
+    Parameters
+    ----------
+    leap_s : int
+        GPS − UTC, s.
+    use_timesync : bool
+        See :class:`BootClockModel`.
+    link : str
+        Name used in log messages.
+    counters_from : Source
+        The source whose counters are updated.
+    """
+
+    def __init__(self, leap_s: int, use_timesync: bool, link: str, counters_from: Source) -> None:
+        self.counters = counters_from.counters
+        self.model = BootClockModel(leap_s, use_timesync)
+        self.clock = DeviceClock(link, self.counters, model=self.model, tick_ns=1_000_000)
+        self.valid = _ALL_VALID
+        self._handlers: dict[str, Callable[[Any, list[Sample]], None]] = {
+            "LOCAL_POSITION_NED": self._local_position,
+            "GLOBAL_POSITION_INT": self._global_position,
+            "ODOMETRY": self._odometry,
+            "ATTITUDE_QUATERNION": self._attitude_quaternion,
+            "ATTITUDE": self._attitude,
+            "SYSTEM_TIME": self._system_time,
+            "EKF_STATUS_REPORT": self._ekf_status,
+        }
+
+    def handle(self, msg: Any) -> list[Sample]:
+        """Samples completed by one pymavlink message (others are ignored)."""
+        out: list[Sample] = []
+        handler = self._handlers.get(msg.get_type())
+        if handler is not None:
+            handler(msg, out)
+        return out
+
+    def _boot(self, time_boot_ms: int) -> int:
+        return self.clock.device_ns(time_boot_ms)
+
+    def _velocity(
+        self,
+        out: list[Sample],
+        dev_ns: int,
+        vel: tuple[float, float, float],
+        source: str,
+        pos: tuple[float, float, float] | None = None,
+        lla: tuple[float, float, float] | None = None,
+    ) -> None:
+        sample = VelocitySample(
+            0, vel, self.valid & ~Validity.ATTITUDE & ~Validity.HEADING, source, dev_ns,
+            pos_ned_m=pos, lat_lon_alt=lla,
+        )  # fmt: skip
+        self.clock.stamp(sample, out)
+
+    def _local_position(self, m: Any, out: list[Sample]) -> None:
+        self._velocity(
+            out, self._boot(m.time_boot_ms), (m.vx, m.vy, m.vz), "mavlink.LOCAL_POSITION_NED",
+            pos=(m.x, m.y, m.z),
+        )  # fmt: skip
+
+    def _global_position(self, m: Any, out: list[Sample]) -> None:
+        vel = (m.vx / 100.0, m.vy / 100.0, m.vz / 100.0)
+        lla = (m.lat * 1e-7, m.lon * 1e-7, m.alt / 1000.0)
+        self._velocity(out, self._boot(m.time_boot_ms), vel, "mavlink.GLOBAL_POSITION_INT", lla=lla)
+
+    def _odometry(self, m: Any, out: list[Sample]) -> None:
+        if m.frame_id != mavlink2.MAV_FRAME_LOCAL_NED:
+            self.counters.rejected += 1
+            return
+        q = normalized(tuple(m.q))
+        if m.child_frame_id == mavlink2.MAV_FRAME_LOCAL_NED:
+            vel = (m.vx, m.vy, m.vz)
+        elif m.child_frame_id == mavlink2.MAV_FRAME_BODY_FRD and q is not None:
+            vel = _rotate(q, (m.vx, m.vy, m.vz))
+        else:
+            self.counters.rejected += 1
+            return
+        if m.time_usec >= UNIX_USEC_THRESHOLD:
+            t = unix_ns_to_gps_ns(m.time_usec * 1000, self.model.leap_s)
+            out.append(VelocitySample(t, vel, self.valid, "mavlink.ODOMETRY", t, (m.x, m.y, m.z)))
+            return
+        dev_ns = self._boot(m.time_usec // 1000) + (m.time_usec % 1000) * 1000
+        self._velocity(out, dev_ns, vel, "mavlink.ODOMETRY", pos=(m.x, m.y, m.z))
+
+    def _attitude_quaternion(self, m: Any, out: list[Sample]) -> None:
+        q = normalized((m.q1, m.q2, m.q3, m.q4))
+        if q is None:
+            self.counters.parse_errors += 1
+            return
+        dev = self._boot(m.time_boot_ms)
+        valid = self.valid & (Validity.ATTITUDE | Validity.HEADING)
+        self.clock.stamp(AttitudeSample(0, q, valid, "mavlink.ATTITUDE_QUATERNION", dev), out)
+
+    def _attitude(self, m: Any, out: list[Sample]) -> None:
+        q = normalized(euler_to_quat(m.roll, m.pitch, m.yaw))
+        if q is None:
+            self.counters.parse_errors += 1
+            return
+        dev = self._boot(m.time_boot_ms)
+        valid = self.valid & (Validity.ATTITUDE | Validity.HEADING)
+        self.clock.stamp(AttitudeSample(0, q, valid, "mavlink.ATTITUDE", dev), out)
+
+    def _system_time(self, m: Any, out: list[Sample]) -> None:
+        if not m.time_unix_usec:
+            return
+        dev = self._boot(m.time_boot_ms)
+        gps = unix_ns_to_gps_ns(m.time_unix_usec * 1000, self.model.leap_s)
+        ts = self.clock.reference(dev, gps, True, "mavlink.SYSTEM_TIME")
+        if ts is not None:
+            self.clock.stamp(ts, out)
+
+    def _ekf_status(self, m: Any, out: list[Sample]) -> None:
+        f = m.flags
+        v = Validity.NONE
+        if f & mavlink2.EKF_ATTITUDE:
+            v |= Validity.ATTITUDE | Validity.HEADING
+        if f & mavlink2.EKF_VELOCITY_HORIZ and f & mavlink2.EKF_VELOCITY_VERT:
+            v |= Validity.VELOCITY
+        if f & (mavlink2.EKF_POS_HORIZ_REL | mavlink2.EKF_POS_HORIZ_ABS):
+            v |= Validity.POSITION
+        self.valid = v
+
+    def timesync(self, ex: TimesyncExchange) -> None:
+        """Feed one TIMESYNC round trip (boot-time reboots reset it)."""
+        self.model.timesync.add(ex)
+
+
+def _rotate(
+    q: tuple[float, float, float, float], v: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    w, x, y, z = q
+    vx, vy, vz = v
+    return (
+        (1 - 2 * (y * y + z * z)) * vx + 2 * (x * y - w * z) * vy + 2 * (x * z + w * y) * vz,
+        2 * (x * y + w * z) * vx + (1 - 2 * (x * x + z * z)) * vy + 2 * (y * z - w * x) * vz,
+        2 * (x * z - w * y) * vx + 2 * (y * z + w * x) * vy + (1 - 2 * (x * x + y * y)) * vz,
+    )
+
+
+class MavlinkSource(Source):
+    """A MAVLink link or ``.tlog`` file.
+
+    Parameters
+    ----------
+    url : str
+        pymavlink connection string: ``udpin:127.0.0.1:14550``, ``udpout:host:port``,
+        ``tcp:127.0.0.1:5760``, a serial device (with ``baudrate``), or a ``.tlog`` path.
+    leap_s : int
+        GPS − UTC, s.
+    rates_hz : mapping of str to float
+        Message name → rate requested with MAV_CMD_SET_MESSAGE_INTERVAL (live links).
+    signing_key : bytes or None
+        32-byte MAVLink 2 signing secret; when given, unsigned and badly signed
+        packets are rejected (counted in ``counters.rejected``) and ours are signed.
+    host_clock_is_utc : bool
+        Whether ``time.time_ns()`` is UTC-disciplined (then TIMESYNC maps boot
+        time to GPS; otherwise only SYSTEM_TIME does).
+    timesync_period_s : float
+        Interval between TIMESYNC requests, s (live links).
+    baudrate : int
+        Serial line rate, baud.
+    source_system, source_component : int
+        Our MAVLink identity.
+    """
+
+    def __init__(
+        self,
+        url: str,
+        leap_s: int = GPS_LEAP_SECONDS_DEFAULT,
+        rates_hz: Mapping[str, float] | None = None,
+        signing_key: bytes | None = None,
+        host_clock_is_utc: bool = True,
+        timesync_period_s: float = 0.25,
+        baudrate: int = 115200,
+        source_system: int = 255,
+        source_component: int = mavlink2.MAV_COMP_ID_ONBOARD_COMPUTER,
+    ) -> None:
+        super().__init__()
+        self.url = url
+        try:
+            self._conn = mavutil.mavlink_connection(
+                url, baud=baudrate, source_system=source_system,
+                source_component=source_component, dialect="ardupilotmega",
+            )  # fmt: skip
+        except (OSError, ValueError) as exc:
+            raise DriverError(f"mavlink {url}: cannot open: {exc}") from exc
+        self.is_file = isinstance(self._conn, mavutil.mavlogfile)
+        self.decoder = MavlinkDecoder(leap_s, host_clock_is_utc and not self.is_file, url, self)
+        self.rates_hz = dict(DEFAULT_RATES_HZ if rates_hz is None else rates_hz)
+        self._timesync_period_ns = round(timesync_period_s * 1e9)
+        self._next_timesync_ns = 0
+        self._outstanding: dict[int, int] = {}
+        self._target: tuple[int, int] | None = None
+        self._loss_seen = 0
+        if signing_key is not None:
+            if len(signing_key) != 32:
+                raise ConfigError(f"mavlink.signing_key: {len(signing_key)} bytes, need 32")
+            self._conn.setup_signing(
+                signing_key, sign_outgoing=True, allow_unsigned_callback=lambda _m, _id: False
+            )
+
+    @property
+    def time_bound_ns(self) -> int:
+        """Stated bound on the error of the GPS times now being produced, ns."""
+        return self.decoder.model.bound_ns
+
+    def request_rates(self) -> None:
+        """Send MAV_CMD_SET_MESSAGE_INTERVAL for every message in :attr:`rates_hz`."""
+        if self._target is None:
+            return
+        sysid, compid = self._target
+        for name, hz in self.rates_hz.items():
+            msg_id = getattr(mavlink2, f"MAVLINK_MSG_ID_{name}")
+            self._conn.mav.command_long_send(
+                sysid, compid, mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 0,
+                msg_id, round(1e6 / hz), 0, 0, 0, 0, 0,
+            )  # fmt: skip
+
+    def _send_timesync(self) -> None:
+        now = time.time_ns()
+        if now < self._next_timesync_ns or self._target is None:
+            return
+        self._next_timesync_ns = now + self._timesync_period_ns
+        self._outstanding = {k: v for k, v in self._outstanding.items() if now - k < 10**9}
+        self._outstanding[now] = now
+        self._conn.mav.timesync_send(0, now)
+
+    def _link_message(self, msg: Any) -> None:
+        mtype = msg.get_type()
+        if mtype == "HEARTBEAT":
+            src = (msg.get_srcSystem(), msg.get_srcComponent())
+            if src[1] == mavlink2.MAV_COMP_ID_AUTOPILOT1 and self._target is None:
+                self._target = src
+                self.request_rates()
+        elif mtype == "TIMESYNC":
+            now = time.time_ns()
+            if msg.tc1 == 0:  # the autopilot's own request: answer it
+                self._conn.mav.timesync_send(now, msg.ts1)
+            elif msg.ts1 in self._outstanding:
+                sent = self._outstanding.pop(msg.ts1)
+                self.decoder.timesync(TimesyncExchange(sent, now, msg.tc1))
+
+    def poll(self, timeout_s: float = 0.0) -> list[Sample]:
+        out: list[Sample] = []
+        if not self.is_file:
+            try:
+                self._send_timesync()
+            except OSError as exc:
+                log.debug("mavlink %s: send failed: %s", self.url, exc)
+        block = timeout_s > 0 and not self.is_file
+        for _ in range(5000):
+            try:
+                msg = self._conn.recv_match(blocking=block, timeout=timeout_s if block else None)
+            except (OSError, ValueError) as exc:
+                if self.is_file:
+                    raise DriverError(f"mavlink {self.url}: {exc}") from exc
+                self.counters.parse_errors += 1
+                continue
+            block = False
+            if msg is None:
+                if self.is_file:
+                    self.eof = True
+                break
+            self._count(msg)
+            if msg.get_type() == "BAD_DATA":
+                continue
+            if not self.is_file:
+                self._link_message(msg)
+            try:
+                out += self.decoder.handle(msg)
+            except ClockError as exc:  # pragma: no cover - stamping queues instead of raising
+                log.debug("mavlink %s: %s", self.url, exc)
+        self._sync_counters()
+        return out
+
+    def _count(self, msg: Any) -> None:
+        if msg.get_type() != "BAD_DATA":
+            self.counters.frames += 1
+            return
+        reason = str(getattr(msg, "reason", ""))
+        if "signature" in reason:
+            return  # counted from pymavlink's signing state
+        if "CRC" in reason:
+            self.counters.crc_errors += 1
+        else:
+            self.counters.parse_errors += 1
+
+    def _sync_counters(self) -> None:
+        mav = self._conn.mav
+        self.counters.bytes = mav.total_bytes_received
+        self.counters.drops += self._conn.mav_loss - self._loss_seen
+        self._loss_seen = self._conn.mav_loss
+        if mav.signing.secret_key is not None:
+            self.counters.rejected = mav.signing.reject_count
+
+    def close(self) -> None:
+        self._conn.close()
+
+
+def open_mavlink(path_or_url: str | Path, **kwargs: Any) -> Source:
+    """A MAVLink source for a URL or ``.tlog``, or a dataflash source for a ``.bin`` file."""
+    if str(path_or_url).endswith(".bin"):
+        from sarmoco.drivers.dataflash import DataflashSource
+
+        return DataflashSource(path_or_url, leap_s=kwargs.get("leap_s", GPS_LEAP_SECONDS_DEFAULT))
+    return MavlinkSource(str(path_or_url), **kwargs)
