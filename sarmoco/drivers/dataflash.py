@@ -3,9 +3,10 @@
 Velocity from XKF1 (core 0) or NKF1 (VN, VE, VD m/s; PN, PE, PD m), attitude
 from XKQ (core 0), XKQ1 or NKQ1 quaternions, else ATT (degrees). The log's
 ``TimeUS`` (µs since boot) is mapped onto GPS time by a least-squares offset
-(and, once the records span a minute, skew) fit to the GPS records (GWk, GMS are GPS time; fixes with Status ≥ 3),
-rejecting pairs more than 50 ms off the first fit. The file is read twice: once
-for the GPS records, once for the samples.
+(and, once the records span a minute, skew) fit to the GPS records (GWk, GMS
+are GPS time; fixes with Status ≥ 3), rejecting pairs more than 50 ms off
+the first fit. The file is read twice: once for the GPS records, once for the
+samples.
 """
 
 from __future__ import annotations
@@ -28,9 +29,10 @@ VELOCITY_TYPES = ("XKF1", "NKF1")
 QUAT_TYPES = ("XKQ", "XKQ1", "NKQ1")
 GPS_FIX_3D = 3
 _OUTLIER_NS = 50_000_000
-_VALID = (
-    Validity.ATTITUDE | Validity.HEADING | Validity.VELOCITY | Validity.POSITION | Validity.TIME
-)
+_MIN_SKEW_SPAN_US = 60_000_000
+"""GPS records must span this long (µs) before a clock skew is fitted (else offset only)."""
+_VEL_VALID = Validity.VELOCITY | Validity.POSITION | Validity.TIME
+_ATT_VALID = Validity.ATTITUDE | Validity.HEADING | Validity.TIME
 
 
 def _core0(m: Any) -> bool:
