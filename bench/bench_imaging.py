@@ -1,0 +1,104 @@
+"""Backprojection throughput in pixel*pulses/s (issue 3, bench 5, second half).
+
+Full-size ``thz-spotlight`` geometry and pulse (4096 range bins, upsampled 8x
+before linear interpolation) onto a ground grid around the scene centre. Three
+numbers from the same run, each the best of ``--repeat`` after a warm-up:
+
+- the whole :func:`backproject` call (FFT upsampling of the lines + kernel);
+- the compiled kernel alone on already upsampled lines;
+- the FFT upsampling alone.
+
+The content of the lines does not change the cost (random samples are used).
+Single-threaded by design (``numba.njit(parallel=False)``).
+
+Run: ``.venv/bin/python bench/bench_imaging.py [--pulses 512] [--pixels 512] [--repeat 3]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections.abc import Callable
+
+import numpy as np
+import pytest
+
+from sarmoco.processing import rangecomp
+from sarmoco.processing.imaging import PlaneGrid, backproject
+from sarmoco.processing.imaging.backprojection import DEFAULT_UPSAMPLE, _bp_kernel
+from sarmoco.processing.imaging.interp import fft_upsample
+from sarmoco.sim.scenario import load_preset
+
+
+def _best_time(fn: Callable[[], object], repeat: int) -> float:
+    """Best wall time of ``repeat`` calls after one warm-up, s."""
+    fn()
+    best = np.inf
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return float(best)
+
+
+def run(n_pulses: int, n_pix: int, repeat: int) -> list[tuple[str, float, float]]:
+    """Rows (name, seconds, pixel*pulses/s) for the whole call, the kernel and the upsampling."""
+    scn = load_preset("thz-spotlight")
+    radar = scn.radar
+    rng = np.random.default_rng(0)
+    shape = (n_pulses, radar.n_samples)
+    rc = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)).astype(np.complex64)
+    axis = rangecomp.range_axis_m(radar)
+    t_s = np.arange(n_pulses) / radar.prf_hz + scn.aperture_s / 2 - n_pulses / radar.prf_hz / 2
+    apc, _ = scn.ideal_track(t_s)
+    grid = PlaneGrid.centred(scn.scene_center_ned, n_pix, n_pix, 0.05, 0.05)
+    lam = radar.wavelength_m
+    up = np.ascontiguousarray(fft_upsample(rc, DEFAULT_UPSAMPLE))
+    pix = np.ascontiguousarray(grid.positions().reshape(-1, 3))
+    dr = float(axis[1] - axis[0]) / DEFAULT_UPSAMPLE
+    ref = np.zeros(n_pulses)
+    out = np.zeros(pix.shape[0], dtype=np.complex64)
+
+    def kernel() -> None:
+        _bp_kernel(up, float(axis[0]), dr, apc, ref, pix, 4 * np.pi / lam, out)
+
+    work = float(n_pulses) * n_pix * n_pix
+    rows = []
+    for name, fn in (
+        ("backproject() total", lambda: backproject(rc, axis, apc, lam, grid)),
+        ("kernel only", kernel),
+        ("FFT upsampling only", lambda: fft_upsample(rc, DEFAULT_UPSAMPLE)),
+    ):
+        sec = _best_time(fn, repeat)
+        rows.append((name, sec, work / sec))
+    return rows
+
+
+def report(rows: list[tuple[str, float, float]], n_pulses: int, n_pix: int) -> str:
+    lines = [
+        f"backprojection, thz-spotlight full-size pulse (4096 bins, x{DEFAULT_UPSAMPLE}), "
+        f"{n_pulses} pulses onto {n_pix} x {n_pix} pixels, 1 thread",
+        f"{'stage':<22} {'s':>8} {'Mpixel*pulses/s':>16} {'ns/(pixel*pulse)':>17}",
+    ]
+    for name, sec, rate in rows:
+        lines.append(f"{name:<22} {sec:8.3f} {rate / 1e6:16.1f} {1e9 / rate:17.2f}")
+    return "\n".join(lines)
+
+
+@pytest.mark.bench
+def test_bench_backprojection() -> None:
+    """Full-size run (``pytest -m bench bench/bench_imaging.py``): prints the table."""
+    print(report(run(512, 512, 3), 512, 512))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--pulses", type=int, default=512)
+    ap.add_argument("--pixels", type=int, default=512)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+    print(report(run(args.pulses, args.pixels, args.repeat), args.pulses, args.pixels))
+
+
+if __name__ == "__main__":
+    main()
