@@ -1,0 +1,144 @@
+"""Counters, the loopback HTTP status endpoint, Prometheus text, structured logs."""
+
+from __future__ import annotations
+
+import io
+import json
+import logging
+import os
+import re
+import signal
+import threading
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from sarmoco.daemon import logging_setup
+from sarmoco.daemon.navbuffer import NavBuffer
+from sarmoco.daemon.status import Counters, Health, StatusServer, metric_name, prometheus_text
+from sarmoco.errors import ConfigError
+
+
+def _get(url: str) -> tuple[int, str]:
+    try:
+        with urllib.request.urlopen(url, timeout=5) as resp:
+            return resp.status, resp.read().decode()
+    except urllib.error.HTTPError as err:
+        return err.code, err.read().decode()
+
+
+def test_counters_are_thread_safe() -> None:
+    counters = Counters()
+
+    def bump() -> None:
+        for _ in range(5000):
+            counters.inc("pulses")
+
+    threads = [threading.Thread(target=bump) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert counters.snapshot()["counters"]["pulses"] == 20000
+
+
+def test_http_status_metrics_health_on_loopback() -> None:
+    counters, health = Counters(), Health()
+    nav = NavBuffer()
+    nav.push_velocity(10, (30.0, 0.0, 0.0))
+    nav.push_velocity(10, (30.0, 0.0, 0.0))
+    counters.add_source("nav", nav.counts)
+    counters.inc("pulses_recorded", 256)
+    counters.set("ins_age_s", 0.012)
+    health.set("ins", True)
+    health.set("radar", False, "no packet for 2.0 s")
+    server = StatusServer(counters, health, "127.0.0.1", 0).start()
+    try:
+        base = f"http://127.0.0.1:{server.port}"
+        code, body = _get(base + "/status")
+        doc = json.loads(body)
+        assert code == 200 and doc["healthy"] is False
+        assert doc["counters"]["pulses_recorded"] == 256
+        assert doc["counters"]["nav_kinematics_duplicate"] == 1
+        assert doc["components"]["radar"] == {"ok": False, "detail": "no packet for 2.0 s"}
+        assert _get(base + "/health")[0] == 503
+        health.set("radar", True)
+        assert _get(base + "/health") == (200, "ok\n")
+        code, text = _get(base + "/metrics")
+        assert code == 200
+        assert "# TYPE sarmoco_pulses_recorded_total counter" in text
+        assert "sarmoco_pulses_recorded_total 256\n" in text
+        assert "sarmoco_ins_age_s 0.012\n" in text
+        assert 'sarmoco_component_up{component="radar"} 1' in text
+        sample = re.compile(r"^[a-zA-Z_:][a-zA-Z0-9_:]*(\{[^}]*\})? \S+$")
+        for line in text.splitlines():
+            assert line.startswith("# TYPE ") or sample.match(line), line
+        assert _get(base + "/nothing")[0] == 404
+    finally:
+        server.stop()
+
+
+def test_only_loopback_is_served() -> None:
+    with pytest.raises(ConfigError):
+        StatusServer(Counters(), Health(), "0.0.0.0", 0)
+    assert metric_name("kinematics-stale.count") == "kinematics_stale_count"
+    assert metric_name("5xx") == "_5xx"
+    assert "component_up" in prometheus_text(Counters(), Health())
+
+
+@pytest.fixture
+def restore_logging() -> Iterator[None]:
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    yield
+    logging_setup.setup_logging(stream=io.StringIO())
+    for h in list(root.handlers):
+        root.removeHandler(h)
+        h.close()
+    for h in handlers:
+        root.addHandler(h)
+    root.setLevel(level)
+
+
+def test_json_and_key_value_lines(restore_logging: None) -> None:
+    buf = io.StringIO()
+    logging_setup.setup_logging("info", "json", stream=buf)
+    log = logging.getLogger("sarmoco.test")
+    log.info("block recorded", extra={"pulses": 256, "store": "run.zarr"})
+    log.debug("hidden")
+    try:
+        raise RuntimeError("boom")
+    except RuntimeError:
+        log.exception("failed")
+    lines = buf.getvalue().splitlines()
+    assert len(lines) == 2
+    first = json.loads(lines[0])
+    assert first["msg"] == "block recorded" and first["pulses"] == 256
+    assert first["level"] == "info" and first["logger"] == "sarmoco.test"
+    assert "RuntimeError: boom" in json.loads(lines[1])["exc"]
+    buf = io.StringIO()
+    logging_setup.setup_logging("debug", "kv", stream=buf)
+    log.warning("ins stale", extra={"age_s": 1.5, "link": "udpin:127.0.0.1:14550"})
+    line = buf.getvalue().strip()
+    assert "\n" not in line
+    assert 'msg="ins stale"' in line and "age_s=1.5" in line and "level=warning" in line
+
+
+def test_sighup_reopens_the_log_file(tmp_path: Path, restore_logging: None) -> None:
+    path = tmp_path / "sarmoco.log"
+    logging_setup.setup_logging("info", "kv", path=path)
+    previous = signal.getsignal(signal.SIGHUP)
+    logging_setup.install_sighup()
+    try:
+        log = logging.getLogger("sarmoco.test")
+        log.info("before rotation")
+        path.rename(tmp_path / "sarmoco.log.1")
+        os.kill(os.getpid(), signal.SIGHUP)  # handled before the next bytecode runs
+        log.info("after rotation")
+    finally:
+        signal.signal(signal.SIGHUP, previous)
+    assert "before rotation" in (tmp_path / "sarmoco.log.1").read_text()
+    assert "after rotation" in path.read_text()
