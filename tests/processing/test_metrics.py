@@ -13,19 +13,19 @@ from sarmoco.processing.metrics import (
     point_target_metrics,
     upsample_cut,
 )
-from sarmoco.processing.types import Image
+from sarmoco.processing.types import ComplexArray, FloatArray, Image
 
 
 def _band_cut(
-    n: int, band_frac: float, weights: np.ndarray | None, shift: float, carrier: float
-) -> np.ndarray:
+    n: int, band_frac: float, weights: FloatArray | None, shift: float, carrier: float
+) -> ComplexArray:
     """A band-limited impulse at ``shift`` samples from the centre, with a spectral carrier."""
     nb = round(n * band_frac)
     spec = np.zeros(n, dtype=np.complex128)
     k = np.arange(nb) - nb // 2
     w = np.ones(nb) if weights is None else weights
     spec[k % n] = w * np.exp(-2j * np.pi * k * (n // 2 + shift) / n)
-    return np.fft.ifft(spec) * np.exp(2j * np.pi * carrier * np.arange(n))
+    return np.asarray(np.fft.ifft(spec) * np.exp(2j * np.pi * carrier * np.arange(n)))
 
 
 @pytest.mark.parametrize("shift", [0.0, 0.3, 0.5])
@@ -58,8 +58,8 @@ def test_point_target_2d_with_position_error() -> None:
     n0, n1 = 128, 96
     c0 = _band_cut(n0, 0.4, None, 0.25, carrier=-0.2)
     c1 = _band_cut(n1, 0.5, None, -0.4, carrier=0.35)
-    ax0 = np.arange(n0) * 0.2 - 10.0
-    ax1 = np.arange(n1) * 0.1 + 500.0
+    ax0 = np.arange(n0, dtype=np.float64) * 0.2 - 10.0
+    ax1 = np.arange(n1, dtype=np.float64) * 0.1 + 500.0
     img = Image(np.outer(c0, c1).astype(np.complex64), ax0, ax1, "ground")
     true = (ax0[n0 // 2] + 0.25 * 0.2, ax1[n1 // 2] - 0.4 * 0.1)
     m = point_target_metrics(img, expected_m=(true[0] + 0.01, true[1]), search_radius_m=2.0)
@@ -83,6 +83,17 @@ def test_entropy_and_contrast() -> None:
 
 def test_bad_inputs_raise() -> None:
     with pytest.raises(ProcessingError):
-        cut_metrics(np.ones(3, dtype=np.complex64), 1.0)
+        cut_metrics(np.ones(3, dtype=np.complex128), 1.0)
     with pytest.raises(ProcessingError):
         image_entropy(np.zeros((4, 4)))
+
+
+def test_peak_index_picks_the_lobe_of_the_chosen_target() -> None:
+    weak = _band_cut(512, 0.5, None, 0.0, carrier=0.0)
+    strong = 3.0 * np.roll(weak, 60)  # a brighter target 60 samples further on the same cut
+    cut = weak + strong
+    m = cut_metrics(cut, spacing_m=1.0, peak_index=256)
+    # the bright neighbour's sidelobes pull the weak peak by ~0.06 sample
+    assert m.peak_m == pytest.approx(256.0, abs=0.1)
+    assert m.irw_m == pytest.approx(0.886 * 2.0, rel=0.01)
+    assert cut_metrics(cut, spacing_m=1.0).peak_m == pytest.approx(316.0, abs=0.05)
