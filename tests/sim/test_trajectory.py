@@ -1,7 +1,8 @@
-"""True trajectory: derivatives are consistent, turbulence matches its spectrum, flight log works."""
+"""True trajectory: consistent derivatives, turbulence matching its spectrum, flight-log motion."""
 
 from __future__ import annotations
 
+import itertools
 from pathlib import Path
 
 import numpy as np
@@ -95,12 +96,13 @@ def test_turbulence_rms_and_spectrum() -> None:
     total = np.trapezoid(s_model, fine)
     edges = spec.corner_hz * 2.0 ** np.arange(-3, 4)
     measured, expected = [], []
-    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+    for lo, hi in itertools.pairwise(edges):
         b, m = (f >= lo) & (f < hi), (fine >= lo) & (fine < hi)
         measured.append(np.sum(pxx[b]) * (f[1] - f[0]))
         expected.append(0.4**2 * np.trapezoid(s_model[m], fine[m]) / total)
     ratio_db = 10 * np.log10(np.array(measured) / np.array(expected))
-    # the expected band powers fall by 14 dB across these six octaves; each is met to 1 dB (measured worst 0.6 dB)
+    # the expected band powers fall by 14 dB across these six octaves; each is met to 1 dB
+    # (measured worst 0.6 dB)
     assert 10 * np.log10(expected[0] / expected[-1]) > 12
     assert np.abs(ratio_db).max() < 1.0, ratio_db
 
