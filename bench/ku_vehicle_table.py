@@ -62,7 +62,7 @@ class Case:
     """One table scenario."""
 
     scale: float = 0.2
-    cross_track_rms_m: float = 1.0
+    cross_track_rms_m: float = 1.15
     vertical_rms_m: float = 0.5
     along_speed_rms_mps: float = 0.05
     corner_hz: float = 0.05

@@ -39,7 +39,7 @@ def pga(
     lines: ComplexArray,
     max_iter: int = 8,
     tol_rad: float = 0.02,
-    min_window: int = 8,
+    min_window: int = 16,
     floor_db: float = -20.0,
 ) -> tuple[FloatArray, list[float]]:
     """Estimate the common azimuth phase error of azimuth-compressed lines.
@@ -55,7 +55,8 @@ def pga(
     min_window : int
         Smallest window, bins.
     floor_db : float
-        The window covers where the centred average is above this level of its peak, dB.
+        The window is twice the width where the centred average is above this level of its
+        peak, dB, never wider than the previous one.
 
     Returns
     -------
@@ -78,7 +79,9 @@ def pga(
         rows = np.arange(img.shape[0])[:, None]
         # Centre shift to bin 0 (not P/2, which would add a pi-per-pulse ramp at the wrap).
         shifted = img[rows, (np.arange(n_p)[None, :] + peaks[:, None]) % n_p]
-        width = max(min_window, min(width, _window_width(np.fft.fftshift(shifted, 1), floor_db)))
+        width = max(
+            min_window, min(width, 2 * _window_width(np.fft.fftshift(shifted, 1), floor_db))
+        )
         win = (np.abs(np.fft.fftfreq(n_p) * n_p) <= width // 2).astype(float)
         g = np.fft.ifft(shifted * win[None, :], axis=1)
         grad = np.angle(np.sum(np.conj(g[:, :-1]) * g[:, 1:], axis=0))

@@ -11,7 +11,8 @@ envelope-corrected subaperture the rates are measured again and fitted with κ0 
 Streaming: subaperture j is estimated (step 1) as soon as its last pulse is in; step 2 of j
 runs when step 1 of j + 1 is known (its envelope is then interpolated, not extrapolated);
 pulses up to the centre of the latest step-2 subaperture are corrected and released. The
-latency is 2 hop + subaperture/2, at most subaperture + hop for overlaps of 50 % or more.
+latency is at most subaperture + hop (the first pulses of a run); later pulses wait
+2 hop + subaperture/2, which is no more for overlaps of 50 % or more.
 The constant and linear terms are pinned at the start (zero value and slope); the offline
 form pins zero mean and trend over the aperture instead, otherwise it uses the same
 subaperture grid and estimators, so both agree up to a line in time (and the envelope
@@ -345,8 +346,12 @@ class SlidingSubapertureAutofocus:
 
     @property
     def latency_s(self) -> float:
-        """Upper bound of the delay from a pulse's arrival to its release, s."""
-        return 2.0 * self.config.hop_s + 0.5 * self.config.subaperture_s
+        """Upper bound of the delay from a pulse's arrival to its release, s.
+
+        Subaperture + hop: reached by the first pulses of a run (released when the second
+        subaperture is complete); later pulses wait at most 2 hop + subaperture / 2.
+        """
+        return self.config.subaperture_s + self.config.hop_s
 
     def _start(self, j: int) -> float:
         return j * self.config.hop_s
@@ -374,7 +379,7 @@ class SlidingSubapertureAutofocus:
 
     def _los(self) -> tuple[FloatArray, FloatArray]:
         """LOS displacement (m) and its rate (m/s) of every buffered pulse, from the carry."""
-        if not self.config.envelope_step:
+        if not self.config.envelope_step or not self._centres:
             return np.zeros(self._t.size), np.zeros(self._t.size)
         a = _los_accel(np.array(self._accel, dtype=float), self.geometry)
         a_t = splice(np.array(self._centres), a, self._t)

@@ -1,0 +1,85 @@
+"""Issue 4 bench 5: autofocus CPU time per second of full-size ku-vehicle data at its real PRF.
+
+Simulates ``ku-vehicle`` at scale 1 (PRF 1 kHz, full swath, the table's motion and GPS
+navigation), range-compresses it, and times (process CPU time) the offline two-step autofocus
+with its default configuration and PGA, per second of data: the fraction of real time.
+
+Run: ``.venv/bin/python bench/bench_autofocus.py [--seconds 2.0]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import pytest
+
+from bench.ku_vehicle_table import Case, scenario
+from sarmoco.processing import rangecomp
+from sarmoco.processing.autofocus import AutofocusConfig, AutofocusGeometry, autofocus_offline
+from sarmoco.processing.autofocus.pga import pga_stripmap
+from sarmoco.processing.geometry import fit_reference_track
+from sarmoco.sim.run import simulate
+from sarmoco.sim.trajectory import MotionSpec
+
+
+def measure(seconds: float) -> dict[str, float]:
+    """CPU seconds of the two-step autofocus and of PGA per second of data."""
+    case = Case(scale=1.0)
+    scn = scenario(case)
+    motion = MotionSpec(
+        kind="turbulence",
+        cross_track_rms_m=case.cross_track_rms_m,
+        vertical_rms_m=case.vertical_rms_m,
+        along_speed_rms_mps=case.along_speed_rms_mps,
+        attitude_rms_rad=0.0,
+        corner_hz=case.corner_hz,
+        seed=case.motion_seed,
+    )
+    n = min(scn.n_pulses, round(seconds * scn.radar.prf_hz))
+    run = simulate(scn, motion, "gps", n_pulses=n)
+    rc = rangecomp.compress(scn.radar, run.echo)
+    range_m = rangecomp.range_axis_m(scn.radar)
+    nav = run.ins.nav
+    assert nav.pos_ned is not None
+    track = fit_reference_track(nav.t_ns, nav.pos_ned)
+    geom = AutofocusGeometry(
+        scn.radar.wavelength_m, track.v0_mps, -float(track.origin_ned[2]), scn.center_slant_range_m
+    )
+    data_s = n / scn.radar.prf_hz
+    t0 = time.process_time()
+    corr, _ = autofocus_offline(rc, run.t_ns, range_m, geom, AutofocusConfig())
+    focused = corr.apply(rc, range_m)
+    t1 = time.process_time()
+    t_s = (run.t_ns - run.t_ns[0]) * 1e-9
+    pga_stripmap(focused, t_s, range_m, geom.speed_mps, geom.wavelength_m)
+    t2 = time.process_time()
+    return {
+        "pulses": float(n),
+        "bins": float(rc.shape[1]),
+        "prf_hz": scn.radar.prf_hz,
+        "two_step_cpu_per_s": (t1 - t0) / data_s,
+        "pga_cpu_per_s": (t2 - t1) / data_s,
+    }
+
+
+@pytest.mark.bench
+def test_bench_autofocus() -> None:
+    """Print the fraction of real time (bench only)."""
+    print(measure(2.0))
+
+
+def main() -> None:
+    """Command line."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=2.0)
+    res = measure(ap.parse_args().seconds)
+    print(
+        f"{res['pulses']:.0f} pulses x {res['bins']:.0f} bins at PRF {res['prf_hz']:.0f} Hz: "
+        f"two-step autofocus {res['two_step_cpu_per_s']:.3f} CPU s per s of data, "
+        f"PGA {res['pga_cpu_per_s']:.3f} (fraction of real time, one core)"
+    )
+
+
+if __name__ == "__main__":
+    main()
