@@ -28,6 +28,7 @@ import math
 
 import numba
 import numpy as np
+import numpy.typing as npt
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.types import C_MPS, ComplexArray, FloatArray, IntArray, RadarParams
@@ -108,7 +109,7 @@ def synthesize(
     t_ns: IntArray,
     apc_ned: FloatArray,
     targets_ned: FloatArray,
-    amplitudes: ComplexArray,
+    amplitudes: npt.ArrayLike,
     snr_db: float | None,
     rng: np.random.Generator,
     illumination: FloatArray | None = None,

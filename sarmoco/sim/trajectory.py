@@ -43,6 +43,7 @@ from pathlib import Path
 from typing import Literal, Protocol
 
 import numpy as np
+import numpy.typing as npt
 from scipy.interpolate import BSpline, make_smoothing_spline
 from scipy.ndimage import gaussian_filter1d
 
@@ -378,7 +379,7 @@ def _deviation(scn: Scenario, spec: MotionSpec) -> Deviation | None:
     raise ConfigError(f"motion.kind: {spec.kind!r} is not 'ideal', 'turbulence' or 'flightlog'")
 
 
-def true_trajectory(scn: Scenario, t_s: FloatArray, spec: MotionSpec) -> Trajectory:
+def true_trajectory(scn: Scenario, t_s: npt.ArrayLike, spec: MotionSpec) -> Trajectory:
     """True APC kinematics at ``t_s`` (seconds since the first pulse).
 
     The same ``spec`` gives the same continuous trajectory for any choice of ``t_s``.

@@ -3,6 +3,8 @@ unweighted-sinc sidelobes and width, for matched-filter and dechirp receive chai
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -16,7 +18,7 @@ from sarmoco.sim.scenario import load_preset
 SINC_PSLR_DB = -13.26
 CUT_HALF_BINS = 40
 
-CHAINS = {
+CHAINS: dict[str, tuple[str, dict[str, Any]]] = {
     "ku-matched": ("ku-vehicle", {}),
     "ku-dechirp": ("ku-vehicle", {"receive": "dechirp"}),
     "thz-dechirp": ("thz-spotlight", {}),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import numpy.typing as npt
 import pytest
 
 from sarmoco.errors import ConfigError
@@ -18,7 +19,7 @@ MOTION = MotionSpec(kind="turbulence", seed=2)
 EPOCH = SCN.t0_ns
 
 
-def _truth(t: FloatArray) -> Trajectory:
+def _truth(t: npt.ArrayLike) -> Trajectory:
     return true_trajectory(SCN, t, MOTION)
 
 
