@@ -153,13 +153,12 @@ def synthesize(
     weights = amp[None, :] * (1.0 if illumination is None else illumination)
     weights = np.ascontiguousarray(np.broadcast_to(weights, (n_p, tgt.shape[0])))
     ranges = slant_ranges(apc, tgt)
-    out = np.zeros((n_p, radar.n_samples), dtype=np.complex128)
+    echo = np.zeros((n_p, radar.n_samples), dtype=np.complex64)
     args = (radar.range_gate_delay_s, radar.sample_rate_hz, radar.pulse_width_s)
     if radar.receive == "matched":
-        _matched_kernel(out, ranges, weights, *args, radar.chirp_rate_hz_per_s, radar.wavelength_m)
+        _matched_kernel(echo, ranges, weights, *args, radar.chirp_rate_hz_per_s, radar.wavelength_m)
     else:
-        _dechirp_kernel(out, ranges, weights, *args, radar.chirp_rate_hz_per_s, radar.carrier_hz)
-    echo = out.astype(np.complex64)
+        _dechirp_kernel(echo, ranges, weights, *args, radar.chirp_rate_hz_per_s, radar.carrier_hz)
     if snr_db is not None:
         sigma = noise_sigma(snr_db) / math.sqrt(2.0)
         noise = rng.standard_normal((n_p, radar.n_samples, 2), dtype=np.float32) * np.float32(sigma)
