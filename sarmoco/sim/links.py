@@ -265,7 +265,8 @@ class PtyLink(Link):
         self._count(len(data))
 
     def fds(self) -> list[int]:
-        return [self._master]
+        # with no peer the master polls readable (hang-up) forever: do not watch it then
+        return [self._master] if self.peer_ready() else []
 
     def receive(self) -> bytes:
         chunks = []

@@ -71,14 +71,14 @@ class PlayResult:
 def _idle_for(
     emitters: Sequence[Emitter], now: Callable[[], int | None]
 ) -> Callable[[float], None]:
+    """Wait up to the timeout for bytes from the daemon, then let every emitter service its link."""
+
     def idle(timeout_s: float) -> None:
         fds = [fd for e in emitters for fd in e.link.fds()]
         if fds:
-            if not select.select(fds, [], [], timeout_s)[0]:
-                return
+            select.select(fds, [], [], timeout_s)
         elif timeout_s > 0:
             time.sleep(timeout_s)
-            return
         t = now()
         for e in emitters:
             e.service(t)

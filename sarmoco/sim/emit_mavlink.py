@@ -1,0 +1,266 @@
+"""The simulated autopilot: MAVLink 2 over UDP, TCP, a pseudo-terminal, or into a ``.tlog``.
+
+What it sends (system 1, component 1, ArduPilot-like):
+
+* HEARTBEAT at 1 Hz, also while waiting for the daemon (so a ``udpin:`` peer learns
+  where we are);
+* LOCAL_POSITION_NED (velocity NED, position NED: the INS position, or the velocity
+  integrated from the first sample for grades without one) and ATTITUDE_QUATERNION
+  at the INS sample epochs, decimated to the rate asked for;
+* SYSTEM_TIME (GPS-derived UNIX time and ``time_boot_ms`` of the same instant);
+* EKF_STATUS_REPORT at 1 Hz (position flags only when the INS has a position).
+
+What it answers: TIMESYNC requests (``tc1 = 0``) with ``tc1`` = the boot clock now
+(ns, :class:`~sarmoco.sim.insclock.InsClock`) once playback has started, and
+COMMAND_LONG MAV_CMD_SET_MESSAGE_INTERVAL (interval µs; 0 = default rate,
+-1 = off) with a COMMAND_ACK. Rates are at most the INS rate and decimate on the
+INS sample index, so the sent samples are a subset of the INS record.
+
+A ``.tlog`` is what a ground station logs: each message prefixed by the host's
+receive time (UNIX µs, big-endian u64); here the wire GPS time of sending.
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+import time
+from collections.abc import Iterator, Mapping
+from functools import partial
+from typing import Any
+
+import numpy as np
+
+os.environ.setdefault("MAVLINK20", "1")
+
+from pymavlink.dialects.v20 import ardupilotmega as mavlink2
+
+from sarmoco.drivers.clock import NS_PER_S
+from sarmoco.errors import ConfigError
+from sarmoco.processing.types import FloatArray
+from sarmoco.sim.emitter import Emitter
+from sarmoco.sim.faults import PacketFaults
+from sarmoco.sim.insfeed import InsFeed
+from sarmoco.sim.links import FileLink, Link
+from sarmoco.sim.pacing import Event
+
+SYSTEM_ID = 1
+COMPONENT_ID = mavlink2.MAV_COMP_ID_AUTOPILOT1
+HEARTBEAT_PERIOD_S = 1.0
+STATUS_PERIOD_S = 1.0
+STREAMS = ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "SYSTEM_TIME")
+"""Messages whose rate MAV_CMD_SET_MESSAGE_INTERVAL sets."""
+DEFAULT_RATES_HZ: dict[str, float] = {
+    "LOCAL_POSITION_NED": 4.0,
+    "ATTITUDE_QUATERNION": 4.0,
+    "SYSTEM_TIME": 1.0,
+}
+"""Rates before the daemon asks (ArduPilot streams slowly until told otherwise), Hz."""
+_EKF_FLAGS_BASE = mavlink2.EKF_ATTITUDE | mavlink2.EKF_VELOCITY_HORIZ | mavlink2.EKF_VELOCITY_VERT
+_EKF_FLAGS_POSITION = (
+    mavlink2.EKF_POS_HORIZ_REL | mavlink2.EKF_POS_HORIZ_ABS | mavlink2.EKF_POS_VERT_ABS
+)
+_MSG_IDS = {getattr(mavlink2, f"MAVLINK_MSG_ID_{name}"): name for name in STREAMS}
+
+
+def dead_reckoned(t_ns: np.ndarray, vel_ned: FloatArray) -> FloatArray:
+    """Velocity integrated with the trapezoid rule from zero at the first sample, m."""
+    dt = np.diff(t_ns).astype(np.float64) * 1e-9
+    steps = 0.5 * (vel_ned[1:] + vel_ned[:-1]) * dt[:, None]
+    return np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
+
+
+class _PacketSink:
+    """The file pymavlink writes to: each write is one packet, handed to the emitter."""
+
+    def __init__(self, emitter: MavlinkEmitter) -> None:
+        self._emitter = emitter
+
+    def write(self, buf: bytes) -> None:
+        self._emitter.send(bytes(buf), self._emitter.now_ns)
+
+
+class MavlinkEmitter(Emitter):
+    """Plays a run's INS samples as an autopilot's MAVLink 2 stream.
+
+    Parameters
+    ----------
+    link : Link
+        UDP (to the daemon's ``udpin:`` port), TCP server, pty or file (``.tlog``).
+    feed : InsFeed
+        Samples and the autopilot boot clock.
+    rates_hz : mapping of str to float, optional
+        Initial rates of :data:`STREAMS`, Hz (default :data:`DEFAULT_RATES_HZ`;
+        a ``.tlog`` is usually written at the INS rate).
+    signing_key : bytes, optional
+        32-byte MAVLink 2 signing secret: sign every packet.
+    faults, seed, rank
+        See :class:`~sarmoco.sim.emitter.Emitter`.
+    """
+
+    protocol = "mavlink2"
+
+    def __init__(
+        self,
+        link: Link,
+        feed: InsFeed,
+        *,
+        rates_hz: Mapping[str, float] | None = None,
+        signing_key: bytes | None = None,
+        faults: PacketFaults | None = None,
+        seed: int = 0,
+        rank: int = 1,
+    ) -> None:
+        super().__init__(link, faults, seed, rank)
+        self.feed = feed
+        self.tlog = isinstance(link, FileLink)
+        self.default_rates_hz = dict(DEFAULT_RATES_HZ if rates_hz is None else rates_hz)
+        self.rates_hz = dict(self.default_rates_hz)
+        self.pos_ned = (
+            feed.pos_ned if feed.pos_ned is not None else dead_reckoned(feed.t_ns, feed.vel_ned)
+        )
+        self._tx = mavlink2.MAVLink(
+            _PacketSink(self), srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID
+        )
+        if signing_key is not None:
+            if len(signing_key) != 32:
+                raise ConfigError(f"mavlink signing key: {len(signing_key)} bytes, need 32")
+            self._tx.signing.secret_key = signing_key
+            self._tx.signing.sign_outgoing = True
+            self._tx.signing.timestamp = 1
+        self._rx = mavlink2.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        self._rx.robust_parsing = True
+        self.peer_heard = False
+        self._last_preroll_heartbeat = -HEARTBEAT_PERIOD_S
+        self.sent: dict[str, int] = {}
+        self.answered: dict[str, int] = {"TIMESYNC": 0, "SET_MESSAGE_INTERVAL": 0}
+
+    # --- schedule -------------------------------------------------------------------
+
+    def events(self) -> Iterator[Event]:
+        """Heartbeats and EKF status each second, and every INS sample epoch (plus latency)."""
+        f = self.feed
+        if not f.t_ns.size:
+            return
+        t_first, t_last = int(f.t_ns[0]), int(f.t_ns[-1])
+        period = round(HEARTBEAT_PERIOD_S * NS_PER_S)
+        beats = range(t_first, t_last + 1, period)
+        i = 0
+        for t_beat in beats:
+            while i < f.t_ns.size and int(f.t_ns[i]) + f.latency_ns < t_beat:
+                yield Event(int(f.t_ns[i]) + f.latency_ns, self.rank, partial(self._sample, i))
+                i += 1
+            yield Event(t_beat, self.rank, partial(self._heartbeat, t_beat))
+        for j in range(i, f.t_ns.size):
+            yield Event(int(f.t_ns[j]) + f.latency_ns, self.rank, partial(self._sample, j))
+
+    # --- sending ----------------------------------------------------------------------
+
+    def write(self, packet: bytes) -> None:
+        if self.tlog:
+            stamp = struct.pack(">Q", self.wire.unix_ns(self.now_ns) // 1000)
+            self.link.write(stamp + packet)
+        else:
+            self.link.write(packet)
+
+    def _count(self, name: str) -> None:
+        self.sent[name] = self.sent.get(name, 0) + 1
+
+    def _due(self, name: str, index: int) -> bool:
+        hz = self.rates_hz.get(name, 0.0)
+        return hz > 0 and index % max(1, round(self.feed.rate_hz / hz)) == 0
+
+    def _heartbeat(self, t_ns: int) -> None:
+        self.now_ns = t_ns
+        self._tx.heartbeat_send(
+            mavlink2.MAV_TYPE_FIXED_WING,
+            mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA,
+            mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+            0,
+            mavlink2.MAV_STATE_ACTIVE,
+        )
+        self._count("HEARTBEAT")
+        flags = _EKF_FLAGS_BASE | (_EKF_FLAGS_POSITION if self.feed.pos_ned is not None else 0)
+        self._tx.ekf_status_report_send(flags, 0.0, 0.0, 0.0, 0.0, 0.0)
+        self._count("EKF_STATUS_REPORT")
+
+    def _sample(self, i: int) -> None:
+        f = self.feed
+        self.now_ns = int(f.t_ns[i]) + f.latency_ns
+        up_ns = int(f.uptime_ns[i])
+        boot_ms = round(up_ns / 1e6)
+        k = int(f.index[i])
+        if self._due("SYSTEM_TIME", k):
+            # the UNIX time at which the boot clock reads boot_ms exactly
+            t_ref = int(f.t_ns[i]) + boot_ms * 1_000_000 - up_ns
+            self._tx.system_time_send(round(self.wire.unix_ns(t_ref) / 1000), boot_ms)
+            self._count("SYSTEM_TIME")
+        if self._due("LOCAL_POSITION_NED", k):
+            x, y, z = (float(v) for v in self.pos_ned[i])
+            vx, vy, vz = (float(v) for v in f.vel_ned[i])
+            self._tx.local_position_ned_send(boot_ms, x, y, z, vx, vy, vz)
+            self._count("LOCAL_POSITION_NED")
+        if self._due("ATTITUDE_QUATERNION", k):
+            w, qx, qy, qz = (float(v) for v in f.quat[i])
+            self._tx.attitude_quaternion_send(boot_ms, w, qx, qy, qz, 0.0, 0.0, 0.0)
+            self._count("ATTITUDE_QUATERNION")
+
+    # --- answering --------------------------------------------------------------------
+
+    def service(self, now_ns: int | None) -> None:
+        if now_ns is None and time.monotonic() - self._last_preroll_heartbeat >= HEARTBEAT_PERIOD_S:
+            self._last_preroll_heartbeat = time.monotonic()
+            self._heartbeat(self.now_ns)
+        super().service(now_ns)
+
+    def on_bytes(self, data: bytes, now_ns: int | None) -> None:
+        try:
+            msgs = self._rx.parse_buffer(data) or []
+        except mavlink2.MAVError:
+            return
+        for msg in msgs:
+            if msg.get_type() == "BAD_DATA":
+                continue
+            self.peer_heard = True
+            if msg.get_type() == "TIMESYNC" and msg.tc1 == 0 and now_ns is not None:
+                self.now_ns = now_ns
+                self._tx.timesync_send(self.feed.clock.uptime_ns(now_ns), msg.ts1)
+                self.answered["TIMESYNC"] += 1
+            elif msg.get_type() == "COMMAND_LONG" and msg.target_system in (0, SYSTEM_ID):
+                self._command(msg, now_ns)
+
+    def _command(self, msg: Any, now_ns: int | None) -> None:
+        if now_ns is not None:
+            self.now_ns = now_ns
+        result = mavlink2.MAV_RESULT_UNSUPPORTED
+        if msg.command == mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL:
+            name = _MSG_IDS.get(round(msg.param1))
+            result = mavlink2.MAV_RESULT_DENIED
+            if name is not None:
+                interval_us = msg.param2
+                if interval_us == 0:
+                    self.rates_hz[name] = self.default_rates_hz[name]
+                elif interval_us < 0:
+                    self.rates_hz[name] = 0.0
+                else:
+                    self.rates_hz[name] = min(1e6 / interval_us, self.feed.rate_hz)
+                self.answered["SET_MESSAGE_INTERVAL"] += 1
+                result = mavlink2.MAV_RESULT_ACCEPTED
+        self._tx.command_ack_send(
+            msg.command, result, target_system=msg.get_srcSystem(),
+            target_component=msg.get_srcComponent(),
+        )  # fmt: skip
+
+    def ready(self) -> bool:
+        return self.tlog or (self.link.peer_ready() and self.peer_heard)
+
+    def connect_hint(self) -> dict[str, Any]:
+        return {"system_id": SYSTEM_ID, "component_id": COMPONENT_ID}
+
+    def stats(self) -> dict[str, Any]:
+        return {
+            **super().stats(),
+            "messages": dict(self.sent),
+            "answered": dict(self.answered),
+            "rates_hz": dict(self.rates_hz),
+        }
