@@ -4,7 +4,7 @@ Simulates ``ku-vehicle`` at scale 1 (PRF 1 kHz, full swath, the table's motion a
 navigation), range-compresses it, and times (process CPU time) the offline two-step autofocus
 with its default configuration and PGA, per second of data: the fraction of real time.
 
-Run: ``.venv/bin/python bench/bench_autofocus.py [--seconds 2.0]``.
+Run: ``.venv/bin/python -m bench.bench_autofocus [--seconds 2.0]`` from the repository root.
 """
 
 from __future__ import annotations

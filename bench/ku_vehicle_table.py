@@ -16,7 +16,7 @@ Every image is a backprojection on a small ground grid around each target (IMAGI
 ``processing.metrics``. IRW theory: range ``0.886 c/2B / sin β`` on the ground, azimuth
 ``0.886 λ / (4 sin(θ/2))`` of the stripmap beam θ.
 
-Run: ``.venv/bin/python bench/ku_vehicle_table.py [--scale 0.3] [--seed 3]``; the test
+Run: ``.venv/bin/python -m bench.ku_vehicle_table [--scale 0.3] [--seed 2]``; the test
 ``tests/processing/autofocus/test_ku_vehicle.py`` runs a smaller case.
 """
 
