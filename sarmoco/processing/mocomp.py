@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 import numpy as np
+import scipy.fft
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.geometry import (
@@ -172,33 +173,42 @@ class MocompSolution:
     range_shift_m: FloatArray
 
 
-def delay_ramp(shift_bins: FloatArray, n: int) -> ComplexArray:
-    """exp(-j 2π f s) on the ``np.fft.fftfreq(n)`` grid for each row's shift s, (P, n) complex64.
+def apply_delay(spec: ComplexArray, shift_bins: FloatArray) -> None:
+    """Multiply spectra in place by exp(-j 2π f s) on the ``fftfreq(n)`` grid, per row.
 
-    The exponential is separable: with ``m = a·B + b`` the value for bin m is
-    the product of two small tables (P, A) and (P, B), so the cost is one
-    complex multiply per element instead of one complex exponential (several
-    times the cost of the FFT it multiplies).
+    For even n the exponential is separable: bin ``m = a·B + b`` (and the negative
+    half offset by -n/2) gets the product of a per-row coarse and fine table, so
+    the cost is three in-place complex multiplies per element and no temporary,
+    instead of a complex exponential per element (several times the cost of the
+    FFT it multiplies). Tables are exact in float64, rounded to complex64.
 
     Parameters
     ----------
+    spec : ndarray of complex64, shape (P, n), C-contiguous
+        Spectra along axis 1 (FFT order), modified in place.
     shift_bins : ndarray of float64, shape (P,)
         Delay of each row, bins.
-    n : int
-        FFT length.
     """
+    rows, n = spec.shape
     s = np.asarray(shift_bins, dtype=np.float64)[:, None]
-    pos = (n + 1) // 2  # fftfreq: m = 0..pos-1, then m = pos-n..-1
-    block = max(1, int(np.ceil(np.sqrt(pos))))
-    count = -(-pos // block)
-    coarse = np.exp(-2j * np.pi * s * (np.arange(count) * block / n))
-    fine = np.exp(-2j * np.pi * s * (np.arange(block) / n))
-    up = (coarse[:, :, None] * fine[:, None, :]).reshape(s.shape[0], -1)[:, :pos]
-    out = np.empty((s.shape[0], n), dtype=np.complex64)
-    out[:, :pos] = up
-    # negative frequencies m = pos-n .. -1 are m' - n for m' = pos .. n-1: the first
-    # n-pos entries of ``up`` shifted by m0 = pos - n
-    out[:, pos:] = up[:, : n - pos] * np.exp(-2j * np.pi * s * ((pos - n) / n))
+    half = n // 2
+    block = 1 << max(0, round(0.5 * np.log2(max(half, 1))))
+    if n % 2 or half % block or not spec.flags.c_contiguous:
+        spec *= _phasor(s * np.fft.fftfreq(n))
+        return
+    count = half // block
+    view = spec.reshape(rows, 2, count, block)
+    view *= _phasor(s * (np.arange(count) * block / n))[:, None, :, None]
+    view *= _phasor(s * (np.arange(block) / n))[:, None, None, :]
+    spec[:, half:] *= _phasor(s * (-half / n))
+
+
+def _phasor(cycles: FloatArray) -> ComplexArray:
+    """exp(-j 2π c) as complex64 (cos and sin of the float64 angle)."""
+    angle = 2.0 * np.pi * cycles
+    out = np.empty(angle.shape, dtype=np.complex64)
+    out.real = np.cos(angle)
+    out.imag = -np.sin(angle)
     return out
 
 
@@ -215,9 +225,10 @@ def shift_range(echo: ComplexArray, shift_bins: FloatArray) -> ComplexArray:
     shift_bins : ndarray of float64, shape (P,)
         Shift of each pulse in bins (positive: toward far range).
     """
-    spec = np.fft.fft(echo, axis=1)
-    spec *= delay_ramp(shift_bins, echo.shape[1])
-    return np.fft.ifft(spec, axis=1).astype(echo.dtype, copy=False)
+    spec = np.ascontiguousarray(scipy.fft.fft(echo, axis=1), dtype=np.complex64)
+    apply_delay(spec, shift_bins)
+    out: ComplexArray = scipy.fft.ifft(spec, axis=1, overwrite_x=True)
+    return out.astype(echo.dtype, copy=False)
 
 
 def _squint_coef(geom: LosGeometry, t_ns: IntArray) -> FloatArray:

@@ -17,6 +17,7 @@ from sarmoco.processing.mocomp import (
     InsMotionCompensator,
     LosGeometry,
     LosState,
+    apply_delay,
     compensate_aperture,
     correct_los,
     integrate_los,
@@ -106,10 +107,16 @@ def test_phase_and_envelope_bring_every_pulse_back_to_the_reference_track() -> N
     np.testing.assert_array_equal(sol_q.range_shift_m != 0.0, moved)
 
 
-def test_shift_range_is_a_sub_sample_delay() -> None:
-    x = _dirichlet(128, np.array([40.0, 40.0]), 30)
+@pytest.mark.parametrize("n", [128, 96, 127])  # separable tables, and the general path
+def test_shift_range_is_a_sub_sample_delay(n: int) -> None:
+    x = _dirichlet(n, np.array([40.0, 40.0]), 30)
     y = shift_range(x.astype(np.complex64), np.array([2.5, -7.25]))
-    np.testing.assert_allclose(y, _dirichlet(128, np.array([42.5, 32.75]), 30), atol=2e-6)
+    np.testing.assert_allclose(y, _dirichlet(n, np.array([42.5, 32.75]), 30), atol=3e-6)
+    s = np.array([0.3, -11.7, 1000.25])
+    spec = np.ones((3, n), dtype=np.complex64)
+    apply_delay(spec, s)
+    expect = np.exp(-2j * np.pi * np.fft.fftfreq(n)[None, :] * s[:, None])
+    np.testing.assert_allclose(spec, expect, atol=2e-6)
 
 
 @pytest.mark.parametrize("order", [1, 2])
