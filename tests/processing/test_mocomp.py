@@ -243,3 +243,18 @@ def test_ins_only_compensation_focuses_the_thz_target(
     assert tac[ins1].axis1.pslr_db <= -12.43  # the paper's Table 2 value (range cut)
     assert tac[ins1].axis0.pslr_db < tac["raw"].axis0.pslr_db - 5.0
     assert tac[ins1].axis1.pslr_db < tac["GPS position"].axis1.pslr_db - 1.0
+
+
+def test_lever_arm_moves_the_apc_with_the_attitude() -> None:
+    """At zero INS velocity the APC displacement is R(q_k) l - R(q_1) l (roll about the nose)."""
+    p = 5
+    t_ns = 10**15 + np.arange(p, dtype=np.int64) * 50_000
+    roll = np.linspace(0.0, 0.2, p)
+    quat = np.stack([np.cos(roll / 2), np.sin(roll / 2), np.zeros(p), np.zeros(p)], axis=1)
+    lever = np.array([0.0, 0.0, 0.5])  # APC 0.5 m below the IMU
+    geom = LosGeometry.build(RADAR, _axis(), DEPTH_M, SCENE_R_M, 60.0)
+    comp = InsMotionCompensator(NORTH, geom, lever)
+    disp = comp.displacement(t_ns, np.zeros((p, 3)), quat)
+    # rolling right wing down by φ swings a point below the IMU toward -y (west, away from scene)
+    expect = np.stack([-0.5 * np.sin(roll), 0.5 * np.cos(roll) - 0.5], axis=1)
+    np.testing.assert_allclose(disp, expect, atol=1e-12)
