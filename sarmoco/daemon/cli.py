@@ -5,29 +5,61 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from sarmoco import __version__
-from sarmoco.daemon.config import describe_keys, load_config
-from sarmoco.errors import SarmocoError
+from sarmoco.daemon.config import keys_markdown, load_config
+from sarmoco.errors import ConfigError, SarmocoError
 
 
 def _cmd_config_check(args: argparse.Namespace) -> int:
     cfg = load_config(args.file)
     print(
         f"{args.file}: ok (radar {cfg.radar.receive} at {cfg.radar.carrier_hz / 1e9:g} GHz, "
-        f"INS over {cfg.ins.protocol}, imaging {cfg.imaging.algorithm})"
+        f"INS over {cfg.ins.protocol}, recording to {cfg.recorder.directory})"
     )
     return 0
 
 
 def _cmd_config_keys(args: argparse.Namespace) -> int:
-    print("| key | type | unit | default | allowed | meaning |")
-    print("|---|---|---|---|---|---|")
-    for row in describe_keys():
-        print(
-            f"| `{row['key']}` | {row['type']} | {row['unit']} | `{row['default']}` | "
-            f"{row['allowed']} | {row['doc']} |"
-        )
+    print(keys_markdown(), end="")
+    return 0
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from sarmoco.daemon.logging_setup import install_sighup, setup_logging
+    from sarmoco.daemon.runner import run_live
+
+    cfg = load_config(args.config)
+    setup_logging(cfg.status.log_level, "json")
+    install_sighup()
+    store = Path(args.store) if args.store else None
+    return run_live(cfg, store, args.exit_when_idle)
+
+
+def _cmd_replay(args: argparse.Namespace) -> int:
+    from sarmoco.daemon.runner import replay_files, replay_store
+
+    cfg = load_config(args.config)
+    out = Path(args.out)
+    if args.recording:
+        summary = replay_store(cfg, Path(args.recording), out, progress=not args.quiet)
+    elif args.radar and args.nav:
+        summary = replay_files(cfg, Path(args.radar), Path(args.nav), out, not args.quiet)
+    else:
+        raise ConfigError("replay: give --recording STORE, or both --radar FILE.vrt and --nav FILE")
+    print(f"{out}: {summary.pulses_processed} pulses focused, {summary.tiles} tiles")
+    return 0
+
+
+def _cmd_report(args: argparse.Namespace) -> int:
+    from sarmoco.daemon.report import write_report
+
+    store = Path(args.store)
+    out = Path(args.out) if args.out else store.with_suffix(".report")
+    write_report(store, out)
+    print((out / "report.txt").read_text(), end="")
+    print(f"quicklooks and report.json in {out}")
     return 0
 
 
@@ -47,6 +79,29 @@ def build_parser() -> argparse.ArgumentParser:
     check.set_defaults(func=_cmd_config_check)
     keys = cfg_sub.add_parser("keys", help="print every key as a Markdown table")
     keys.set_defaults(func=_cmd_config_keys)
+
+    run = sub.add_parser("run", help="the live daemon: read INS and radar, focus, record")
+    run.add_argument("--config", required=True, help="TOML configuration file")
+    run.add_argument("--store", help="store to create (default: a new one in recorder.directory)")
+    run.add_argument(
+        "--exit-when-idle", type=float, metavar="S",
+        help="stop cleanly after S seconds without radar pulses (simulation, tests)",
+    )  # fmt: skip
+    run.set_defaults(func=_cmd_run)
+
+    replay = sub.add_parser("replay", help="ground replay of logged streams on a virtual clock")
+    replay.add_argument("--config", required=True, help="TOML configuration file")
+    replay.add_argument("--recording", help="a store written by `sarmoco run`")
+    replay.add_argument("--radar", help="VITA 49.2 packet file (.vrt)")
+    replay.add_argument("--nav", help="INS log (.tlog, .bin, SBG binary, CAN log)")
+    replay.add_argument("--out", required=True, help="store to create")
+    replay.add_argument("--quiet", action="store_true", help="no progress bar")
+    replay.set_defaults(func=_cmd_replay)
+
+    report = sub.add_parser("report", help="quicklook PNGs and metrics of a store")
+    report.add_argument("store", help="a run or replay store")
+    report.add_argument("--out", help="output folder (default: STORE with suffix .report)")
+    report.set_defaults(func=_cmd_report)
     return parser
 
 

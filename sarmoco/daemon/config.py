@@ -106,8 +106,8 @@ class GeometryConfig:
     """Imaging geometry."""
 
     look_side: Literal["right", "left"] = _key("right", "Side the antenna looks to")
-    scene_depth_m: float = _key(
-        0.0, "Depth (NED down) of the flat scene below the local NED origin", unit="m"
+    height_m: float = _key(
+        100.0, "Height of the antenna above the flat imaged terrain", unit="m", gt=0
     )
     center_slant_range_m: float = _key(
         900.0, "Scene-centre slant range used for first-order compensation", unit="m", gt=0
@@ -131,26 +131,44 @@ class MocompConfig:
 
 @dataclass(frozen=True)
 class AutofocusConfig:
-    """Sliding-subaperture autofocus (METHODS §3) and PGA."""
+    """Sliding-subaperture two-step autofocus (METHODS §3)."""
 
-    enabled: bool = _key(True, "Run the two-step autofocus")
-    subaperture_s: float = _key(0.5, "Subaperture length", unit="s", gt=0)
-    overlap: float = _key(0.5, "Fractional overlap of consecutive subapertures", ge=0, lt=1)
+    enabled: bool = _key(True, "Run the two-step autofocus after INS compensation")
+    subaperture_s: float = _key(0.4, "Subaperture length", unit="s", gt=0)
+    hop_s: float = _key(
+        0.1, "Hop between subaperture starts (overlap = 1 - hop / subaperture)", unit="s", gt=0
+    )
     n_lines: int = _key(16, "Range lines used per subaperture", gt=0)
     estimator: Literal["map-drift", "contrast"] = _key("map-drift", "Doppler-rate estimator")
-    pga: bool = _key(False, "Refine with phase gradient autofocus")
+    envelope_step: bool = _key(
+        True, "Estimate cross-track accelerations and correct the envelope (step 1)"
+    )
+    range_order: Literal[0, 1, 2] = _key(
+        2, "Order of the range model of the phase step (2: the paper's second-order model)"
+    )
 
 
 @dataclass(frozen=True)
 class ImagingConfig:
-    """Image formation."""
+    """Image formation: backprojection onto ground tiles along the track."""
 
-    algorithm: Literal["rda", "pfa", "backprojection"] = _key(
-        "backprojection", "Image formation algorithm"
+    block_pulses: int = _key(256, "Pulses per processing block", gt=0)
+    window: Literal["none", "hann", "hamming", "taylor"] = _key(
+        "none", "Range-compression weighting"
     )
-    block_pulses: int = _key(1024, "Pulses per processing block", gt=0)
-    window: Literal["none", "hann", "taylor"] = _key("none", "Range and azimuth weighting")
-    pixel_m: float = _key(0.1, "Ground grid spacing (backprojection)", unit="m", gt=0)
+    pixel_m: float = _key(0.1, "Ground grid spacing", unit="m", gt=0)
+    tile_length_m: float = _key(20.0, "Along-track length of one image tile", unit="m", gt=0)
+    swath_m: float = _key(
+        60.0, "Ground-range width of the tiles, centred on the scene centre", unit="m", gt=0
+    )
+    azimuth_beamwidth_deg: float = _key(
+        3.0,
+        "Two-way azimuth beamwidth: pulses farther than its half-angle from a tile "
+        "do not contribute to it",
+        unit="deg",
+        gt=0,
+        lt=90,
+    )
 
 
 @dataclass(frozen=True)
@@ -322,6 +340,17 @@ def describe_keys() -> list[dict[str, str]]:
                 }
             )
     return rows
+
+
+def keys_markdown() -> str:
+    """Every key as a Markdown table (the README's "Configuration" table)."""
+    lines = ["| key | type | unit | default | allowed | meaning |", "|---|---|---|---|---|---|"]
+    lines += [
+        f"| `{r['key']}` | {r['type']} | {r['unit']} | `{r['default']}` | {r['allowed']} | "
+        f"{r['doc']} |"
+        for r in describe_keys()
+    ]
+    return "\n".join(lines) + "\n"
 
 
 def _type_text(tp: Any) -> str:

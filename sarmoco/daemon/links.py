@@ -1,0 +1,109 @@
+"""Open the configured radar and INS links (live or from files) as driver sources."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from urllib.parse import urlsplit
+
+from sarmoco.daemon.config import Config
+from sarmoco.drivers.can_source import CanLogSource, CanSource
+from sarmoco.drivers.mavlink import open_mavlink
+from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource, RadarUdpSource
+from sarmoco.drivers.sbg import SbgFileSource, SbgSerialSource
+from sarmoco.drivers.source import Source
+from sarmoco.drivers.vita49 import ContextExpectation, VitaDecoder
+from sarmoco.errors import ConfigError
+
+CAN_LOG_SUFFIXES = (".log", ".asc", ".blf", ".trc", ".csv")
+"""File suffixes that name a CAN log (replayed through ``can.LogReader``)."""
+
+
+def vita_decoder(cfg: Config) -> VitaDecoder:
+    """A VITA 49.2 decoder for the configured radar (context packets checked against it)."""
+    r = cfg.radar
+    return VitaDecoder(
+        r.n_samples,
+        r.sample_format,
+        leap_s=cfg.ins.gps_minus_utc_s,
+        expect=ContextExpectation(r.bandwidth_hz, r.carrier_hz, r.sample_rate_hz),
+        link=r.link,
+    )
+
+
+def open_radar(cfg: Config, link: str | None = None) -> RadarSource:
+    """Open ``radar.link`` (or ``link``): ``udp://HOST:PORT``, ``tcp://HOST:PORT`` or a file.
+
+    Raises
+    ------
+    ConfigError
+        If the link is neither a known URL nor an existing file.
+    DriverError
+        If the socket or file cannot be opened.
+    """
+    text = cfg.radar.link if link is None else link
+    decoder = vita_decoder(cfg)
+    url = urlsplit(text)
+    if url.scheme in ("udp", "tcp"):
+        if url.hostname is None or url.port is None:
+            raise ConfigError(f"radar.link: {text!r} lacks HOST:PORT")
+        if url.scheme == "udp":
+            return RadarUdpSource(url.hostname, url.port, decoder)
+        return RadarTcpSource(url.hostname, url.port, decoder)
+    if url.scheme in ("", "file") and Path(url.path).is_file():
+        return RadarFileSource(url.path, decoder)
+    raise ConfigError(
+        f"radar.link: {text!r} is not udp://HOST:PORT, tcp://HOST:PORT or an existing file"
+    )
+
+
+def open_ins(cfg: Config, link: str | None = None) -> Source:
+    """Open ``ins.link`` (or ``link``) with the configured protocol.
+
+    MAVLink: any pymavlink connection string, a ``.tlog`` or a dataflash ``.bin``.
+    SBG: a serial device (a pseudo-terminal in simulation) or a file of logged bytes.
+    SBG CAN: ``INTERFACE:CHANNEL`` (``socketcan:can0``, ``slcan:/dev/ttyACM0``,
+    ``socketcand:HOST:PORT:CHANNEL``, ``virtual:NAME``) or a CAN log file.
+
+    Raises
+    ------
+    ConfigError
+        If the link does not fit the protocol.
+    DriverError
+        If it cannot be opened.
+    """
+    ins = cfg.ins
+    text = ins.link if link is None else link
+    leap = ins.gps_minus_utc_s
+    if ins.protocol == "mavlink":
+        key = bytes.fromhex(ins.signing_key_hex) if ins.signing_key_hex else None
+        return open_mavlink(
+            text,
+            leap_s=leap,
+            signing_key=key,
+            baudrate=ins.baudrate,
+            rates_hz=_mavlink_rates(ins.rate_hz),
+        )
+    if ins.protocol == "sbg":
+        if text.startswith("/dev/"):
+            return SbgSerialSource(text, ins.baudrate, leap)
+        return SbgFileSource(text, leap)
+    if text.endswith(CAN_LOG_SUFFIXES) and Path(text).is_file():
+        return CanLogSource(text, leap)
+    interface, _, channel = text.partition(":")
+    if not channel:
+        raise ConfigError(f"ins.link: {text!r} is not INTERFACE:CHANNEL or a CAN log file")
+    if interface == "socketcand":
+        host, port, chan = [*channel.rsplit(":", 2), "", ""][:3]
+        if not port.isdigit():
+            raise ConfigError(f"ins.link: {text!r} is not socketcand:HOST:PORT:CHANNEL")
+        return CanSource.open("socketcand", chan or "can0", leap, host=host, port=int(port))
+    return CanSource.open(interface, channel, leap)
+
+
+def _mavlink_rates(rate_hz: float) -> dict[str, float]:
+    """Messages the daemon asks the autopilot for, at the configured INS rate."""
+    return {
+        "LOCAL_POSITION_NED": rate_hz,
+        "ATTITUDE_QUATERNION": rate_hz,
+        "SYSTEM_TIME": 1.0,
+    }

@@ -1,0 +1,298 @@
+"""The daemon's data path: readers → echo ring / nav buffer → aligner → focuser → recorder.
+
+Readers (threads in a live run, a loop in a replay) call :meth:`Pipeline.read_radar`
+and :meth:`Pipeline.add_nav`; the processing loop calls :meth:`Pipeline.process`
+with the current GPS time, and :meth:`Pipeline.finish` at the end. Only the
+processing loop touches the focuser and the recorder, so neither needs locks;
+the ring and the nav buffer are the thread-safe hand-over points, and both
+drop (with a counter) rather than block a reader.
+
+The "current time" of the aligner is the radar's own clock: the newest pulse
+time stamp plus the host's monotonic time elapsed since it arrived (live), or
+the newest pulse time alone (replay, a virtual clock). Pulses therefore wait
+for the INS by radar time, whatever the epoch of the radar and however the
+host clock is set.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import queue
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from sarmoco.daemon.aligner import AlignedBlock, Aligner
+from sarmoco.daemon.config import Config
+from sarmoco.daemon.echoring import EchoRing, SampleFormat
+from sarmoco.daemon.flags import NAV_UNUSABLE, PulseFlag
+from sarmoco.daemon.focuser import Focuser, FocusOutput
+from sarmoco.daemon.navbuffer import NavBuffer, PushResult
+from sarmoco.daemon.recorder import NAV_KIND_ATTITUDE, NAV_KIND_VELOCITY, Recorder
+from sarmoco.daemon.status import Counters
+from sarmoco.drivers.radar import RadarSource
+from sarmoco.drivers.samples import AttitudeSample, Sample, VelocitySample
+from sarmoco.processing.metrics import image_contrast, image_entropy
+
+log = logging.getLogger(__name__)
+
+RING_SECONDS = 4.0
+"""Echo ring capacity in seconds of pulses at the nominal PRF."""
+
+
+def ring_format(cfg: Config) -> SampleFormat:
+    """How echoes are held and recorded: int16 I/Q as on the wire, or complex64 for float32."""
+    return "int16" if cfg.radar.sample_format == "int16" else "complex64"
+
+
+@dataclass
+class RunSummary:
+    """Totals of a run, for the report and the store's ``metrics`` attribute."""
+
+    pulses_received: int = 0
+    pulses_processed: int = 0
+    pulses_nav_flagged: int = 0
+    nav_samples: int = 0
+    tiles: int = 0
+    tile_metrics: list[dict[str, float]] = field(default_factory=list)
+
+    def as_dict(self) -> dict[str, Any]:
+        """JSON-able form."""
+        return {
+            "pulses_received": self.pulses_received,
+            "pulses_processed": self.pulses_processed,
+            "pulses_nav_flagged": self.pulses_nav_flagged,
+            "nav_samples": self.nav_samples,
+            "tiles": self.tiles,
+            "tile_metrics": self.tile_metrics,
+        }
+
+
+class Pipeline:
+    """One run's buffers, alignment, focusing and recording.
+
+    Parameters
+    ----------
+    cfg : Config
+        Daemon configuration.
+    recorder : Recorder
+        The run's store (written from the processing loop only).
+    counters : Counters
+        Status counters (updated here, served by the status endpoint).
+    """
+
+    def __init__(self, cfg: Config, recorder: Recorder, counters: Counters) -> None:
+        self.cfg = cfg
+        self.recorder = recorder
+        self.counters = counters
+        capacity = max(1024, math.ceil(RING_SECONDS * cfg.radar.prf_hz))
+        self.ring = EchoRing(capacity, cfg.radar.n_samples, ring_format(cfg))
+        self.nav = NavBuffer()
+        self.aligner = Aligner(
+            self.ring,
+            self.nav,
+            max_gap_ns=round(cfg.ins.max_gap_s * 1e9),
+            latency_budget_ns=round(cfg.ins.latency_budget_s * 1e9),
+            lever_arm_body_m=cfg.ins.lever_arm_m,
+            max_block=cfg.imaging.block_pulses,
+        )
+        self.focuser: Focuser | None = None
+        self.summary = RunSummary()
+        self._nav_rows: queue.SimpleQueue[tuple[Sample, int | None, PushResult]] = (
+            queue.SimpleQueue()
+        )
+        self._id_lock = threading.Lock()
+        self._next_pulse_id = 0
+        self._latest_pulse_ns: int | None = None
+        self._latest_pulse_mono_ns = 0
+        self._pending: list[AlignedBlock] = []
+        self._pending_n = 0
+        fmt = ring_format(cfg)
+        self._scratch = np.empty(
+            (cfg.radar.n_samples, 2) if fmt == "int16" else (cfg.radar.n_samples,),
+            np.int16 if fmt == "int16" else np.complex64,
+        )
+        """Where a pulse that finds the ring full is decoded, then dropped."""
+
+    # -- readers --------------------------------------------------------------------------
+
+    def read_radar(self, source: RadarSource, timeout_s: float) -> int:
+        """Decode the pulses ``source`` has within ``timeout_s`` into the ring; returns the count.
+
+        When the ring is full the pulse is read into scratch space and dropped (counted by
+        the ring), so the socket is always drained.
+        """
+        n = 0
+        while True:
+            slot = self.ring.reserve()
+            row = slot.samples if slot is not None else self._scratch
+            packets = source.read_into(row[None, ...], timeout_s if n == 0 else 0.0)
+            if not packets:
+                if slot is not None:
+                    self.ring.abort(slot)
+                return n
+            pkt = packets[0]
+            n += 1
+            if slot is None:
+                continue
+            with self._id_lock:
+                pid = self._next_pulse_id
+                self._next_pulse_id += 1
+                self._latest_pulse_ns = pkt.t_gps_ns
+                self._latest_pulse_mono_ns = time.monotonic_ns()
+            self.ring.commit(slot, pkt.t_gps_ns, pid, pkt.stream_id, PulseFlag.from_packet(pkt))
+
+    def add_nav(self, samples: list[Sample], rx_ns: int | None) -> None:
+        """Offer INS samples to the nav buffer and queue them for the recorder."""
+        for s in samples:
+            if isinstance(s, VelocitySample | AttitudeSample):
+                result = self.nav.push_sample(s, rx_ns)
+                self._nav_rows.put((s, rx_ns, result))
+
+    # -- processing loop --------------------------------------------------------------------
+
+    def now_ns(self, live: bool) -> int | None:
+        """Radar-clock "now" (see the module doc); None before the first pulse."""
+        with self._id_lock:
+            if self._latest_pulse_ns is None:
+                return None
+            elapsed = time.monotonic_ns() - self._latest_pulse_mono_ns if live else 0
+            return self._latest_pulse_ns + elapsed
+
+    def process(self, now_ns: int | None) -> int:
+        """Record queued INS samples, release aligned pulses, focus and record them.
+
+        Returns the number of pulses released by the aligner.
+        """
+        self._record_nav()
+        if now_ns is None:
+            return 0
+        released = 0
+        while (block := self.aligner.poll(now_ns)) is not None:
+            released += len(block)
+            self._accept(block)
+        self._update_counters()
+        return released
+
+    def finish(self) -> RunSummary:
+        """Release every remaining pulse, close all tiles, write the run metrics."""
+        self._record_nav()
+        block = self.aligner.flush()
+        if block is not None:
+            self._accept(block)
+        self._focus_pending()
+        if self.focuser is not None:
+            self._record(self.focuser.finish())
+        self.recorder.set_metrics(self.summary.as_dict())
+        self._update_counters()
+        return self.summary
+
+    def _accept(self, block: AlignedBlock) -> None:
+        e = block.echoes
+        self.recorder.append_pulses(e.t_ns, e.pulse_id, e.channel, e.flags, e.samples)
+        self.summary.pulses_received += len(block)
+        self._pending.append(block)
+        self._pending_n += len(block)
+        if self._pending_n >= self.cfg.imaging.block_pulses:
+            self._focus_pending()
+
+    def _focus_pending(self) -> None:
+        if not self._pending:
+            return
+        blocks, self._pending, self._pending_n = self._pending, [], 0
+        t = np.concatenate([b.echoes.t_ns for b in blocks])
+        ids = np.concatenate([b.echoes.pulse_id for b in blocks])
+        flags = np.concatenate([b.echoes.flags for b in blocks])
+        raw = np.concatenate([b.echoes.complex_samples() for b in blocks])
+        pos = np.concatenate([b.nav.pos_ned for b in blocks])
+        vel = np.concatenate([b.nav.vel_ned for b in blocks])
+        quat = np.concatenate([b.nav.quat for b in blocks])
+        usable = (flags & NAV_UNUSABLE) == 0
+        self.summary.pulses_nav_flagged += int(np.count_nonzero(~usable))
+        if not usable.any():
+            return
+        t, ids, raw, pos, vel, quat = (a[usable] for a in (t, ids, raw, pos, vel, quat))
+        if self.focuser is None:
+            self.focuser = Focuser(self.cfg, int(t[0]), vel.mean(axis=0))
+        out = self.focuser.push(raw, t, vel, quat)
+        assert out.motion is not None
+        m = out.motion
+        self.recorder.append_motion(ids, t, pos, vel, quat, m.d_los_m, m.phase_rad, m.range_shift_m)
+        self.summary.pulses_processed += t.shape[0]
+        self._record(out)
+
+    def _record(self, out: FocusOutput) -> None:
+        focuser = self.focuser
+        assert focuser is not None
+        if focuser.autofocus is not None:
+            subs = focuser.autofocus.report.subapertures[self._autofocus_rows() :]
+            if subs:
+                self.recorder.append_rows(
+                    "autofocus",
+                    {
+                        "t_center_s": [s.t_center_s for s in subs],
+                        "a_y_mps2": [s.accel_yz_mps2[0] for s in subs],
+                        "a_z_mps2": [s.accel_yz_mps2[1] for s in subs],
+                        "accel_residual_hz_per_s": [s.accel_residual_hz_per_s for s in subs],
+                        "kappa": np.array([s.kappa for s in subs], dtype=np.float64),
+                        "kappa_residual_hz_per_s": [s.kappa_residual_hz_per_s for s in subs],
+                    },
+                    row_dim="subaperture",
+                )
+        for tile in out.tiles:
+            metrics = {
+                "entropy": image_entropy(tile.data),
+                "contrast": image_contrast(tile.data),
+                "pulses": float(tile.n_pulses),
+                "index": float(tile.index),
+            }
+            self.recorder.add_image(tile.image(), tile.t0_ns, tile.t1_ns, metrics)
+            self.summary.tiles += 1
+            self.summary.tile_metrics.append(metrics)
+
+    def _autofocus_rows(self) -> int:
+        table = self.recorder.tables.get("autofocus")
+        return 0 if table is None else table.committed
+
+    def _record_nav(self) -> None:
+        rows: list[tuple[Sample, int | None, PushResult]] = []
+        while True:
+            try:
+                rows.append(self._nav_rows.get_nowait())
+            except queue.Empty:
+                break
+        if not rows:
+            return
+        nan3 = (math.nan,) * 3
+        t, kind, vel, pos, quat, result, rx = [], [], [], [], [], [], []
+        for s, rx_ns, res in rows:
+            t.append(s.t_gps_ns)
+            rx.append(-1 if rx_ns is None else rx_ns)
+            result.append(int(res))
+            if isinstance(s, VelocitySample):
+                kind.append(NAV_KIND_VELOCITY)
+                vel.append(s.vel_ned_mps)
+                pos.append(s.pos_ned_m if s.pos_ned_m is not None else nan3)
+                quat.append((math.nan,) * 4)
+            else:
+                assert isinstance(s, AttitudeSample)
+                kind.append(NAV_KIND_ATTITUDE)
+                vel.append(nan3)
+                pos.append(nan3)
+                quat.append(s.quat_wxyz)
+        self.recorder.append_nav(t, kind, vel, pos, quat, result, rx)
+        self.summary.nav_samples += len(rows)
+
+    def _update_counters(self) -> None:
+        c = self.counters
+        c.set("pulses_received_total", self.summary.pulses_received)
+        c.set("pulses_processed_total", self.summary.pulses_processed)
+        c.set("pulses_nav_flagged_total", self.summary.pulses_nav_flagged)
+        c.set("pulses_dropped_ring_total", self.ring.dropped)
+        c.set("echo_backlog_pulses", len(self.ring))
+        c.set("nav_samples_total", self.summary.nav_samples)
+        c.set("tiles_total", self.summary.tiles)

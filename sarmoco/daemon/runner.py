@@ -1,0 +1,275 @@
+"""``sarmoco run`` (the live daemon) and ``sarmoco replay`` (ground replay, virtual clock)."""
+
+from __future__ import annotations
+
+import datetime
+import logging
+import signal
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from types import FrameType
+
+import numpy as np
+
+from sarmoco.daemon.config import Config, config_to_dict
+from sarmoco.daemon.links import open_ins, open_radar
+from sarmoco.daemon.navbuffer import PushResult
+from sarmoco.daemon.pipeline import Pipeline, RunSummary, ring_format
+from sarmoco.daemon.recorder import NAV_KIND_ATTITUDE, NAV_KIND_VELOCITY, Recorder
+from sarmoco.daemon.sdnotify import Notifier
+from sarmoco.daemon.status import Counters, Health, StatusServer
+from sarmoco.daemon.store import open_store
+from sarmoco.drivers.radar import RadarSource
+from sarmoco.drivers.samples import AttitudeSample, Validity, VelocitySample
+from sarmoco.drivers.source import Source
+from sarmoco.errors import SarmocoError
+
+log = logging.getLogger(__name__)
+
+POLL_S = 0.05
+"""Reader poll timeout and idle sleep of the processing loop, s."""
+
+INS_STALE_S = 2.0
+"""The INS counts as unhealthy when its newest sample is older than this (host clock), s."""
+
+
+def new_store_path(directory: str | Path, kind: str) -> Path:
+    """A fresh store name ``<directory>/<kind>-<UTC time>.zarr``."""
+    stamp = datetime.datetime.now(datetime.UTC).strftime("%Y%m%dT%H%M%S.%fZ")
+    return Path(directory) / f"{kind}-{stamp}.zarr"
+
+
+def open_recorder(cfg: Config, path: Path) -> Recorder:
+    """The run's recorder, configured from ``recorder.*``."""
+    return Recorder(
+        path,
+        cfg.radar.n_samples,
+        ring_format(cfg),
+        config=config_to_dict(cfg),
+        raw_echoes=cfg.recorder.raw_echoes,
+        chunk_pulses=cfg.recorder.chunk_pulses,
+        fsync_interval_s=cfg.recorder.fsync_interval_s,
+    )
+
+
+@dataclass
+class _LiveState:
+    stop: threading.Event
+    last_nav_mono: float = 0.0
+    last_pulse_mono: float = 0.0
+    first_pulse_mono: float = 0.0
+    reader_error: str = ""
+
+
+def _radar_reader(pipe: Pipeline, radar: RadarSource, st: _LiveState) -> None:
+    try:
+        while not st.stop.is_set() and not radar.eof:
+            if pipe.read_radar(radar, POLL_S):
+                st.last_pulse_mono = time.monotonic()
+                st.first_pulse_mono = st.first_pulse_mono or st.last_pulse_mono
+    except SarmocoError as exc:  # the link itself failed (socket closed, port gone)
+        st.reader_error = f"radar: {exc}"
+        log.error("radar reader stopped", extra={"error": str(exc)})
+
+
+def _ins_reader(pipe: Pipeline, ins: Source, st: _LiveState) -> None:
+    try:
+        while not st.stop.is_set() and not ins.eof:
+            samples = ins.poll(POLL_S)
+            if samples:
+                st.last_nav_mono = time.monotonic()
+                pipe.add_nav(samples, time.monotonic_ns())
+    except SarmocoError as exc:
+        st.reader_error = f"ins: {exc}"
+        log.error("INS reader stopped", extra={"error": str(exc)})
+
+
+def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None = None) -> int:
+    """Run the daemon until SIGTERM/SIGINT (or ``idle_exit_s`` without pulses after the first).
+
+    Parameters
+    ----------
+    cfg : Config
+        The configuration.
+    store : Path, optional
+        Store to create (default: a new name in ``recorder.directory``).
+    idle_exit_s : float, optional
+        Stop cleanly once no radar pulse has arrived for this long (simulation, tests).
+
+    Returns
+    -------
+    int
+        Exit status: 0 after a clean stop, 1 if a link failed.
+    """
+    notifier = Notifier()
+    counters, health = Counters(), Health()
+    st = _LiveState(threading.Event())
+
+    def on_term(signum: int, frame: FrameType | None) -> None:
+        st.stop.set()
+
+    signal.signal(signal.SIGTERM, on_term)
+    signal.signal(signal.SIGINT, on_term)
+    status = (
+        StatusServer(counters, health, port=cfg.status.http_port).start()
+        if cfg.status.http_port
+        else None
+    )
+    path = store or new_store_path(cfg.recorder.directory, "run")
+    recorder = open_recorder(cfg, path)
+    radar = open_radar(cfg)
+    ins = open_ins(cfg)
+    pipe = Pipeline(cfg, recorder, counters)
+    counters.add_source("radar", radar.decoder.counters.snapshot)
+    counters.add_source("ins", ins.counters.snapshot)
+    threads = [
+        threading.Thread(target=_radar_reader, args=(pipe, radar, st), name="radar", daemon=True),
+        threading.Thread(target=_ins_reader, args=(pipe, ins, st), name="ins", daemon=True),
+    ]
+    for t in threads:
+        t.start()
+    log.info("sarmoco running", extra={"store": str(path), "radar": cfg.radar.link,
+                                        "ins": cfg.ins.link})  # fmt: skip
+    print(f'{{"store": "{path}", "status_port": {status.port if status else 0}}}', flush=True)
+    notifier.ready(f"recording to {path}")
+    last_status = 0.0
+    try:
+        while not st.stop.is_set():
+            released = pipe.process(pipe.now_ns(live=True))
+            now = time.monotonic()
+            nav_age = now - st.last_nav_mono if st.last_nav_mono else float("inf")
+            ok = all(t.is_alive() for t in threads) and not st.reader_error
+            health.set("readers", ok, st.reader_error)
+            health.set("ins", nav_age < INS_STALE_S, f"newest sample {nav_age:.2f} s old")
+            if ok:
+                notifier.watchdog()
+            if now - last_status >= 1.0:
+                last_status = now
+                counters.set("ins_age_seconds", nav_age)
+                notifier.status(
+                    f"{pipe.summary.pulses_received} pulses, INS age {nav_age:.2f} s, "
+                    f"backlog {len(pipe.ring)}"
+                )
+            if not ok and st.reader_error:
+                break
+            if idle_exit_s is not None and st.first_pulse_mono:
+                if now - st.last_pulse_mono > idle_exit_s:
+                    break
+            if released == 0:
+                time.sleep(POLL_S)
+    finally:
+        notifier.stopping()
+        st.stop.set()
+        for t in threads:
+            t.join(timeout=5.0)
+        summary = pipe.finish()
+        recorder.close()
+        radar.close()
+        ins.close()
+        if status is not None:
+            status.stop()
+        notifier.close()
+        log.info("sarmoco stopped", extra=summary.as_dict() | {"store": str(path)})
+    return 1 if st.reader_error else 0
+
+
+def replay_files(
+    cfg: Config, radar_file: Path, nav_file: Path, out: Path, progress: bool = True
+) -> RunSummary:
+    """Replay a ``.vrt`` radar file and an INS log through the pipeline on a virtual clock.
+
+    INS samples are read ahead of the radar until they cover the newest pulse plus the
+    longest bridged gap, so the aligner sees what it would have seen live, as fast as the
+    CPU allows. The aligner's clock is the newest pulse time.
+    """
+    radar = open_radar(cfg, str(radar_file))
+    ins = open_ins(cfg, str(nav_file))
+    total = max(radar_file.stat().st_size, 1)
+    lead_ns = round(cfg.ins.max_gap_s * 1e9)
+    with open_recorder(cfg, out) as recorder:
+        pipe = Pipeline(cfg, recorder, Counters())
+        newest_nav = -(2**62)
+        while not radar.eof:
+            pipe.read_radar(radar, 0.0)
+            now = pipe.now_ns(live=False)
+            while not ins.eof and (now is None or newest_nav < now + lead_ns):
+                samples = ins.poll(0.0)
+                pipe.add_nav(samples, None)
+                newest_nav = max([newest_nav, *(s.t_gps_ns for s in samples)])
+            pipe.process(now)
+            if progress:
+                _progress(radar.decoder.counters.bytes / total)
+        summary = pipe.finish()
+    radar.close()
+    ins.close()
+    if progress:
+        _progress(1.0, end=True)
+    return summary
+
+
+def replay_store(cfg: Config, recording: Path, out: Path, progress: bool = True) -> RunSummary:
+    """Replay a recorded store (raw echoes and INS samples as received) through the pipeline.
+
+    The INS samples the live run accepted are offered again in time order, ahead of the
+    pulses by the longest bridged gap; the pulses go through the same ring, aligner,
+    focuser and recorder on a virtual clock.
+    """
+    src = open_store(recording)
+    n_pulses = src.committed("pulses")
+    nav = src.read("nav", ["t_ns", "kind", "vel_ned", "pos_ned", "quat", "result"])
+    keep = nav["result"] == int(PushResult.ACCEPTED)
+    nav = {k: v[keep] for k, v in nav.items()}
+    order = np.argsort(nav["t_ns"], kind="stable")
+    lead_ns = round(cfg.ins.max_gap_s * 1e9)
+    k_nav = 0
+    step = cfg.imaging.block_pulses
+    with open_recorder(cfg, out) as recorder:
+        pipe = Pipeline(cfg, recorder, Counters())
+        for start in range(0, n_pulses, step):
+            p = src.read("pulses", ["t_ns", "pulse_id", "channel", "flags", "echo"],
+                         start, min(start + step, n_pulses))  # fmt: skip
+            for i in range(p["t_ns"].shape[0]):
+                slot = pipe.ring.reserve()
+                if slot is None:
+                    pipe.process(int(p["t_ns"][i - 1]))
+                    slot = pipe.ring.reserve()
+                assert slot is not None
+                slot.samples[...] = p["echo"][i]
+                pipe.ring.commit(slot, int(p["t_ns"][i]), int(p["pulse_id"][i]),
+                                 int(p["channel"][i]))  # fmt: skip
+            now = int(p["t_ns"][-1])
+            stop = int(np.searchsorted(nav["t_ns"][order], now + lead_ns, side="right"))
+            pipe.add_nav([_nav_sample(nav, int(j)) for j in order[k_nav:stop]], None)
+            k_nav = stop
+            pipe.process(now)
+            if progress:
+                _progress(min(start + step, n_pulses) / max(n_pulses, 1))
+        summary = pipe.finish()
+    if progress:
+        _progress(1.0, end=True)
+    return summary
+
+
+def _nav_sample(nav: dict[str, np.ndarray], j: int) -> VelocitySample | AttitudeSample:
+    t = int(nav["t_ns"][j])
+    if int(nav["kind"][j]) == NAV_KIND_ATTITUDE:
+        q = nav["quat"][j]
+        return AttitudeSample(t, (float(q[0]), float(q[1]), float(q[2]), float(q[3])),
+                              Validity.ATTITUDE | Validity.HEADING, "store.nav", t)  # fmt: skip
+    assert int(nav["kind"][j]) == NAV_KIND_VELOCITY
+    v, p = nav["vel_ned"][j], nav["pos_ned"][j]
+    pos = None if np.isnan(p).any() else (float(p[0]), float(p[1]), float(p[2]))
+    return VelocitySample(t, (float(v[0]), float(v[1]), float(v[2])), Validity.VELOCITY,
+                          "store.nav", t, pos)  # fmt: skip
+
+
+def _progress(fraction: float, end: bool = False) -> None:
+    width = 40
+    done = round(width * min(max(fraction, 0.0), 1.0))
+    sys.stderr.write(f"\rreplay [{'#' * done}{'.' * (width - done)}] {100 * fraction:5.1f} %")
+    if end:
+        sys.stderr.write("\n")
+    sys.stderr.flush()

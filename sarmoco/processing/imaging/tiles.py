@@ -1,0 +1,152 @@
+"""Streaming backprojection onto ground tiles laid along a straight reference track.
+
+The imaging frame is that of METHODS §1 (x along the reference track, y toward
+the illuminated side, z down; origin at the reference APC at its start time).
+Tile ``k`` covers ``k L <= x < (k + 1) L`` and the ground-range band
+``y_c ± W/2`` on the flat ground ``z = H``. A pulse at along-track position
+``x_p`` contributes to every tile that meets its beam footprint
+``|x - x_p| <= R_far tan(θ/2)``; a tile is finished, and handed out, once the
+platform is a half footprint past its end, so memory stays bounded however
+long the run.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from sarmoco.errors import ProcessingError
+from sarmoco.processing.imaging.backprojection import backproject
+from sarmoco.processing.imaging.grid import PlaneGrid
+from sarmoco.processing.types import ComplexArray, FloatArray, Image, IntArray
+
+
+@dataclass(frozen=True)
+class TileLayout:
+    """Where the tiles lie.
+
+    Parameters
+    ----------
+    height_m : float
+        Height H of the reference track above the flat ground, m.
+    ground_range_m : float
+        Ground-range (imaging-frame y) of the tile centres, m.
+    swath_m : float
+        Ground-range width W of a tile, m.
+    tile_length_m : float
+        Along-track length L of a tile, m.
+    pixel_m : float
+        Pixel spacing on both axes, m.
+    beamwidth_rad : float
+        Azimuth beamwidth θ that bounds which pulses see a tile, rad.
+    """
+
+    height_m: float
+    ground_range_m: float
+    swath_m: float
+    tile_length_m: float
+    pixel_m: float
+    beamwidth_rad: float
+
+    def __post_init__(self) -> None:
+        for name in ("swath_m", "tile_length_m", "pixel_m", "beamwidth_rad"):
+            if not getattr(self, name) > 0:
+                raise ProcessingError(f"TileLayout.{name}: {getattr(self, name)!r} is not > 0")
+
+    @property
+    def half_footprint_m(self) -> float:
+        """Half the along-track beam footprint at the far edge of the swath, m."""
+        far = math.hypot(self.height_m, self.ground_range_m + self.swath_m / 2.0)
+        return far * math.tan(self.beamwidth_rad / 2.0)
+
+    def grid(self, k: int) -> PlaneGrid:
+        """Pixel grid of tile ``k`` in the imaging frame (axis 0 = x, axis 1 = y)."""
+        n0 = max(2, round(self.tile_length_m / self.pixel_m))
+        n1 = max(2, round(self.swath_m / self.pixel_m))
+        ax0 = (k * self.tile_length_m + (np.arange(n0) + 0.5) * self.pixel_m).astype(np.float64)
+        ax1 = (self.ground_range_m + (np.arange(n1) - n1 / 2.0 + 0.5) * self.pixel_m).astype(
+            np.float64
+        )
+        return PlaneGrid(ax0, ax1, (0.0, 0.0, self.height_m), 0.0, "ground")
+
+
+@dataclass
+class Tile:
+    """A tile being accumulated: its index, grid, pixels and time span (GPS ns)."""
+
+    index: int
+    grid: PlaneGrid
+    data: ComplexArray
+    t0_ns: int
+    t1_ns: int
+    n_pulses: int = 0
+
+    def image(self) -> Image:
+        """The tile as an :class:`Image` (frame ``ground``, axes in imaging-frame metres)."""
+        return Image(self.data, self.grid.axis0_m, self.grid.axis1_m, self.grid.frame)
+
+
+class TileImager:
+    """Backproject blocks of pulses onto the tiles their beam covers.
+
+    Parameters
+    ----------
+    layout : TileLayout
+        Tile geometry.
+    range_axis_m : ndarray, shape (S,)
+        Slant range of each range-compressed bin, m (uniform).
+    wavelength_m : float
+        Carrier wavelength, m.
+    """
+
+    def __init__(self, layout: TileLayout, range_axis_m: FloatArray, wavelength_m: float) -> None:
+        self.layout = layout
+        self.range_axis_m = np.asarray(range_axis_m, dtype=np.float64)
+        self.wavelength_m = float(wavelength_m)
+        self._open: dict[int, Tile] = {}
+        self._first_open = -(2**62)
+        """Tiles below this index were handed out and are never reopened."""
+
+    def add(self, rc: ComplexArray, t_ns: IntArray, apc_m: FloatArray) -> list[Tile]:
+        """Backproject a block and return the tiles it finished.
+
+        Parameters
+        ----------
+        rc : ndarray of complex, shape (P, S)
+            Motion-compensated, autofocused range-compressed pulses.
+        t_ns : ndarray of int64, shape (P,)
+            Pulse times, GPS ns, increasing across calls.
+        apc_m : ndarray, shape (P, 3)
+            APC of each pulse in the imaging frame (the reference track), m.
+        """
+        if rc.shape[0] == 0:
+            return []
+        x = apc_m[:, 0]
+        half = self.layout.half_footprint_m
+        length = self.layout.tile_length_m
+        first = max(math.floor((float(x.min()) - half) / length), self._first_open)
+        for k in range(first, math.floor((float(x.max()) + half) / length) + 1):
+            if k not in self._open:
+                grid = self.layout.grid(k)
+                shape = (grid.axis0_m.size, grid.axis1_m.size)
+                self._open[k] = Tile(k, grid, np.zeros(shape, np.complex64), int(t_ns[0]), 0)
+        for k, tile in self._open.items():
+            sel = np.flatnonzero((x >= k * length - half) & (x <= (k + 1) * length + half))
+            if sel.size == 0:
+                continue
+            img = backproject(rc[sel], self.range_axis_m, apc_m[sel], self.wavelength_m, tile.grid)
+            tile.data += img.data
+            tile.n_pulses += sel.size
+            tile.t1_ns = int(t_ns[sel[-1]])
+        return self._pop_below(math.floor((float(x[-1]) - half) / length))
+
+    def close(self) -> list[Tile]:
+        """Hand out every tile still open (end of the run)."""
+        return self._pop_below(2**62)
+
+    def _pop_below(self, index: int) -> list[Tile]:
+        keys = sorted(k for k in self._open if k < index)
+        self._first_open = max(self._first_open, index)
+        return [self._open.pop(k) for k in keys]
