@@ -255,18 +255,14 @@ class SbgCanEmitter(Emitter):
         return self.channel_open
 
     def connect_hint(self) -> dict[str, Any]:
-        hint: dict[str, Any] = {"framing": self.framing}
+        where = self.link.describe()
+        bus: dict[str, Any] | str | None = where.get("path")
         if self.framing == "slcan":
-            hint["bus"] = {"interface": "slcan", "channel": self.link.describe()["path"]}
+            bus = {"interface": "slcan", "channel": where["path"]}
         elif self.framing == "socketcand":
-            host, port = str(self.link.describe()["listen"]).split(":")
-            hint["bus"] = {
-                "interface": "socketcand",
-                "channel": CHANNEL,
-                "host": host,
-                "port": int(port),
-            }
-        return hint
+            host, port = str(where["listen"]).split(":")
+            bus = {"interface": "socketcand", "channel": CHANNEL, "host": host, "port": int(port)}
+        return {"framing": self.framing, "connect": bus}
 
     def stats(self) -> dict[str, Any]:
         return {**super().stats(), "frames": self.frames_sent, "frames_unsent": self.frames_unsent}

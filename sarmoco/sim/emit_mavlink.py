@@ -255,7 +255,12 @@ class MavlinkEmitter(Emitter):
         return self.tlog or (self.link.peer_ready() and self.peer_heard)
 
     def connect_hint(self) -> dict[str, Any]:
-        return {"system_id": SYSTEM_ID, "component_id": COMPONENT_ID}
+        where = self.link.describe()
+        connect = {
+            "udp": f"udpin:{where.get('to')}",  # the daemon listens where we send
+            "tcp": f"tcp:{where.get('listen')}",
+        }.get(where["link"], where.get("path"))
+        return {"connect": connect, "system_id": SYSTEM_ID, "component_id": COMPONENT_ID}
 
     def stats(self) -> dict[str, Any]:
         return {

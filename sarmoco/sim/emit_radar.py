@@ -141,7 +141,13 @@ class RadarEmitter(Emitter):
         self.send(packet, t + self.window_ns)
 
     def connect_hint(self) -> dict[str, Any]:
+        where = self.link.describe()
+        connect = {
+            "udp": f"udp://{where.get('to')}",  # the daemon binds this port
+            "tcp": f"tcp://{where.get('listen')}",  # the daemon connects here
+        }.get(where["link"], where.get("path"))
         return {
+            "connect": connect,
             "stream_id": self.stream_id,
             "payload": self.payload,
             "n_samples": int(self.echo.shape[1]),

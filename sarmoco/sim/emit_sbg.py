@@ -158,7 +158,10 @@ class SbgEmitter(Emitter):
         self._send_msg(msg, "EVENT_A", t_pulse_ns + self.feed.latency_ns)
 
     def connect_hint(self) -> dict[str, Any]:
-        return {"geodetic_origin": list(GEODETIC_ORIGIN)}
+        return {
+            "connect": self.link.describe().get("path"),
+            "geodetic_origin": list(GEODETIC_ORIGIN),
+        }
 
     def stats(self) -> dict[str, Any]:
         return {**super().stats(), "messages": dict(self.sent)}

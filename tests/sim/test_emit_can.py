@@ -95,7 +95,7 @@ def test_slcan_adapter_on_a_pty() -> None:
 def test_socketcand_on_tcp() -> None:
     link = TcpServerLink("127.0.0.1", 0)
     em = make(link, "socketcand")
-    bus = em.describe()["bus"]
+    bus = em.describe()["connect"]
     samples, src = live(em, lambda: CanSource.open(**bus))
     check(em, samples)
     assert src.counters.parse_errors == 0

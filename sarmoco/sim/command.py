@@ -1,0 +1,275 @@
+"""``sarmoco sim``: simulated hardware, as files or as live links on loopback.
+
+Files::
+
+    sarmoco sim --preset ku-vehicle --scale 0.1 --out DIR
+
+Live links (the simulator waits for the daemon on every link, then plays)::
+
+    sarmoco sim --preset ku-vehicle --scale 0.1 --serve \\
+        --radar udp://127.0.0.1:40000 --ins mavlink:udpout:127.0.0.1:14550
+
+``--radar``: ``udp://127.0.0.1:PORT`` (datagrams sent to the daemon's port) or
+``tcp://127.0.0.1:PORT`` (we listen; port 0 picks one). ``--ins`` (repeatable):
+``mavlink:udpout:127.0.0.1:PORT`` (sent to the daemon's ``udpin:`` port),
+``mavlink:tcp:127.0.0.1:PORT`` (we listen), ``mavlink:pty``, ``sbg:pty``,
+``sbg-can:slcan-pty`` (a simulated slcan adapter), ``sbg-can:socketcand:PORT``
+(a socketcand server on 127.0.0.1). With ``--out`` the INS recordings are chosen
+by protocol name (``--ins mavlink --ins sbg``; default all three).
+
+With ``--serve`` one JSON line goes to stdout as soon as every link is open::
+
+    {"event": "listening", "pid": ..., "radar": {...}, "ins": [{...}], ...}
+
+each link with ``connect`` (what the daemon opens: a URL, a pty path, or the
+python-can bus arguments); at the end a second line ``{"event": "done", ...}``.
+With ``--out`` a single line ``{"event": "written", "dir": ..., "files": [...]}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import signal
+import sys
+from pathlib import Path
+from types import FrameType
+from typing import Any
+
+from sarmoco.drivers.clock import GPS_LEAP_SECONDS_DEFAULT
+from sarmoco.errors import ConfigError
+from sarmoco.sim.emit_can import SbgCanEmitter
+from sarmoco.sim.emit_mavlink import MavlinkEmitter
+from sarmoco.sim.emit_radar import RadarEmitter
+from sarmoco.sim.emit_sbg import SbgEmitter
+from sarmoco.sim.emitter import Emitter, WireTime
+from sarmoco.sim.faults import Faults, parse_faults
+from sarmoco.sim.ins import GRADES
+from sarmoco.sim.insfeed import InsFeed
+from sarmoco.sim.links import Link, PtyLink, TcpServerLink, UdpOutLink
+from sarmoco.sim.outfiles import NAV_FILES, TRUTH_FILE, truth_record, write_run, write_truth
+from sarmoco.sim.player import Pacing, play_emitters
+from sarmoco.sim.run import SimRun, simulate
+from sarmoco.sim.scenario import PRESETS, load_preset
+from sarmoco.sim.trajectory import MotionSpec
+
+
+def add_parser(subparsers: Any) -> None:
+    """Add the ``sim`` subcommand to the CLI's subparsers."""
+    p = subparsers.add_parser(
+        "sim",
+        help="simulated radar and INS: write files (--out) or serve live links (--serve)",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("--preset", required=True, choices=PRESETS, help="scenario preset")
+    p.add_argument("--scale", type=float, default=1.0, help="scenario scale in (0, 1] (default 1)")
+    p.add_argument("--seed", type=int, default=0, help="seed of noise, INS errors and faults")
+    p.add_argument("--pulses", type=int, default=None, help="pulses to simulate (default: all)")
+    p.add_argument(
+        "--motion",
+        default="ideal",
+        metavar="KIND[:LOG]",
+        help="ideal | turbulence | flightlog:PATH.tlog (default ideal)",
+    )
+    p.add_argument("--motion-seed", type=int, default=0, help="seed of the turbulence")
+    p.add_argument("--ins-grade", default="tactical", choices=sorted(GRADES))
+    p.add_argument("--ins-rate", type=float, default=200.0, help="INS output rate, Hz")
+    where = p.add_mutually_exclusive_group(required=True)
+    where.add_argument("--out", type=Path, metavar="DIR", help="write files into DIR")
+    where.add_argument("--serve", action="store_true", help="serve live links on loopback")
+    p.add_argument("--radar", metavar="URL", help="udp://127.0.0.1:PORT | tcp://127.0.0.1:PORT")
+    p.add_argument("--ins", action="append", metavar="SPEC", help="INS link (repeatable)")
+    pace = p.add_mutually_exclusive_group()
+    pace.add_argument("--realtime", action="store_true", help="real time (default with --serve)")
+    pace.add_argument("--fast", action="store_true", help="as fast as possible (default --out)")
+    pace.add_argument("--speed", type=float, help="real time sped up by this factor")
+    p.add_argument("--fault", action="append", metavar="SPEC", help="fault (repeatable)")
+    p.add_argument("--payload", default="int16", choices=("int16", "float32"))
+    p.add_argument("--stream-id", type=int, default=0, help="VITA 49 stream ID")
+    p.add_argument("--wait", type=float, default=60.0, help="wait this long for the daemon, s")
+    p.add_argument(
+        "--lead", type=float, default=1.0, help="live: time before the first INS sample, s"
+    )
+    p.add_argument(
+        "--linger", type=float, default=1.0, help="live: keep answering after the end, s"
+    )
+    p.add_argument("--truth", type=Path, help="live: also write the truth record here")
+    p.add_argument("--leap-s", type=int, default=GPS_LEAP_SECONDS_DEFAULT, help="GPS - UTC, s")
+    p.set_defaults(func=run_command)
+
+
+def _motion(text: str, seed: int) -> MotionSpec:
+    kind, _, path = text.partition(":")
+    if kind not in ("ideal", "turbulence", "flightlog"):
+        raise ConfigError(f"--motion {text!r}: kind is not one of ideal, turbulence, flightlog")
+    if kind == "flightlog" and not path:
+        raise ConfigError("--motion flightlog needs a log: flightlog:PATH.tlog")
+    return MotionSpec(kind, seed=seed, log_path=Path(path) if path else None)  # type: ignore[arg-type]
+
+
+def _host_port(text: str, what: str) -> tuple[str, int]:
+    host, sep, port = text.rpartition(":")
+    if not sep or not port.isdigit():
+        raise ConfigError(f"{what} {text!r}: want HOST:PORT")
+    return host, int(port)
+
+
+def radar_link(url: str) -> Link:
+    """The radar link of ``--radar URL``."""
+    scheme, sep, rest = url.partition("://")
+    if sep and scheme == "udp":
+        return UdpOutLink(*_host_port(rest, "--radar"))
+    if sep and scheme == "tcp":
+        return TcpServerLink(*_host_port(rest, "--radar"))
+    raise ConfigError(f"--radar {url!r}: want udp://127.0.0.1:PORT or tcp://127.0.0.1:PORT")
+
+
+def ins_emitter(spec: str, feed: InsFeed, faults: Faults, seed: int, rank: int) -> Emitter:
+    """The INS emitter of one ``--ins SPEC`` (live)."""
+    proto, _, where = spec.partition(":")
+    common: dict[str, Any] = {"faults": faults.ins, "seed": seed, "rank": rank}
+    if proto == "mavlink":
+        kind, _, address = where.partition(":")
+        if kind == "udpout":
+            return MavlinkEmitter(UdpOutLink(*_host_port(address, "--ins")), feed, **common)
+        if kind == "tcp":
+            return MavlinkEmitter(TcpServerLink(*_host_port(address, "--ins")), feed, **common)
+        if kind == "pty":
+            return MavlinkEmitter(PtyLink(), feed, **common)
+    elif proto == "sbg" and where == "pty":
+        return SbgEmitter(PtyLink(), feed, **common)
+    elif proto == "sbg-can":
+        kind, _, port = where.partition(":")
+        if kind == "slcan-pty":
+            return SbgCanEmitter(PtyLink(), feed, "slcan", **common)
+        if kind == "socketcand" and port.isdigit():
+            return SbgCanEmitter(
+                TcpServerLink("127.0.0.1", int(port)), feed, "socketcand", **common
+            )
+    raise ConfigError(
+        f"--ins {spec!r}: want mavlink:udpout:HOST:PORT, mavlink:tcp:HOST:PORT, mavlink:pty, "
+        "sbg:pty, sbg-can:slcan-pty or sbg-can:socketcand:PORT"
+    )
+
+
+def build_run(args: argparse.Namespace, faults: Faults) -> SimRun:
+    """Simulate the scenario the arguments describe."""
+    scn = load_preset(args.preset, scale=args.scale)
+    return simulate(
+        scn,
+        _motion(args.motion, args.motion_seed),
+        args.ins_grade,
+        ins_rate_hz=args.ins_rate,
+        seed=args.seed,
+        n_pulses=args.pulses,
+        ins_clock_offset_s=faults.clock_offset_s,
+        ins_clock_drift_ppm=faults.clock_drift_ppm,
+    )
+
+
+def _print_line(record: dict[str, Any]) -> None:
+    sys.stdout.write(json.dumps(record) + "\n")
+    sys.stdout.flush()
+
+
+def _pacing(args: argparse.Namespace, live: bool) -> Pacing:
+    realtime = args.realtime or args.speed is not None or (live and not args.fast)
+    speed = args.speed or 1.0
+    return Pacing(
+        realtime=realtime,
+        speed=speed,
+        pin_to_host=live and realtime and speed == 1.0,
+        lead_s=args.lead if live else 0.5,
+        leap_s=args.leap_s,
+    )
+
+
+def _write_files(args: argparse.Namespace, run: SimRun, faults: Faults) -> int:
+    nav = args.ins or list(NAV_FILES)
+    truth = write_run(
+        run, faults, args.out, nav=nav, payload=args.payload, stream_id=args.stream_id,
+        seed=args.seed, pacing=_pacing(args, live=False),
+    )  # fmt: skip
+    files = [d.get("path") for d in truth["wire"]["links"].values()]
+    _print_line(
+        {"event": "written", "dir": str(args.out), "files": [*files, str(args.out / TRUTH_FILE)]}
+    )
+    return 0
+
+
+def _serve(args: argparse.Namespace, run: SimRun, faults: Faults) -> int:
+    if not args.radar and not args.ins:
+        raise ConfigError("sim --serve: give --radar and/or --ins")
+    feed = InsFeed.from_run(run, faults)
+    emitters: dict[str, Emitter] = {}
+    try:
+        if args.radar:
+            emitters["radar"] = RadarEmitter(
+                radar_link(args.radar), run.scenario.radar, run.t_ns, run.echo,
+                payload=args.payload, stream_id=args.stream_id, faults=faults.radar,
+                seed=args.seed * 16, rank=0,
+            )  # fmt: skip
+        for k, spec in enumerate(args.ins or [], start=1):
+            emitters[f"ins{k}"] = ins_emitter(spec, feed, faults, args.seed * 16 + k, k)
+        _print_line(
+            {
+                "event": "listening",
+                "pid": os.getpid(),
+                "preset": args.preset,
+                "scale": args.scale,
+                "n_pulses": int(run.t_ns.size),
+                "radar": emitters["radar"].describe() if "radar" in emitters else None,
+                "ins": [e.describe() for name, e in emitters.items() if name != "radar"],
+                "radar_params": radar_params(run),
+                "truth": None if args.truth is None else str(args.truth),
+            }
+        )
+
+        def on_start(wire: WireTime) -> None:
+            if args.truth is not None:
+                write_truth(args.truth, truth_record(run, feed, faults, emitters, wire))
+
+        result = play_emitters(
+            list(emitters.values()), _pacing(args, live=True), wait_s=args.wait,
+            linger_s=args.linger, on_start=on_start,
+        )  # fmt: skip
+        if args.truth is not None:
+            write_truth(args.truth, truth_record(run, feed, faults, emitters, result.wire))
+        _print_line(
+            {
+                "event": "done",
+                "events": result.events,
+                "wall_s": round(result.wall_s, 3),
+                "waited_s": round(result.waited_s, 3),
+                "shift_ns": result.wire.shift_ns,
+                "links": {name: e.stats() for name, e in emitters.items()},
+            }
+        )
+    finally:
+        for e in emitters.values():
+            e.close()
+    return 0
+
+
+def radar_params(run: SimRun) -> dict[str, Any]:
+    """The radar parameters a daemon configuration needs (from the run's scenario)."""
+    return dataclasses.asdict(run.scenario.radar)
+
+
+def _stop(signum: int, frame: FrameType | None) -> None:
+    raise SystemExit(0)
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """Handler of ``sarmoco sim``; returns the exit status."""
+    if args.serve and args.out is not None:
+        raise ConfigError("sim: --out and --serve exclude each other")
+    faults = parse_faults(args.fault)
+    run = build_run(args, faults)
+    if args.out is not None:
+        return _write_files(args, run, faults)
+    signal.signal(signal.SIGTERM, _stop)
+    return _serve(args, run, faults)

@@ -1,0 +1,154 @@
+"""``sarmoco sim --out DIR``: a run written as the files a flight would leave, plus the truth.
+
+Files (each holds exactly the bytes the live link would carry):
+
+============  ==================================================================
+radar.vrt     VITA 49.2 packets back to back (:mod:`sarmoco.sim.emit_radar`)
+nav.tlog      MAVLink 2 with 8-byte UNIX µs stamps; LOCAL_POSITION_NED and
+              ATTITUDE_QUATERNION at the INS rate, SYSTEM_TIME at 5 Hz
+ins.sbg       sbgECom binary as read from the serial port
+ins.log       SBG CAN frames in candump format
+truth.json    the run's truth (:meth:`SimRun.truth_dict`) and a ``wire`` section:
+              what was written, the wire time base, the INS clock, the faults
+              asked for and those injected per file
+============  ==================================================================
+
+The INS files are three recordings of the same INS (same samples, same clock).
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from sarmoco.drivers.vita49 import PayloadFormat
+from sarmoco.errors import DataFileError
+from sarmoco.sim.emit_can import SbgCanEmitter
+from sarmoco.sim.emit_mavlink import MavlinkEmitter
+from sarmoco.sim.emit_radar import RadarEmitter
+from sarmoco.sim.emit_sbg import SbgEmitter
+from sarmoco.sim.emitter import Emitter, WireTime
+from sarmoco.sim.faults import Faults
+from sarmoco.sim.insfeed import InsFeed
+from sarmoco.sim.links import FileLink
+from sarmoco.sim.player import Pacing, play_emitters
+from sarmoco.sim.run import SimRun
+
+NAV_FILES = {"mavlink": "nav.tlog", "sbg": "ins.sbg", "sbg-can": "ins.log"}
+"""File written for each INS protocol."""
+RADAR_FILE = "radar.vrt"
+TRUTH_FILE = "truth.json"
+TLOG_SYSTEM_TIME_HZ = 5.0
+
+
+def truth_record(
+    run: SimRun,
+    feed: InsFeed,
+    faults: Faults,
+    emitters: dict[str, Emitter],
+    wire: WireTime,
+) -> dict[str, Any]:
+    """The run's truth plus what went on the wire (JSON-able).
+
+    ``wire.shift_ns`` is added to every scenario GPS time on the wire (0 for files).
+    """
+    truth = run.truth_dict()
+    truth["wire"] = {
+        "shift_ns": wire.shift_ns,
+        "leap_s": wire.leap_s,
+        "ins_clock": feed.clock.to_dict(),
+        "ins_latency_ns": feed.latency_ns,
+        "ins_samples_sent": int(feed.t_ns.size),
+        "faults": faults.to_dict(),
+        "links": {name: {**e.describe(), "stats": e.stats()} for name, e in emitters.items()},
+    }
+    return truth
+
+
+def write_truth(path: Path, truth: dict[str, Any]) -> None:
+    """Write ``truth`` as JSON (atomically: a reader never sees half a file)."""
+    tmp = path.with_suffix(".json.tmp")
+    try:
+        tmp.write_text(json.dumps(truth))
+        tmp.replace(path)
+    except OSError as exc:
+        raise DataFileError(f"{path}: cannot write the truth record: {exc}") from exc
+
+
+def write_run(
+    run: SimRun,
+    faults: Faults,
+    out_dir: Path,
+    *,
+    nav: Sequence[str] = ("mavlink", "sbg", "sbg-can"),
+    payload: PayloadFormat = "int16",
+    stream_id: int = 0,
+    seed: int = 0,
+    pacing: Pacing | None = None,
+) -> dict[str, Any]:
+    """Write ``run`` into ``out_dir``; return the truth record (also in ``truth.json``).
+
+    Parameters
+    ----------
+    run : SimRun
+        The simulated run (its INS clock offset and drift must be ``faults``').
+    faults : Faults
+        Faults to inject (each file draws its own).
+    out_dir : Path
+        Directory, created if needed.
+    nav : sequence of {"mavlink", "sbg", "sbg-can"}
+        INS recordings to write.
+    payload : {"int16", "float32"}
+        Radar I/Q format.
+    stream_id : int
+        VITA 49 stream ID.
+    seed : int
+        Seed of the fault draws.
+    pacing : Pacing, optional
+        Default: as fast as possible (the files do not depend on it).
+    """
+    unknown = set(nav) - set(NAV_FILES)
+    if unknown:
+        raise DataFileError(f"sim --out: unknown INS recording(s) {sorted(unknown)}")
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise DataFileError(f"{out_dir}: cannot create: {exc}") from exc
+    feed = InsFeed.from_run(run, faults)
+    emitters: dict[str, Emitter] = {
+        "radar": RadarEmitter(
+            FileLink(out_dir / RADAR_FILE),
+            run.scenario.radar,
+            run.t_ns,
+            run.echo,
+            payload=payload,
+            stream_id=stream_id,
+            faults=faults.radar,
+            seed=seed * 16,
+            rank=0,
+        ),
+    }
+    for k, proto in enumerate(nav, start=1):
+        link = FileLink(out_dir / NAV_FILES[proto])
+        common: dict[str, Any] = {"faults": faults.ins, "seed": seed * 16 + k, "rank": k}
+        if proto == "mavlink":
+            rates = {
+                "LOCAL_POSITION_NED": feed.rate_hz,
+                "ATTITUDE_QUATERNION": feed.rate_hz,
+                "SYSTEM_TIME": TLOG_SYSTEM_TIME_HZ,
+            }
+            emitters[proto] = MavlinkEmitter(link, feed, rates_hz=rates, **common)
+        elif proto == "sbg":
+            emitters[proto] = SbgEmitter(link, feed, **common)
+        else:
+            emitters[proto] = SbgCanEmitter(link, feed, "candump", **common)
+    try:
+        result = play_emitters(list(emitters.values()), pacing or Pacing(realtime=False))
+    finally:
+        for e in emitters.values():
+            e.close()
+    truth = truth_record(run, feed, faults, emitters, result.wire)
+    write_truth(out_dir / TRUTH_FILE, truth)
+    return truth
