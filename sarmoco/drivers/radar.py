@@ -14,7 +14,7 @@ import socket
 from abc import ABC, abstractmethod
 from pathlib import Path
 from types import TracebackType
-from typing import BinaryIO
+from typing import BinaryIO, Self
 
 import numpy as np
 import numpy.typing as npt
@@ -67,7 +67,7 @@ class RadarSource(ABC):
     def close(self) -> None:
         """Release the link; idempotent."""
 
-    def __enter__(self) -> RadarSource:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(

@@ -13,6 +13,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Iterator
 from types import TracebackType
+from typing import Self
 
 from sarmoco.drivers.counters import DriverCounters
 from sarmoco.drivers.samples import Sample
@@ -38,7 +39,7 @@ class Source(ABC):
         while not self.eof:
             yield from self.poll(timeout_s)
 
-    def __enter__(self) -> Source:
+    def __enter__(self) -> Self:
         return self
 
     def __exit__(

@@ -9,6 +9,7 @@ import socket
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import can
 import cantools
@@ -66,26 +67,26 @@ def frames(n: int = 100) -> tuple[list[tuple[int, bytes]], list[tuple[str, int, 
     return out, truth
 
 
-def check(samples: list, truth: list) -> None:
+def check(samples: list[Any], truth: list[Any]) -> None:
     vel = [s for s in samples if isinstance(s, VelocitySample)]
     att = [s for s in samples if isinstance(s, AttitudeSample)]
     ev = [s for s in samples if isinstance(s, EventSample)]
     tv, ta, te = ([t for t in truth if t[0] == k] for k in ("vel", "att", "ev"))
     assert (len(vel), len(att), len(ev)) == (len(tv), len(ta), len(te))
-    for s, (_, t, v) in zip(vel, tv, strict=True):
-        assert abs(s.t_gps_ns - t) <= 1000
-        assert s.vel_ned_mps == pytest.approx(v, abs=0.006)
-        assert s.valid & Validity.VELOCITY and s.valid & Validity.TIME
+    for sv, (_, t, v) in zip(vel, tv, strict=True):
+        assert abs(sv.t_gps_ns - t) <= 1000
+        assert sv.vel_ned_mps == pytest.approx(v, abs=0.006)
+        assert sv.valid & Validity.VELOCITY and sv.valid & Validity.TIME
     for s, (_, t, q) in zip(att, ta, strict=True):
         assert abs(s.t_gps_ns - t) <= 1000
         assert s.quat_wxyz == pytest.approx(q, abs=2e-4)
-    for s, (_, t, _) in zip(ev, te, strict=True):
-        assert abs(s.t_gps_ns - t) <= 1000
+    for se, (_, t, _) in zip(ev, te, strict=True):
+        assert abs(se.t_gps_ns - t) <= 1000
 
 
 def test_layouts_match_vendor_dbc() -> None:
-    db = cantools.database.load_file(str(DBC), encoding="cp1252", strict=False)
-    cases = {
+    db: Any = cantools.database.load_file(str(DBC), encoding="cp1252", strict=False)
+    cases: dict[int, Any] = {
         sc.ID_EKF_VEL_NED: (sc.encode_ekf_vel_ned((12.34, -5.67, 0.89)),
                             {"VELOCITY_N": 12.34, "VELOCITY_E": -5.67, "VELOCITY_D": 0.89}),
         sc.ID_EKF_EULER: (sc.encode_ekf_euler(0.1234, -0.5, 2.5),

@@ -8,6 +8,7 @@ import socket
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -83,6 +84,7 @@ def run_link(key: bytes | None, sender_key: bytes | None) -> tuple[MavlinkSource
 
 def test_udp_round_trip_timesync_rates() -> None:
     src, ap, got = run_link(None, None)
+    late: list[Any]
     src.close()
     assert (mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 32.0) in ap.commands  # LOCAL_POSITION_NED
     assert (mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 31.0) in ap.commands  # ATTITUDE_QUATERNION
@@ -136,7 +138,9 @@ def test_tlog_matches_pymavlink() -> None:
     with MavlinkSource(str(TLOG)) as src:
         samples = list(src.samples())
     for name, kind in (("LOCAL_POSITION_NED", VelocitySample), ("ATTITUDE", AttitudeSample)):
-        ours = [s for s in samples if isinstance(s, kind) and s.source == f"mavlink.{name}"]
+        ours: list[Any] = [
+            s for s in samples if isinstance(s, kind) and s.source == f"mavlink.{name}"
+        ]
         assert len(ours) >= 0.95 * len(ref[name])
         t = np.array([s.t_gps_ns for s in ours])
         assert np.all(np.diff(t) > 0)
@@ -163,8 +167,8 @@ def test_dataflash_matches_pymavlink() -> None:
             ref[(m.get_type(), m.TimeUS)] = m
     with DataflashSource(DFBIN) as src:
         samples = list(src.samples())
-    vel = [s for s in samples if isinstance(s, VelocitySample)]
-    att = [s for s in samples if isinstance(s, AttitudeSample)]
+    vel: list[Any] = [s for s in samples if isinstance(s, VelocitySample)]
+    att: list[Any] = [s for s in samples if isinstance(s, AttitudeSample)]
     assert len(vel) == sum(k == "NKF1" for k, _ in ref) and len(att) == len(vel)
     for s in vel:
         m = ref[("NKF1", s.device_time_ns // 1000)]

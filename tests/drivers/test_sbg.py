@@ -7,6 +7,7 @@ import os
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 from hypothesis import given, settings
@@ -41,9 +42,13 @@ def utc_msg(dev_us: int) -> codec.UtcTime:
     )  # fmt: skip
 
 
-def scenario(n: int = 300) -> tuple[bytes, list[tuple[str, int, tuple[float, ...]]]]:
+Truth = list[tuple[str, int, tuple[float, ...]]]
+
+
+def scenario(n: int = 300) -> tuple[bytes, Truth]:
     """100 Hz EKF_NAV + EKF_QUAT/EULER, UTC_TIME at 5 Hz, an event every 0.5 s."""
-    frames, truth = [], []
+    frames: list[bytes] = []
+    truth: Truth = []
     for k in range(n):
         dev = (D0_US + k * 10_000) & 0xFFFFFFFF
         dev_ext = D0_US + k * 10_000
@@ -73,7 +78,7 @@ def scenario(n: int = 300) -> tuple[bytes, list[tuple[str, int, tuple[float, ...
     return b"".join(frames), truth
 
 
-def check(samples: list, truth: list[tuple[str, int, tuple[float, ...]]]) -> None:
+def check(samples: list[Any], truth: Truth) -> None:
     vel = [s for s in samples if isinstance(s, VelocitySample)]
     att = [s for s in samples if isinstance(s, AttitudeSample)]
     ev = [s for s in samples if isinstance(s, EventSample)]
@@ -81,16 +86,16 @@ def check(samples: list, truth: list[tuple[str, int, tuple[float, ...]]]) -> Non
     ta = [t for t in truth if t[0] == "att"]
     te = [t for t in truth if t[0] == "ev"]
     assert (len(vel), len(att), len(ev)) == (len(tv), len(ta), len(te))
-    for s, (_, t, v) in zip(vel, tv, strict=True):
-        assert abs(s.t_gps_ns - t) <= 1000
-        assert s.vel_ned_mps == pytest.approx(v, abs=1e-5)
-        assert s.valid & Validity.VELOCITY and s.valid & Validity.TIME
+    for sv, (_, t, v) in zip(vel, tv, strict=True):
+        assert abs(sv.t_gps_ns - t) <= 1000
+        assert sv.vel_ned_mps == pytest.approx(v, abs=1e-5)
+        assert sv.valid & Validity.VELOCITY and sv.valid & Validity.TIME
     for s, (_, t, q) in zip(att, ta, strict=True):
         assert abs(s.t_gps_ns - t) <= 1000
         sign = 1 if s.quat_wxyz[0] * q[0] >= 0 else -1
         assert [sign * c for c in s.quat_wxyz] == pytest.approx(q, abs=1e-6)
-    for s, (_, t, _) in zip(ev, te, strict=True):
-        assert abs(s.t_gps_ns - t) <= 1000 and s.channel == "A"
+    for se, (_, t, _) in zip(ev, te, strict=True):
+        assert abs(se.t_gps_ns - t) <= 1000 and se.channel == "A"
 
 
 def test_crc_kermit_check_value() -> None:
@@ -108,7 +113,7 @@ def test_round_trip_through_pty() -> None:
 
     th = threading.Thread(target=write)
     th.start()
-    samples = []
+    samples: list[Any] = []
     deadline = time.monotonic() + 20
     while len(samples) < len(truth) + 15 and time.monotonic() < deadline:
         samples += src.poll(0.05)

@@ -12,6 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sarmoco.drivers.radar import RadarFileSource, RadarTcpSource, RadarUdpSource
+from sarmoco.drivers.samples import EchoPacket
 from sarmoco.drivers.vita49 import (
     ContextExpectation,
     VitaDecoder,
@@ -59,7 +60,7 @@ def test_udp_round_trip(fmt: str, base: str) -> None:
             tx.sendto(p, src.address)
         tx.close()
         out = np.zeros((64, N), np.complex64)
-        got = []
+        got: list[EchoPacket] = []
         while len(got) < 40:
             batch = src.read_into(out[len(got) :], timeout_s=1.0)
             assert batch, "timed out"
@@ -127,7 +128,7 @@ def test_tcp_stream_with_garbage_resyncs() -> None:
     th = threading.Thread(target=serve)
     th.start()
     out = np.zeros((30, N), np.complex64)
-    got = []
+    got: list[EchoPacket] = []
     with RadarTcpSource("127.0.0.1", port, VitaDecoder(N)) as src:
         while not src.eof and len(got) < 30:
             got += src.read_into(out[len(got) :], timeout_s=2.0)
@@ -188,7 +189,7 @@ def test_damaged_stream_recovers_intact_packets(
 
     framer = VitaStreamFramer(dec)
     framer.feed(stream)
-    got = []
+    got: list[EchoPacket] = []
     while (p := framer.next_packet()) is not None:
         e = dec.decode_into(p, out[len(got)] if len(got) < 8 else out[7])
         framer.consume(p, dec.last_ok)
