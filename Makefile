@@ -12,7 +12,7 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/sarmoco config check systemd/sarmoco.toml
+	$(BIN)/sarmoco demo --out demo-out
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

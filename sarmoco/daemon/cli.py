@@ -10,6 +10,7 @@ from pathlib import Path
 from sarmoco import __version__
 from sarmoco.daemon.config import keys_markdown, load_config
 from sarmoco.errors import ConfigError, SarmocoError
+from sarmoco.sim import command as sim_command
 
 
 def _cmd_config_check(args: argparse.Namespace) -> int:
@@ -63,6 +64,16 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_demo(args: argparse.Namespace) -> int:
+    from sarmoco.daemon.demo import run_loopback
+
+    out = Path(args.out)
+    run_loopback(out, args.scale)
+    print((out / "report" / "report.txt").read_text(), end="")
+    print(f"store {out / 'run.zarr'}, quicklooks in {out / 'report'}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser with every subcommand."""
     parser = argparse.ArgumentParser(
@@ -102,6 +113,15 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("store", help="a run or replay store")
     report.add_argument("--out", help="output folder (default: STORE with suffix .report)")
     report.set_defaults(func=_cmd_report)
+
+    sim_command.add_parser(sub)
+
+    demo = sub.add_parser(
+        "demo", help="simulated hardware + daemon on loopback, then the report (the main job)"
+    )
+    demo.add_argument("--out", default="demo-out", help="output folder (default demo-out)")
+    demo.add_argument("--scale", type=float, default=0.1, help="ku-vehicle scenario scale")
+    demo.set_defaults(func=_cmd_demo)
     return parser
 
 

@@ -1,0 +1,143 @@
+"""``sarmoco demo``: the simulated hardware and the daemon on loopback, then the report.
+
+``sarmoco sim --serve`` plays a scaled ``ku-vehicle`` scenario in real time over the
+real wire protocols to ``sarmoco run``, which focuses and records it; then the
+report (quicklooks and metrics) is written next to the store. The demo uses
+MAVLink over UDP and VITA 49 over UDP; the end-to-end tests use the other links.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+from sarmoco.daemon.report import write_report
+from sarmoco.daemon.simconfig import config_table, write_config
+from sarmoco.errors import SarmocoError
+from sarmoco.sim.scenario import load_preset
+
+PRESET = "ku-vehicle"
+DAEMON_START_S = 60.0
+"""How long the simulator or the daemon may take to open its links, s."""
+
+SIM_TIMEOUT_S = 600.0
+"""Longest a simulated run may play, s."""
+
+
+def free_udp_port() -> int:
+    """A UDP port on 127.0.0.1 that is free right now."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _json_line(proc: subprocess.Popen[str], what: str, timeout_s: float) -> dict[str, Any]:
+    """Read stdout lines of ``proc`` until one parses as a JSON object."""
+    deadline = time.monotonic() + timeout_s
+    assert proc.stdout is not None
+    while time.monotonic() < deadline:
+        line = proc.stdout.readline()
+        if not line:
+            raise SarmocoError(f"demo: {what} exited (status {proc.wait()}) before it was ready")
+        if line.lstrip().startswith("{"):
+            record: dict[str, Any] = json.loads(line)
+            return record
+    raise SarmocoError(f"demo: {what} not ready after {timeout_s:.0f} s")
+
+
+def _connect_link(info: dict[str, Any] | str) -> str:
+    """The daemon's link string for what the simulator says to connect to."""
+    if isinstance(info, str):
+        return info
+    return f"{info['interface']}:{info['channel']}"
+
+
+INS_SPECS = {
+    "mavlink": "mavlink:udpout:127.0.0.1:{port}",
+    "sbg": "sbg:pty",
+    "sbg-can": "sbg-can:slcan-pty",
+}
+"""``sarmoco sim --ins`` for each INS protocol the daemon speaks."""
+
+
+def run_loopback(
+    out: Path,
+    scale: float = 0.1,
+    ins: str = "mavlink",
+    radar: str = "udp",
+    motion: str = "turbulence",
+    **sections: dict[str, Any],
+) -> dict[str, Any]:
+    """Play a scaled ku-vehicle scenario from ``sarmoco sim --serve`` into ``sarmoco run``.
+
+    The simulator starts first (it opens the pseudo-terminals and the TCP radar port and
+    waits for the daemon); the daemon gets a configuration that matches the scenario and
+    the links the simulator announced. When the simulator is done the daemon gets SIGTERM
+    (a clean stop: flush, close the store, exit 0) and the report is written.
+
+    Parameters
+    ----------
+    out : Path
+        Output folder: ``sarmoco.toml``, ``truth.json``, ``run.zarr``, ``report/``.
+    scale : float
+        Scenario scale (``sarmoco sim --scale``).
+    ins : {"mavlink", "sbg", "sbg-can"}
+        INS protocol: MAVLink over UDP, SBG over a pty, SBG CAN through slcan on a pty.
+    radar : {"udp", "tcp"}
+        VITA 49 transport.
+    motion : str
+        Platform motion (``sarmoco sim --motion``).
+    **sections : dict
+        Extra configuration keys per section (e.g. ``autofocus={"enabled": False}``).
+
+    Returns
+    -------
+    dict
+        The report summary.
+    """
+    out.mkdir(parents=True, exist_ok=True)
+    radar_url = f"udp://127.0.0.1:{free_udp_port()}" if radar == "udp" else "tcp://127.0.0.1:0"
+    py = [sys.executable, "-m", "sarmoco"]
+    sim = subprocess.Popen(
+        [*py, "sim", "--preset", PRESET, "--scale", str(scale), "--motion", motion,
+         "--motion-seed", "1", "--ins-grade", "tactical", "--serve", "--radar", radar_url,
+         "--ins", INS_SPECS[ins].format(port=free_udp_port()),
+         "--truth", str(out / "truth.json")],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    daemon: subprocess.Popen[str] | None = None
+    try:
+        hello = _json_line(sim, "the simulator", DAEMON_START_S)
+        table = config_table(
+            load_preset(PRESET, scale),
+            radar={"link": hello["radar"]["connect"]},
+            ins={"protocol": ins, "link": _connect_link(hello["ins"][0]["connect"])},
+            recorder={"directory": str(out)},
+            status={"http_port": 0},
+        )
+        for name, values in sections.items():
+            table.setdefault(name, {}).update(values)
+        cfg_path = write_config(out / "sarmoco.toml", table)
+        daemon = subprocess.Popen(
+            [*py, "run", "--config", str(cfg_path), "--store", str(out / "run.zarr")],
+            stdout=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        _json_line(daemon, "the daemon", DAEMON_START_S)
+        if sim.wait(timeout=SIM_TIMEOUT_S) != 0:
+            raise SarmocoError(f"demo: the simulator failed (status {sim.returncode})")
+        daemon.send_signal(signal.SIGTERM)
+        status = daemon.wait(timeout=120)
+        if status != 0:
+            raise SarmocoError(f"demo: the daemon stopped with status {status}")
+    finally:
+        for proc in (sim, daemon):
+            if proc is not None and proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    return write_report(out / "run.zarr", out / "report")
