@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import socket
@@ -16,7 +15,6 @@ import can
 import numpy as np
 import pytest
 
-from sarmoco.daemon.cli import build_parser
 from sarmoco.drivers.can_source import CanSource
 from sarmoco.drivers.mavlink import MavlinkSource
 from sarmoco.drivers.radar import RadarSource, RadarTcpSource, RadarUdpSource
@@ -26,20 +24,10 @@ from sarmoco.drivers.source import Source
 from sarmoco.drivers.vita49 import VitaDecoder
 from sarmoco.errors import DriverError
 
-HARNESS = (
-    "import argparse, sys; from sarmoco.sim.command import add_parser; "
-    "p = argparse.ArgumentParser(prog='sarmoco'); add_parser(p.add_subparsers()); "
-    "a = p.parse_args(); sys.exit(a.func(a))"
-)
 SCENARIO = ["--preset", "thz-spotlight", "--scale", "0.02", "--motion", "turbulence"]
 
 
-def sim_argv() -> list[str]:
-    """``python -m sarmoco sim`` once the CLI has it, else the same parser in a harness."""
-    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
-    if "sim" in sub.choices:
-        return [sys.executable, "-m", "sarmoco", "sim"]
-    return [sys.executable, "-c", HARNESS, "sim"]
+SIM = [sys.executable, "-m", "sarmoco", "sim"]
 
 
 def free_udp_port() -> int:
@@ -58,7 +46,7 @@ def serve(
     truth_path = tmp_path / "truth.json"
     live = ["--serve", "--radar", radar, "--ins", ins, "--truth", str(truth_path)]
     timing = ["--lead", "0.5", "--linger", "0.3", "--wait", "30"]
-    argv = [*sim_argv(), *SCENARIO, *live, *timing]
+    argv = [*SIM, *SCENARIO, *live, *timing]
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout is not None
