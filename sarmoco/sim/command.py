@@ -103,11 +103,11 @@ def add_parser(subparsers: Any) -> None:
 
 def _motion(text: str, seed: int) -> MotionSpec:
     kind, _, path = text.partition(":")
-    if kind not in ("ideal", "turbulence", "flightlog"):
-        raise ConfigError(f"--motion {text!r}: kind is not one of ideal, turbulence, flightlog")
-    if kind == "flightlog" and not path:
-        raise ConfigError("--motion flightlog needs a log: flightlog:PATH.tlog")
-    return MotionSpec(kind, seed=seed, log_path=Path(path) if path else None)  # type: ignore[arg-type]
+    if kind == "flightlog" and path:
+        return MotionSpec("flightlog", seed=seed, log_path=Path(path))
+    if kind in ("ideal", "turbulence") and not path:
+        return MotionSpec("ideal" if kind == "ideal" else "turbulence", seed=seed)
+    raise ConfigError(f"--motion {text!r}: want ideal, turbulence or flightlog:PATH.tlog")
 
 
 def _host_port(text: str, what: str) -> tuple[str, int]:

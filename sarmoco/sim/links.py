@@ -106,20 +106,21 @@ class UdpOutLink(Link):
         self.source = self._sock.getsockname()
 
     def write(self, data: bytes) -> None:
-        try:
-            self._sock.sendto(data, self.dest)
-        except BlockingIOError:
-            if not select.select([], [self._sock], [], STALL_S)[1]:
+        while True:
+            try:
+                self._sock.sendto(data, self.dest)
+            except BlockingIOError:  # send buffer full: wait for room, then retry
+                if select.select([], [self._sock], [], STALL_S)[1]:
+                    continue
                 self.dropped_writes += 1
                 return
-            self.write(data)
+            except OSError as exc:
+                if exc.errno not in (errno.ECONNREFUSED, errno.EHOSTUNREACH):
+                    raise DriverError(f"udp to {self.dest}: {exc}") from exc
+                self.dropped_writes += 1  # nobody listening yet: the datagram is lost
+                return
+            self._count(len(data))
             return
-        except OSError as exc:
-            if exc.errno not in (errno.ECONNREFUSED, errno.EHOSTUNREACH):
-                raise DriverError(f"udp to {self.dest}: {exc}") from exc
-            self.dropped_writes += 1  # nobody listening yet: the datagram is lost
-            return
-        self._count(len(data))
 
     def fds(self) -> list[int]:
         return [self._sock.fileno()]
