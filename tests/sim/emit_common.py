@@ -31,5 +31,5 @@ def tiny_run(
 
 
 def play_fast(*emitters: Emitter, wait_s: float | None = None) -> PlayResult:
-    """Play on a virtual clock, then close nothing (the caller reads and closes)."""
+    """Play on a virtual clock (the caller reads the links and closes the emitters)."""
     return play_emitters(list(emitters), Pacing(realtime=False), wait_s=wait_s)

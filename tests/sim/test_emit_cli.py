@@ -123,7 +123,7 @@ def test_sbg_pty_and_radar_tcp(tmp_path: Path) -> None:
 @pytest.mark.parametrize("bus", ["slcan-pty", "socketcand:0"])
 def test_sbg_can_and_radar_udp(tmp_path: Path, bus: str) -> None:
     rport = free_udp_port()
-    extra = {"sleep_after_open": 0} if "slcan" in bus else {}
+    extra: dict[str, Any] = {"sleep_after_open": 0} if "slcan" in bus else {}
     pulses, samples, truth, _ = serve(
         tmp_path, f"udp://127.0.0.1:{rport}", f"sbg-can:{bus}",
         lambda d: CanSource.open(**d["connect"], **extra),

@@ -11,7 +11,7 @@ import pytest
 
 from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource, RadarUdpSource
 from sarmoco.drivers.samples import EchoPacket
-from sarmoco.drivers.vita49 import VitaDecoder
+from sarmoco.drivers.vita49 import PayloadFormat, VitaDecoder
 from sarmoco.errors import ConfigError
 from sarmoco.sim.emit_radar import INT16_PEAK, RadarEmitter
 from sarmoco.sim.faults import PacketFaults
@@ -19,17 +19,14 @@ from sarmoco.sim.links import FileLink, Link, TcpServerLink, UdpOutLink
 from tests.sim.emit_common import play_fast, tiny_run
 
 
-def emitter(link: Link, payload: str = "int16", **kw: object) -> RadarEmitter:
+def emitter(
+    link: Link, payload: PayloadFormat = "int16", faults: PacketFaults | None = None, seed: int = 0
+) -> RadarEmitter:
     run = tiny_run()
     return RadarEmitter(
-        link,
-        run.scenario.radar,
-        run.t_ns,
-        run.echo,
-        payload=payload,
-        stream_id=7,
-        **kw,  # type: ignore[arg-type]
-    )
+        link, run.scenario.radar, run.t_ns, run.echo, payload=payload, stream_id=7,
+        faults=faults, seed=seed,
+    )  # fmt: skip
 
 
 def read_all(
@@ -60,13 +57,13 @@ def check_exact(em: RadarEmitter, got: list[EchoPacket], rows: np.ndarray) -> No
 
 
 @pytest.mark.parametrize("payload", ["int16", "float32"])
-def test_vrt_file_round_trip(tmp_path: Path, payload: str) -> None:
+def test_vrt_file_round_trip(tmp_path: Path, payload: PayloadFormat) -> None:
     path = tmp_path / "radar.vrt"
     em = emitter(FileLink(path), payload)
     play_fast(em)
     em.close()
     n = tiny_run().echo.shape[1]
-    dec = VitaDecoder(n, payload)  # type: ignore[arg-type]
+    dec = VitaDecoder(n, payload)
     with RadarFileSource(path, dec) as src:
         got, rows = read_all(src, n, len(tiny_run().t_ns))
     check_exact(em, got, rows)
@@ -94,7 +91,7 @@ def test_tcp_round_trip() -> None:
     link = TcpServerLink("127.0.0.1", 0)
     em = emitter(link)
     dec = VitaDecoder(n, "int16")
-    result: dict[str, object] = {}
+    result: dict[str, tuple[list[EchoPacket], np.ndarray]] = {}
 
     def reader() -> None:
         with RadarTcpSource("127.0.0.1", link.address[1], dec) as src:
@@ -105,7 +102,7 @@ def test_tcp_round_trip() -> None:
     play_fast(em, wait_s=5.0)  # waits for the daemon's connection
     em.close()  # EOF ends the reader
     th.join(10)
-    got, rows = result["got"]  # type: ignore[misc]
+    got, rows = result["got"]
     check_exact(em, got, rows)
 
 

@@ -50,9 +50,8 @@ def check(em: SbgEmitter, samples: list[Sample], settled_after_ns: int = 0) -> N
     q = np.array([s.quat_wxyz for s in att])
     q *= np.sign(q[:, :1]) * np.sign(feed.quat[:, :1])
     np.testing.assert_allclose(q, feed.quat, atol=1e-6)
-    assert feed.pos_ned is None or np.allclose(
-        [s.lat_lon_alt for s in vel], ned_to_geodetic(feed.pos_ned), atol=1e-6
-    )
+    lla = np.array([s.lat_lon_alt for s in vel], dtype=np.float64)
+    assert feed.pos_ned is None or np.allclose(lla, ned_to_geodetic(feed.pos_ned), atol=1e-6)
     t_ev = np.array([s.t_gps_ns for s in ev])
     assert t_ev.size == feed.pulse_t_ns.size
     assert np.abs(t_ev - feed.pulse_t_ns)[feed.pulse_t_ns >= settled_after_ns].max() <= 1000

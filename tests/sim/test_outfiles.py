@@ -11,7 +11,7 @@ import pytest
 from sarmoco.drivers.can_source import CanLogSource
 from sarmoco.drivers.mavlink import MavlinkSource
 from sarmoco.drivers.radar import RadarFileSource
-from sarmoco.drivers.samples import Sample, VelocitySample
+from sarmoco.drivers.samples import EchoPacket, Sample, VelocitySample
 from sarmoco.drivers.sbg import SbgFileSource
 from sarmoco.drivers.source import Source
 from sarmoco.drivers.vita49 import VitaDecoder
@@ -56,7 +56,7 @@ def test_radar_file_matches_truth(written: tuple[Path, dict]) -> None:
     dec = VitaDecoder(n, truth["wire"]["links"]["radar"]["payload"])
     rows = np.zeros((len(truth["pulses"]["t_ns"]) + 4, n), np.complex64)
     with RadarFileSource(out / RADAR_FILE, dec) as src:
-        got = []
+        got: list[EchoPacket] = []
         while not src.eof:
             got += src.read_into(rows[len(got) :])
     assert [p.t_gps_ns for p in got] == truth["pulses"]["t_ns"]
