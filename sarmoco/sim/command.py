@@ -24,6 +24,19 @@ With ``--serve`` one JSON line goes to stdout as soon as every link is open::
 each link with ``connect`` (what the daemon opens: a URL, a pty path, or the
 python-can bus arguments); at the end a second line ``{"event": "done", ...}``.
 With ``--out`` a single line ``{"event": "written", "dir": ..., "files": [...]}``.
+
+Pacing: ``--realtime`` (default with ``--serve``) plays at wall-clock speed and puts
+the run *now* on the host clock (every GPS time on the wire is shifted by
+``truth.json`` ``wire.shift_ns``), so MAVLink TIMESYNC relates the autopilot's boot
+clock to the daemon host's clock as on real hardware; ``--speed F`` plays F times
+faster and ``--fast`` on a virtual clock (both leave times as simulated: TIMESYNC
+answers then carry simulated time, and a daemon should map MAVLink time with
+SYSTEM_TIME). The bytes sent are the same in every mode; only their timing differs.
+
+Faults (``--fault``, repeatable): ``loss=P``, ``corrupt=P``, ``dup=P``, ``reorder=P``
+(each optionally ``@radar`` or ``@ins``), ``ins-dropout=START_S:DURATION_S``,
+``clock-offset=S``, ``clock-drift=PPM``, ``clock-step=AT_S:STEP_S``
+(:mod:`sarmoco.sim.faults`).
 """
 
 from __future__ import annotations
@@ -86,7 +99,9 @@ def add_parser(subparsers: Any) -> None:
     pace.add_argument("--realtime", action="store_true", help="real time (default with --serve)")
     pace.add_argument("--fast", action="store_true", help="as fast as possible (default --out)")
     pace.add_argument("--speed", type=float, help="real time sped up by this factor")
-    p.add_argument("--fault", action="append", metavar="SPEC", help="fault (repeatable)")
+    p.add_argument(
+        "--fault", action="append", metavar="SPEC", help="fault to inject (repeatable; see above)"
+    )
     p.add_argument("--payload", default="int16", choices=("int16", "float32"))
     p.add_argument("--stream-id", type=int, default=0, help="VITA 49 stream ID")
     p.add_argument("--wait", type=float, default=60.0, help="wait this long for the daemon, s")
