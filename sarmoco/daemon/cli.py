@@ -64,6 +64,24 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_sim(args: argparse.Namespace) -> int:
+    status = sim_command.run_command(args)
+    if status == 0 and args.out is not None:
+        from sarmoco.daemon.simconfig import config_table, write_config
+        from sarmoco.sim.outfiles import NAV_FILES, RADAR_FILE
+        from sarmoco.sim.scenario import load_preset
+
+        out = Path(args.out)
+        table = config_table(
+            load_preset(args.preset, args.scale),
+            radar={"link": str(out / RADAR_FILE), "sample_format": args.payload},
+            ins={"protocol": "mavlink", "link": str(out / NAV_FILES["mavlink"])},
+            recorder={"directory": str(out)},
+        )
+        write_config(out / "sarmoco.toml", table)
+    return status
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from sarmoco.daemon.demo import run_loopback
 
@@ -115,6 +133,11 @@ def build_parser() -> argparse.ArgumentParser:
     report.set_defaults(func=_cmd_report)
 
     sim_command.add_parser(sub)
+    sub.choices["sim"].set_defaults(func=_cmd_sim)
+    sub.choices["sim"].epilog = (
+        "With --out, DIR/sarmoco.toml is a daemon configuration for the scenario "
+        "(radar.vrt + nav.tlog; change ins.protocol/link for ins.sbg or the CAN log ins.log)."
+    )
 
     demo = sub.add_parser(
         "demo", help="simulated hardware + daemon on loopback, then the report (the main job)"

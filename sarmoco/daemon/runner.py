@@ -8,6 +8,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from types import FrameType
@@ -22,12 +23,15 @@ from sarmoco.daemon.recorder import NAV_KIND_ATTITUDE, NAV_KIND_VELOCITY, Record
 from sarmoco.daemon.sdnotify import Notifier
 from sarmoco.daemon.status import Counters, Health, StatusServer
 from sarmoco.daemon.store import open_store
-from sarmoco.drivers.radar import RadarSource
+from sarmoco.drivers.radar import RadarSource, RadarTcpSource
 from sarmoco.drivers.samples import AttitudeSample, Validity, VelocitySample
 from sarmoco.drivers.source import Source
 from sarmoco.errors import SarmocoError
 
 log = logging.getLogger(__name__)
+
+_Link = RadarSource | Source
+"""A radar or navigation link."""
 
 POLL_S = 0.05
 """Reader poll timeout and idle sleep of the processing loop, s."""
@@ -55,36 +59,53 @@ def open_recorder(cfg: Config, path: Path) -> Recorder:
     )
 
 
+REOPEN_S = 1.0
+"""Pause between attempts to reopen a failed live link, s."""
+
+
 @dataclass
 class _LiveState:
     stop: threading.Event
     last_nav_mono: float = 0.0
     last_pulse_mono: float = 0.0
     first_pulse_mono: float = 0.0
-    reader_error: str = ""
+    link_down: str = ""
 
 
-def _radar_reader(pipe: Pipeline, radar: RadarSource, st: _LiveState) -> None:
-    try:
-        while not st.stop.is_set() and not radar.eof:
-            if pipe.read_radar(radar, POLL_S):
-                st.last_pulse_mono = time.monotonic()
-                st.first_pulse_mono = st.first_pulse_mono or st.last_pulse_mono
-    except SarmocoError as exc:  # the link itself failed (socket closed, port gone)
-        st.reader_error = f"radar: {exc}"
-        log.error("radar reader stopped", extra={"error": str(exc)})
+def _keep_reading(
+    name: str,
+    opener: Callable[[], _Link],
+    first: _Link,
+    read: Callable[[_Link], None],
+    st: _LiveState,
+) -> None:
+    """Read a link until stop; reopen it when it fails or its peer goes away.
 
-
-def _ins_reader(pipe: Pipeline, ins: Source, st: _LiveState) -> None:
-    try:
-        while not st.stop.is_set() and not ins.eof:
-            samples = ins.poll(POLL_S)
-            if samples:
-                st.last_nav_mono = time.monotonic()
-                pipe.add_nav(samples, time.monotonic_ns())
-    except SarmocoError as exc:
-        st.reader_error = f"ins: {exc}"
-        log.error("INS reader stopped", extra={"error": str(exc)})
+    File links (a log given to ``run``) end at their end of file instead.
+    """
+    link: _Link | None = first
+    while not st.stop.is_set():
+        try:
+            if link is None:
+                link = opener()
+                log.info("link reopened", extra={"link": name})
+                st.link_down = ""
+            read(link)
+            if not link.eof:
+                continue
+            if not isinstance(link, RadarTcpSource):  # only files end; a TCP peer may return
+                return
+            reason = "peer closed the link"
+        except SarmocoError as exc:  # the link itself failed: port gone, socket refused
+            reason = str(exc)
+        st.link_down = f"{name}: {reason}"
+        log.error("link down, reopening", extra={"link": name, "error": reason})
+        if link is not None:
+            link.close()
+            link = None
+        st.stop.wait(REOPEN_S)
+    if link is not None:
+        link.close()
 
 
 def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None = None) -> int:
@@ -102,7 +123,9 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
     Returns
     -------
     int
-        Exit status: 0 after a clean stop, 1 if a link failed.
+        Exit status 0 (a clean stop). A link that fails is reopened every second
+        meanwhile; while it is down the daemon reports itself unhealthy and stops
+        sending WATCHDOG=1, so systemd restarts it if the outage lasts.
     """
     notifier = Notifier()
     counters, health = Counters(), Health()
@@ -125,10 +148,30 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
     pipe = Pipeline(cfg, recorder, counters)
     counters.add_source("radar", radar.decoder.counters.snapshot)
     counters.add_source("ins", ins.counters.snapshot)
+
+    def read_radar(link: _Link) -> None:
+        assert isinstance(link, RadarSource)
+        if pipe.read_radar(link, POLL_S):
+            st.last_pulse_mono = time.monotonic()
+            st.first_pulse_mono = st.first_pulse_mono or st.last_pulse_mono
+
+    def read_ins(link: _Link) -> None:
+        assert isinstance(link, Source)
+        samples = link.poll(POLL_S)
+        if samples:
+            st.last_nav_mono = time.monotonic()
+            pipe.add_nav(samples, time.monotonic_ns())
+
     threads = [
-        threading.Thread(target=_radar_reader, args=(pipe, radar, st), name="radar", daemon=True),
-        threading.Thread(target=_ins_reader, args=(pipe, ins, st), name="ins", daemon=True),
-    ]
+        threading.Thread(
+            target=_keep_reading, args=("radar", lambda: open_radar(cfg), radar, read_radar, st),
+            name="radar", daemon=True,
+        ),
+        threading.Thread(
+            target=_keep_reading, args=("ins", lambda: open_ins(cfg), ins, read_ins, st),
+            name="ins", daemon=True,
+        ),
+    ]  # fmt: skip
     for t in threads:
         t.start()
     log.info("sarmoco running", extra={"store": str(path), "radar": cfg.radar.link,
@@ -141,8 +184,8 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
             released = pipe.process(pipe.now_ns(live=True))
             now = time.monotonic()
             nav_age = now - st.last_nav_mono if st.last_nav_mono else float("inf")
-            ok = all(t.is_alive() for t in threads) and not st.reader_error
-            health.set("readers", ok, st.reader_error)
+            ok = all(t.is_alive() for t in threads) and not st.link_down
+            health.set("links", ok, st.link_down)
             health.set("ins", nav_age < INS_STALE_S, f"newest sample {nav_age:.2f} s old")
             if ok:
                 notifier.watchdog()
@@ -153,8 +196,6 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
                     f"{pipe.summary.pulses_received} pulses, INS age {nav_age:.2f} s, "
                     f"backlog {len(pipe.ring)}"
                 )
-            if not ok and st.reader_error:
-                break
             if idle_exit_s is not None and st.first_pulse_mono:
                 if now - st.last_pulse_mono > idle_exit_s:
                     break
@@ -167,13 +208,11 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
             t.join(timeout=5.0)
         summary = pipe.finish()
         recorder.close()
-        radar.close()
-        ins.close()
         if status is not None:
             status.stop()
         notifier.close()
         log.info("sarmoco stopped", extra=summary.as_dict() | {"store": str(path)})
-    return 1 if st.reader_error else 0
+    return 0
 
 
 def replay_files(
