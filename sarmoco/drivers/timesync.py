@@ -99,7 +99,7 @@ class LinearClockFit:
                 self.rejected += 1
                 self._run.append((device_ns, reference_ns))
                 if len(self._run) >= max(2, (self._dev.maxlen or 2) // 2):
-                    run = self._run
+                    run = list(self._run)  # reset() clears self._run
                     self.reset()
                     for d, r in run:
                         self._append(d, r)
