@@ -23,16 +23,28 @@ class LineRates:
     rate_hz_per_s : ndarray, shape (N,)
         Doppler-rate error of each line relative to the nominal rate, Hz/s.
     weight : ndarray, shape (N,)
-        Mean magnitude of the line's azimuth-compressed subaperture (METHODS §3 eq. 13).
+        Weight in the fits: the line's compressed peak-to-median power ratio minus one (its
+        signal-to-noise ratio; METHODS §3 eq. 13 uses the mean magnitude, see
+        ``streaming._line_rates``), zero for a rejected line.
     quality : ndarray, shape (N,)
         Reliability in [0, 1] (map drift: normalised correlation peak; contrast: relative
         contrast gain); lines under the configured floor get zero weight in the fits.
+    peak_db : ndarray, shape (N,)
+        Peak of the line's azimuth-compressed power over its median, dB: how far the line's
+        dominant scatterer stands above noise and clutter; lines under the configured floor
+        get zero weight.
     """
 
     range_m: FloatArray
     rate_hz_per_s: FloatArray
     weight: FloatArray
     quality: FloatArray
+    peak_db: FloatArray
+
+    @property
+    def n_used(self) -> int:
+        """Number of lines with non-zero weight."""
+        return int(np.count_nonzero(self.weight))
 
 
 @dataclass(frozen=True)

@@ -13,8 +13,21 @@ from sarmoco.processing.types import ComplexArray, FloatArray
 Pin = Literal["mean_trend", "start"]
 
 
-def splice(t_centers_s: FloatArray, values: FloatArray, t_s: FloatArray) -> FloatArray:
-    """Piecewise-linear series through per-subaperture values, held constant beyond the ends.
+def splice(
+    t_centers_s: FloatArray,
+    values: FloatArray,
+    t_s: FloatArray,
+    end_points: int = 3,
+    end_degree: int = 1,
+) -> FloatArray:
+    """Piecewise-linear series through per-subaperture values, extended by a fit beyond the ends.
+
+    Between the first and last centres the values are interpolated linearly. Before the first
+    centre (and after the last) the series goes on from the end value along the
+    least-squares polynomial of degree ``end_degree`` through the first (last) ``end_points``
+    estimates, constrained to the end value: map drift measures the rate at a subaperture's
+    centre, and the rates change fast enough that holding the end value over the last half
+    subaperture leaves a large quadratic phase there.
 
     Parameters
     ----------
@@ -24,15 +37,33 @@ def splice(t_centers_s: FloatArray, values: FloatArray, t_s: FloatArray) -> Floa
         Estimates at the centres (any unit).
     t_s : ndarray, shape (P,)
         Output times, s.
+    end_points : int
+        Estimates in each end fit (1: hold the end value).
+    end_degree : int
+        Degree of the end fit (lowered to ``end_points - 1`` when fewer estimates exist).
 
     Returns
     -------
     ndarray, shape (P, n)
     """
-    v = np.asarray(values, dtype=float).reshape(len(t_centers_s), -1)
+    tc = np.asarray(t_centers_s, dtype=float)
+    v = np.asarray(values, dtype=float).reshape(tc.size, -1)
     if v.shape[0] == 0:
         raise ProcessingError("splice: no subaperture estimates")
-    return np.column_stack([np.interp(t_s, t_centers_s, v[:, i]) for i in range(v.shape[1])])
+    t = np.asarray(t_s, dtype=float)
+    out = np.column_stack([np.interp(t, tc, v[:, i]) for i in range(v.shape[1])])
+    k = min(end_points, tc.size)
+    degree = min(end_degree, k - 1)
+    if degree < 1:
+        return out
+    powers = np.arange(1, degree + 1)
+    for sel, end in ((slice(0, k), 0), (slice(tc.size - k, None), tc.size - 1)):
+        outside = t < tc[0] if end == 0 else t > tc[-1]
+        if np.any(outside):
+            design = (tc[sel, None] - tc[end]) ** powers[None, :]
+            coef = np.linalg.lstsq(design, v[sel] - v[end], rcond=None)[0]
+            out[outside] = v[end] + ((t[outside, None] - tc[end]) ** powers[None, :]) @ coef
+    return out
 
 
 def integrate_twice(
