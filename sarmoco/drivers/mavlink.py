@@ -302,14 +302,23 @@ class MavlinkSource(Source):
     ) -> None:
         super().__init__()
         self.url = url
+        self.is_file = os.path.isfile(url)
         try:
-            self._conn = mavutil.mavlink_connection(
-                url, baud=baudrate, source_system=source_system,
-                source_component=source_component, dialect="ardupilotmega",
-            )  # fmt: skip
+            if self.is_file:
+                # Not mavlink_connection(): it opens a .tlog as a mavmmaplog, whose index
+                # pass decodes the first message of every type through the sequence, loss
+                # and byte counters and then rewinds, so every counter would start wrong.
+                mavutil.set_dialect("ardupilotmega")
+                self._conn = mavutil.mavlogfile(
+                    url, source_system=source_system, source_component=source_component
+                )
+            else:
+                self._conn = mavutil.mavlink_connection(
+                    url, baud=baudrate, source_system=source_system,
+                    source_component=source_component, dialect="ardupilotmega",
+                )  # fmt: skip
         except (OSError, ValueError) as exc:
             raise DriverError(f"mavlink {url}: cannot open: {exc}") from exc
-        self.is_file = isinstance(self._conn, mavutil.mavlogfile)
         self.decoder = MavlinkDecoder(leap_s, host_clock_is_utc and not self.is_file, url, self)
         self.rates_hz = dict(DEFAULT_RATES_HZ if rates_hz is None else rates_hz)
         self._timesync_period_ns = round(timesync_period_s * 1e9)
@@ -399,6 +408,11 @@ class MavlinkSource(Source):
         return out
 
     def _count(self, msg: Any) -> None:
+        loss = self._conn.mav_loss
+        if loss != self._loss_seen:  # pymavlink saw this message's sequence number jump
+            self.counters.gaps += 1
+            self.counters.drops += loss - self._loss_seen
+            self._loss_seen = loss
         if msg.get_type() != "BAD_DATA":
             self.counters.frames += 1
             return
@@ -413,8 +427,6 @@ class MavlinkSource(Source):
     def _sync_counters(self) -> None:
         mav = self._conn.mav
         self.counters.bytes = mav.total_bytes_received
-        self.counters.drops += self._conn.mav_loss - self._loss_seen
-        self._loss_seen = self._conn.mav_loss
         if mav.signing.secret_key is not None:
             self.counters.rejected = mav.signing.reject_count
 
