@@ -395,8 +395,7 @@ class MavlinkSource(Source):
                 if self.is_file:
                     self.eof = True
                 break
-            self._count(msg)
-            if msg.get_type() == "BAD_DATA":
+            if not self._count(msg):
                 continue
             if not self.is_file:
                 self._link_message(msg)
@@ -407,22 +406,33 @@ class MavlinkSource(Source):
         self._sync_counters()
         return out
 
-    def _count(self, msg: Any) -> None:
+    def _count(self, msg: Any) -> bool:
+        """Count one message from pymavlink; returns whether it is a good frame.
+
+        A message id outside the dialect comes back as ``UNKNOWN_<id>``, whose CRC
+        pymavlink cannot check (the CRC seed depends on the message): it is most
+        likely a damaged id byte, and counts as a parse error.
+        """
         loss = self._conn.mav_loss
         if loss != self._loss_seen:  # pymavlink saw this message's sequence number jump
             self.counters.gaps += 1
             self.counters.drops += loss - self._loss_seen
             self._loss_seen = loss
-        if msg.get_type() != "BAD_DATA":
+        mtype = msg.get_type()
+        if mtype.startswith("UNKNOWN_"):
+            self.counters.parse_errors += 1
+            return False
+        if mtype != "BAD_DATA":
             self.counters.frames += 1
-            return
+            return True
         reason = str(getattr(msg, "reason", ""))
         if "signature" in reason:
-            return  # counted from pymavlink's signing state
-        if "CRC" in reason:
+            pass  # counted from pymavlink's signing state
+        elif "CRC" in reason:
             self.counters.crc_errors += 1
         else:
             self.counters.parse_errors += 1
+        return False
 
     def _sync_counters(self) -> None:
         mav = self._conn.mav

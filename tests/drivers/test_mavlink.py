@@ -287,3 +287,19 @@ def test_damaged_udp_input_never_raises(
     while src.counters.frames - frames0 < 5 and time.monotonic() < deadline:
         src.poll(0.01)
     assert src.counters.frames - frames0 >= 5  # the packets after the damage came through
+
+
+@pytest.mark.parametrize("byte, bit", [(7, 6), (9, 0)])  # msgid 32 -> 96 or 65568: not in dialect
+def test_damaged_message_id_is_a_parse_error(byte: int, bit: int) -> None:
+    src, tx = _source()
+    bad = bytearray(_GOOD[0])
+    bad[byte] ^= 1 << bit
+    before = src.counters.snapshot()
+    tx.send(bytes(bad) + _GOOD[1])
+    tx.close()
+    deadline = time.monotonic() + 2
+    while src.counters.frames == before["frames"] and time.monotonic() < deadline:
+        src.poll(0.01)
+    after = src.counters.snapshot()
+    assert after["parse_errors"] - before["parse_errors"] == 1  # pymavlink's UNKNOWN_<id>
+    assert after["frames"] - before["frames"] == 1  # only the intact second frame
