@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import logging
+import socket
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -29,6 +30,39 @@ log = logging.getLogger(__name__)
 MAX_FRAMES_PER_POLL = 2000
 MAX_ERRORS_IN_ROW = 1000
 """Bus errors in a row, with no good frame between, after which the link counts as dead."""
+
+
+def _device_gone(exc: BaseException) -> bool:
+    """Whether a python-can exception reports the device or its connection failing.
+
+    Interfaces wrap the failure of the port or socket underneath (pyserial's
+    SerialException, a socket error: both OSError) in a CanError; bytes they
+    could not parse surface as ValueError, IndexError, or a CanError wrapping one.
+    """
+    cause: BaseException | None = exc
+    while cause is not None:
+        if isinstance(cause, OSError):
+            return True
+        cause = cause.__cause__
+    return False
+
+
+def _stream_closed(bus: can.BusABC) -> bool:
+    """Whether the TCP peer of a socketcand bus closed the connection.
+
+    python-can's socketcand interface reads end of stream as "no message" and
+    spins until its timeout, so the end is checked here on its socket (a private
+    attribute of python-can 4.6, as pinned).
+    """
+    sock = getattr(bus, "_SocketCanDaemonBus__socket", None)
+    if not isinstance(sock, socket.socket):
+        return False
+    try:
+        return sock.recv(1, socket.MSG_PEEK | socket.MSG_DONTWAIT) == b""
+    except BlockingIOError:
+        return False
+    except OSError:
+        return True
 
 
 class _CanSourceBase(Source):
@@ -64,7 +98,9 @@ class CanSource(_CanSourceBase):
     ) -> None:
         super().__init__(leap_s, link)
         self.bus = bus
+        self._link = link
         self._errors_in_row = 0
+        self._closed = False
 
     @classmethod
     def open(
@@ -92,6 +128,8 @@ class CanSource(_CanSourceBase):
             try:
                 msg = self.bus.recv(wait)
             except (can.CanError, ValueError, IndexError, UnicodeDecodeError) as exc:
+                if _device_gone(exc):
+                    raise DriverError(f"{self._link}: device gone: {exc}") from exc
                 # python-can interfaces raise these for unparsable wire data too
                 self.counters.parse_errors += 1
                 self._burst.error("bus frame", str(exc).splitlines()[0] if str(exc) else "")
@@ -100,6 +138,8 @@ class CanSource(_CanSourceBase):
                     raise DriverError(f"can: {self._errors_in_row} errors in a row: {exc}") from exc
                 continue
             if msg is None:
+                if _stream_closed(self.bus):
+                    raise DriverError(f"{self._link}: peer closed the connection")
                 break
             self._errors_in_row = 0
             wait = 0.0
@@ -107,7 +147,14 @@ class CanSource(_CanSourceBase):
         return out
 
     def close(self) -> None:
-        self.bus.shutdown()
+        """Shut the bus down; idempotent, and quiet when the device is already gone."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self.bus.shutdown()
+        except (can.CanError, OSError) as exc:  # slcan writes "C" to a port that may be gone
+            log.info("%s: closed (the device was already gone: %s)", self._link, exc)
 
 
 class CanLogSource(_CanSourceBase):

@@ -326,6 +326,9 @@ class MavlinkSource(Source):
         self._outstanding: dict[int, int] = {}
         self._target: tuple[int, int] | None = None
         self._loss_seen = 0
+        if isinstance(self._conn, mavutil.mavtcp):
+            # pymavlink prints and carries on (returning no data) when the peer goes away
+            self._conn.handle_eof = self._conn.handle_disconnect = self._peer_closed
         if signing_key is not None:
             if len(signing_key) != 32:
                 raise ConfigError(f"mavlink.signing_key: {len(signing_key)} bytes, need 32")
@@ -385,7 +388,11 @@ class MavlinkSource(Source):
         for _ in range(5000):
             try:
                 msg = self._conn.recv_match(blocking=block, timeout=timeout_s if block else None)
-            except (OSError, ValueError) as exc:
+            except DriverError:  # from _peer_closed
+                raise
+            except OSError as exc:  # port or socket gone (pyserial's SerialException is one)
+                raise DriverError(f"mavlink {self.url}: {exc}") from exc
+            except ValueError as exc:  # pymavlink choked on the bytes
                 if self.is_file:
                     raise DriverError(f"mavlink {self.url}: {exc}") from exc
                 self.counters.parse_errors += 1
@@ -440,8 +447,14 @@ class MavlinkSource(Source):
         if mav.signing.secret_key is not None:
             self.counters.rejected = mav.signing.reject_count
 
+    def _peer_closed(self) -> None:
+        raise DriverError(f"mavlink {self.url}: peer closed the connection")
+
     def close(self) -> None:
-        self._conn.close()
+        try:
+            self._conn.close()
+        except OSError as exc:
+            log.debug("mavlink %s: close: %s", self.url, exc)
 
 
 def open_mavlink(path_or_url: str | Path, **kwargs: Any) -> Source:

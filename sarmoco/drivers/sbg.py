@@ -178,7 +178,8 @@ class SbgSerialSource(_SbgSource):
 
     def poll(self, timeout_s: float = 0.0) -> list[Sample]:
         try:
-            self._ser.timeout = timeout_s
+            if self._ser.timeout != timeout_s:  # the setter reconfigures the port
+                self._ser.timeout = timeout_s
             data = self._ser.read(max(1, self._ser.in_waiting))
             if data and self._ser.in_waiting:
                 data += self._ser.read(self._ser.in_waiting)
