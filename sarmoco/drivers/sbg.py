@@ -5,8 +5,11 @@ with the UTC_TIME log: each UTC_TIME pairs a device time with UTC (ns
 resolution) and the GPS time of week; a sliding offset-and-skew fit
 (:class:`~sarmoco.drivers.devclock.DeviceClock`) maps every other log.
 GPS − UTC comes from configuration and is confirmed (or corrected, with a
-warning) by the GPS time of week the device reports. Logs that arrive before
-the first valid UTC_TIME wait in a bounded queue.
+warning) by the GPS time of week the device reports. Logs wait in a bounded
+queue until the second valid UTC_TIME (after start and after a device reboot):
+from then on the fit has a skew (a line through the first two pairs, to µs),
+where an offset alone would be wrong by the drift times the distance to the
+pair (16 µs at 40 ppm and 0.4 s). The wait is one UTC_TIME period, once.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from sarmoco.drivers.samples import (
     VelocitySample,
 )
 from sarmoco.drivers.source import Source
+from sarmoco.drivers.timesync import LinearClockFit
 from sarmoco.errors import ClockError, DriverError
 
 log = logging.getLogger(__name__)
@@ -72,7 +76,8 @@ class SbgDecoder:
     def __init__(self, leap_s: int = GPS_LEAP_SECONDS_DEFAULT, link: str = "sbg") -> None:
         self.leap_s = leap_s
         self.sniffer, self.counters = codec.new_sniffer(link)
-        self.clock = DeviceClock(link, self.counters)
+        fit = LinearClockFit(window=16, outlier_ns=1_000_000, min_pairs=2, ready_pairs=2)
+        self.clock = DeviceClock(link, self.counters, model=fit)
         self._leap_warned = False
 
     def feed(self, data: bytes, final: bool = False) -> list[Sample]:

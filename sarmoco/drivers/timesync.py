@@ -67,13 +67,24 @@ class LinearClockFit:
         the fit restarts from the new pairs.
     min_pairs : int
         Pairs needed before the skew is estimated (offset only before that).
+    ready_pairs : int
+        Pairs needed before :meth:`map` answers (:attr:`ready`); ``min_pairs``
+        or more makes every answer use the skew, at the cost of waiting for
+        that many pairs after start and after each reset.
     """
 
-    def __init__(self, window: int = 16, outlier_ns: int = 2_000_000, min_pairs: int = 3) -> None:
+    def __init__(
+        self,
+        window: int = 16,
+        outlier_ns: int = 2_000_000,
+        min_pairs: int = 3,
+        ready_pairs: int = 1,
+    ) -> None:
         self._dev: deque[int] = deque(maxlen=window)
         self._ref: deque[int] = deque(maxlen=window)
         self._outlier_ns = outlier_ns
         self._min_pairs = min_pairs
+        self._ready_pairs = ready_pairs
         self._run: list[tuple[int, int]] = []
         self._coef: tuple[int, int, float] | None = None
         self.rejected = 0
@@ -82,8 +93,8 @@ class LinearClockFit:
 
     @property
     def ready(self) -> bool:
-        """Whether at least one pair is in the fit."""
-        return self._coef is not None
+        """Whether the fit holds ``ready_pairs`` pairs, so :meth:`map` answers."""
+        return self._coef is not None and len(self._dev) >= self._ready_pairs
 
     def reset(self) -> None:
         """Forget every pair (device reboot, reference step)."""
@@ -95,7 +106,7 @@ class LinearClockFit:
     def add(self, device_ns: int, reference_ns: int) -> bool:
         """Add one pair; returns False when it is rejected as an outlier."""
         if self._coef is not None and len(self._dev) >= self._min_pairs:
-            if abs(self.map(device_ns) - reference_ns) > self._outlier_ns:
+            if abs(self._map(device_ns) - reference_ns) > self._outlier_ns:
                 self.rejected += 1
                 self._run.append((device_ns, reference_ns))
                 if len(self._run) >= max(2, (self._dev.maxlen or 2) // 2):
@@ -133,10 +144,14 @@ class LinearClockFit:
         Raises
         ------
         ClockError
-            If no pair has been added yet.
+            Before ``ready_pairs`` pairs have been added.
         """
-        if self._coef is None:
-            raise ClockError("device clock not synchronised yet (no time reference received)")
+        if not self.ready:
+            raise ClockError("device clock not synchronised yet (too few time references)")
+        return self._map(device_ns)
+
+    def _map(self, device_ns: int) -> int:
+        assert self._coef is not None
         d0, r0, skew = self._coef
         dx = device_ns - d0
         return r0 + dx + round(skew * dx)

@@ -26,12 +26,12 @@ SKEW = 2e-6  # device clock runs slow by 2 ppm
 OK_STATUS = 4 | codec.SOL_ATTITUDE_VALID | codec.SOL_HEADING_VALID | codec.SOL_VELOCITY_VALID
 
 
-def truth_gps(dev_us: int) -> int:
-    return G0 + round((dev_us - D0_US) * 1000 * (1 + SKEW))
+def truth_gps(dev_us: int, skew: float = SKEW) -> int:
+    return G0 + round((dev_us - D0_US) * 1000 * (1 + skew))
 
 
-def utc_msg(dev_us: int) -> codec.UtcTime:
-    gps = truth_gps(dev_us)
+def utc_msg(dev_us: int, skew: float = SKEW) -> codec.UtcTime:
+    gps = truth_gps(dev_us, skew)
     unix_ns = gps_ns_to_unix_ns(gps, LEAP)
     tm = time.gmtime(unix_ns // 1_000_000_000)
     tow_ms = (gps // 1_000_000) % (604_800 * 1000)
@@ -45,15 +45,15 @@ def utc_msg(dev_us: int) -> codec.UtcTime:
 Truth = list[tuple[str, int, tuple[float, ...]]]
 
 
-def scenario(n: int = 300) -> tuple[bytes, Truth]:
-    """100 Hz EKF_NAV + EKF_QUAT/EULER, UTC_TIME at 5 Hz, an event every 0.5 s."""
+def scenario(n: int = 300, skew: float = SKEW, utc_every: int = 20) -> tuple[bytes, Truth]:
+    """100 Hz EKF_NAV + EKF_QUAT/EULER, UTC_TIME every ``utc_every`` logs, an event every 0.5 s."""
     frames: list[bytes] = []
     truth: Truth = []
     for k in range(n):
         dev = (D0_US + k * 10_000) & 0xFFFFFFFF
         dev_ext = D0_US + k * 10_000
-        if k % 20 == 0:
-            frames.append(codec.encode_message(utc_msg(dev_ext)))
+        if k % utc_every == 0:
+            frames.append(codec.encode_message(utc_msg(dev_ext, skew)))
         vel = (30.0 + 0.01 * k, -2.0 + 0.001 * k, 0.5 * math.sin(k / 10))
         frames.append(
             codec.encode_message(
@@ -68,13 +68,13 @@ def scenario(n: int = 300) -> tuple[bytes, Truth]:
         else:
             q = euler_to_quat(*eul)
             frames.append(codec.encode_message(codec.EkfQuat(dev, q, (0.01,) * 3, OK_STATUS)))
-        truth.append(("vel", truth_gps(dev_ext), vel))
-        truth.append(("att", truth_gps(dev_ext), euler_to_quat(*eul)))
+        truth.append(("vel", truth_gps(dev_ext, skew), vel))
+        truth.append(("att", truth_gps(dev_ext, skew), euler_to_quat(*eul)))
         if k % 50 == 25:
             ev = codec.Event(dev, 0b11, (1234, 0, 0, 0))
             frames.append(codec.encode_message(ev))
-            truth.append(("ev", truth_gps(dev_ext), ()))
-            truth.append(("ev", truth_gps(dev_ext + 1234), ()))
+            truth.append(("ev", truth_gps(dev_ext, skew), ()))
+            truth.append(("ev", truth_gps(dev_ext + 1234, skew), ()))
     return b"".join(frames), truth
 
 
@@ -125,6 +125,17 @@ def test_round_trip_through_pty() -> None:
     assert src.counters.crc_errors == 0 and src.counters.frames > 600
 
 
+@pytest.mark.parametrize("utc_every", [1, 40, 100])  # UTC_TIME at 100, 2.5 and 1 Hz
+def test_fast_drift_mapped_from_the_first_sample(tmp_path: Path, utc_every: int) -> None:
+    """40 ppm: the first logs were offset-only mapped, up to 16 µs off at 0.4 s."""
+    stream, truth = scenario(150, skew=40e-6, utc_every=utc_every)
+    path = tmp_path / "drift.bin"
+    path.write_bytes(stream)
+    with SbgFileSource(path, leap_s=LEAP) as src:
+        samples = list(src.samples())
+    check([s for s in samples if not type(s).__name__ == "TimeSample"], truth)
+
+
 def test_file_with_garbage_and_leap_from_tow(tmp_path: Path) -> None:
     stream, truth = scenario()
     cut = len(stream) // 3
@@ -137,13 +148,14 @@ def test_file_with_garbage_and_leap_from_tow(tmp_path: Path) -> None:
     assert src.counters.parse_errors >= 1
 
 
-def test_logs_before_first_utc_wait_and_reboot_resets() -> None:
+def test_logs_before_second_utc_wait_and_reboot_resets() -> None:
     dec = SbgDecoder(LEAP)
     d1 = 100_000_000
     nav = codec.EkfNav(d1, (1.0, 2.0, 3.0), (0,) * 3, (0,) * 3, 0.0, (0,) * 3, OK_STATUS)
     assert dec.feed(codec.encode_message(nav)) == []
-    out = dec.feed(codec.encode_message(utc_msg(d1 + 1000)))
-    assert [type(s).__name__ for s in out] == ["VelocitySample", "TimeSample"]
+    assert dec.feed(codec.encode_message(utc_msg(d1 + 1000))) == []  # offset only: wait
+    out = dec.feed(codec.encode_message(utc_msg(d1 + 201_000)))
+    assert [type(s).__name__ for s in out] == ["VelocitySample", "TimeSample", "TimeSample"]
     reboot = codec.EkfNav(5_000_000, (1.0, 2.0, 3.0), (0,) * 3, (0,) * 3, 0.0, (0,) * 3, 0)
     assert dec.feed(codec.encode_message(reboot)) == [] and dec.counters.gaps == 1
 
