@@ -1,0 +1,557 @@
+"""The live daemon as a real process (``python -m sarmoco run``): crashes, stops, status, bad input.
+
+The radar and INS come from ``sarmoco sim --out`` files (a scaled ku-vehicle run of
+1000 pulses, which fits the echo ring, so a file link is read without drops), either
+as file links or replayed by the test over UDP on 127.0.0.1. Every check reads the
+store back with :func:`sarmoco.daemon.store.open_store` and compares it with the
+files decoded by the drivers (:class:`~sarmoco.drivers.radar.RadarFileSource`, the
+MAVLink source of the ``.tlog``).
+
+- SIGKILL at random moments while recording (12 daemons, 4 at a time): the store
+  opens, every committed pulse and INS row equals the files', nothing past
+  ``committed`` is read.
+- SIGTERM: exit status 0, store complete, every pulse read recorded, xarray reads it.
+- sd_notify on a real AF_UNIX datagram socket: READY=1, WATCHDOG=1 while healthy,
+  STATUS=, STOPPING=1 at SIGTERM.
+- The HTTP status endpoint: /status, /metrics, /health.
+- A bad configuration exits with status 2 naming the key; garbage inserted into the
+  ``.vrt`` and the ``.tlog`` is counted and skipped, the valid pulses are recorded.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import select
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import tomllib
+import urllib.error
+import urllib.request
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+import tomli_w
+import xarray as xr
+import zarr
+from pymavlink import mavutil
+
+from sarmoco.daemon.config import load_config
+from sarmoco.daemon.flags import NAV_UNUSABLE
+from sarmoco.daemon.links import open_ins, vita_decoder
+from sarmoco.daemon.simconfig import write_config
+from sarmoco.daemon.store import RunStore, open_store
+from sarmoco.drivers.radar import RadarFileSource
+from sarmoco.drivers.samples import AttitudeSample, VelocitySample
+from sarmoco.drivers.vita49 import VitaStreamFramer
+
+SCALE = 0.05
+N_PULSES = 1000
+"""Pulses simulated: fewer than the echo ring holds (1024 at this PRF), so none is dropped."""
+
+START_TIMEOUT_S = 60.0
+"""Longest wait for a daemon to open its links and print its JSON line, s."""
+
+KILL_TRIALS, KILL_PARALLEL = 12, 4
+KILL_WINDOW_S = 2.0
+"""SIGKILLs land uniformly within this long after a wave of daemons is up, s."""
+
+WATCHDOG_USEC = 1_000_000
+PY = [sys.executable, "-m", "sarmoco"]
+
+
+@dataclass(frozen=True)
+class SimFiles:
+    """The simulator's files and what the drivers decode from them."""
+
+    dir: Path
+    table: dict[str, Any]
+    t_ns: npt.NDArray[np.int64]
+    echo: npt.NDArray[np.int16]
+    packets: list[bytes]
+    nav: list[VelocitySample | AttitudeSample]
+
+
+def decode_radar(cfg_path: Path, vrt: Path) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int16]]:
+    """Pulse times (GPS ns) and int16 I/Q echoes of a ``.vrt`` file, read by the radar driver."""
+    cfg = load_config(cfg_path)
+    rows = np.empty((N_PULSES + 64, cfg.radar.n_samples, 2), np.int16)
+    t: list[int] = []
+    with RadarFileSource(vrt, vita_decoder(cfg)) as src:
+        while not src.eof:
+            t += [p.t_gps_ns for p in src.read_into(rows[len(t) :], 0.0)]
+    return np.array(t, dtype=np.int64), rows[: len(t)].copy()
+
+
+def vita_packets(cfg_path: Path, vrt: Path) -> list[bytes]:
+    """The packets of a ``.vrt`` file, cut by the driver's stream framer."""
+    decoder = vita_decoder(load_config(cfg_path))
+    framer = VitaStreamFramer(decoder)
+    framer.feed(vrt.read_bytes())
+    row = np.empty((decoder.n_samples, 2), np.int16)
+    out = []
+    while (packet := framer.next_packet()) is not None:
+        out.append(bytes(packet))
+        decoder.decode_into(packet, row)
+        framer.consume(packet, decoder.last_ok)
+    return out
+
+
+def decode_nav(cfg_path: Path) -> list[VelocitySample | AttitudeSample]:
+    """Velocity and attitude samples of the configured INS log, in file order."""
+    out: list[VelocitySample | AttitudeSample] = []
+    with open_ins(load_config(cfg_path)) as src:
+        while not src.eof:
+            out += [s for s in src.poll(0.0) if isinstance(s, VelocitySample | AttitudeSample)]
+    return out
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory: pytest.TempPathFactory) -> SimFiles:
+    out = tmp_path_factory.mktemp("sim")
+    subprocess.run(
+        [*PY, "sim", "--preset", "ku-vehicle", "--scale", str(SCALE), "--pulses",
+         str(N_PULSES), "--motion", "turbulence", "--motion-seed", "1", "--ins-grade",
+         "tactical", "--out", str(out)],
+        check=True, capture_output=True,
+    )  # fmt: skip
+    cfg_path = out / "sarmoco.toml"
+    t_ns, echo = decode_radar(cfg_path, out / "radar.vrt")
+    assert t_ns.size == N_PULSES
+    with cfg_path.open("rb") as fh:
+        table = tomllib.load(fh)
+    packets = vita_packets(cfg_path, out / "radar.vrt")
+    return SimFiles(out, table, t_ns, echo, packets, decode_nav(cfg_path))
+
+
+def daemon_config(sim: SimFiles, path: Path, **sections: dict[str, Any]) -> Path:
+    """The simulator's configuration with sections overridden; status endpoint off by default."""
+    table = {name: dict(values) for name, values in sim.table.items()}
+    table["status"] = {"http_port": 0}
+    for name, values in sections.items():
+        table.setdefault(name, {}).update(values)
+    return write_config(path, table)
+
+
+def free_port(kind: socket.SocketKind) -> int:
+    """A port on 127.0.0.1 that is free right now (TCP or UDP)."""
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+class Daemon:
+    """A ``sarmoco run`` subprocess; stderr (the JSON log) goes to ``<store>.log``."""
+
+    def __init__(self, config: Path, store: Path, env: dict[str, str] | None = None) -> None:
+        self.store = store
+        self.log = store.with_suffix(".log")
+        with self.log.open("w") as err:
+            self.proc = subprocess.Popen(
+                [*PY, "run", "--config", str(config), "--store", str(store)],
+                stdout=subprocess.PIPE, stderr=err, text=True, env=env,
+            )  # fmt: skip
+
+    def started(self) -> dict[str, Any]:
+        """Wait for the daemon's JSON line (links open, recorder created); return it."""
+        assert self.proc.stdout is not None
+        ready, _, _ = select.select([self.proc.stdout], [], [], START_TIMEOUT_S)
+        line = self.proc.stdout.readline() if ready else ""
+        assert line.startswith("{"), f"daemon did not start: {line!r}\n{self.log.read_text()}"
+        hello: dict[str, Any] = json.loads(line)
+        return hello
+
+    def stop(self, sig: signal.Signals = signal.SIGTERM, timeout_s: float = 60.0) -> int:
+        """Send ``sig`` and wait for the exit status."""
+        self.proc.send_signal(sig)
+        return self.proc.wait(timeout_s)
+
+    def kill_if_running(self) -> None:
+        """SIGKILL the daemon if it still runs (test clean-up) and close its pipe."""
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        if self.proc.stdout is not None:
+            self.proc.stdout.close()
+
+
+def http_get(port: int, path: str) -> tuple[int, str]:
+    """GET http://127.0.0.1:PORT/PATH; returns (status code, body)."""
+    try:
+        with urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=10) as resp:
+            return int(resp.status), resp.read().decode()
+    except urllib.error.HTTPError as exc:
+        return int(exc.code), exc.read().decode()
+
+
+def wait_status(port: int, group: str, name: str, at_least: float) -> dict[str, Any]:
+    """Poll /status until ``status[group][name] >= at_least``; return that document."""
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while True:
+        status: dict[str, Any] = json.loads(http_get(port, "/status")[1])
+        if status[group].get(name, -1) >= at_least:
+            return status
+        assert time.monotonic() < deadline, f"{group}/{name} >= {at_least} not reached: {status}"
+        time.sleep(0.1)
+
+
+def check_committed(store: RunStore, sim: SimFiles) -> int:
+    """Every committed pulse and INS row equals the files'; returns the committed pulses."""
+    n = check_pulses(store, sim)
+    rows = nav_rows(store)
+    assert rows == [nav_row(s) for s in sim.nav[: len(rows)]]
+    return n
+
+
+def check_pulses(store: RunStore, sim: SimFiles) -> int:
+    """Every committed pulse equals the file's; nothing past ``committed`` is read."""
+    n = store.committed("pulses")
+    got = store.read("pulses")
+    assert {a.shape[0] for a in got.values()} == {n}
+    np.testing.assert_array_equal(got["pulse_id"], np.arange(n))
+    np.testing.assert_array_equal(got["t_ns"], sim.t_ns[:n])
+    np.testing.assert_array_equal(got["echo"], sim.echo[:n])
+    np.testing.assert_array_equal(got["channel"], 0)
+    assert not (got["flags"] & ~np.uint32(NAV_UNUSABLE)).any()  # no receiver or drop flags
+    allocated = zarr.open_array(str(store.path / "pulses" / "t_ns"), mode="r").shape[0]
+    assert allocated >= n
+    assert store.read("pulses", ["t_ns"], 0, allocated + 100)["t_ns"].shape[0] == n
+    assert store.dataset("pulses").sizes["pulse"] == n
+    return n
+
+
+NavRow = tuple[int, int, tuple[float, ...]]
+"""An INS row as recorded: (t_ns, kind, velocity NED m/s or attitude quaternion)."""
+
+
+def nav_row(s: VelocitySample | AttitudeSample) -> NavRow:
+    """The row the daemon records for a decoded INS sample."""
+    if isinstance(s, VelocitySample):
+        return s.t_gps_ns, 0, s.vel_ned_mps
+    return s.t_gps_ns, 1, s.quat_wxyz
+
+
+def nav_rows(store: RunStore) -> list[NavRow]:
+    """The committed INS rows of a store."""
+    nav = store.read("nav", ["t_ns", "kind", "vel_ned", "quat"])
+    return [
+        (int(t), int(k), tuple(float(x) for x in (v if k == 0 else q)))
+        for t, k, v, q in zip(nav["t_ns"], nav["kind"], nav["vel_ned"], nav["quat"], strict=True)
+    ]
+
+
+# -- SIGKILL --------------------------------------------------------------------------------
+
+
+def test_sigkill_at_random_moments_leaves_committed_pulses_intact(
+    sim: SimFiles, tmp_path: Path
+) -> None:
+    """12 daemons recording the file links (4 at a time), each SIGKILLed at a random moment.
+
+    Small blocks, chunks and fsync interval make the recording last a second or more
+    (about 125 appends of 8 pulses, each fsynced), so the kills land while recording.
+    """
+    config = daemon_config(
+        sim, tmp_path / "kill.toml", imaging={"block_pulses": 8},
+        recorder={"chunk_pulses": 8, "fsync_interval_s": 0.001},
+    )  # fmt: skip
+    rng = np.random.default_rng(20261122)
+    t0 = time.monotonic()
+    committed: list[int] = []
+    for wave in range(KILL_TRIALS // KILL_PARALLEL):
+        daemons = [Daemon(config, tmp_path / f"kill{wave}-{k}.zarr") for k in range(KILL_PARALLEL)]
+        try:
+            for d in daemons:
+                d.started()
+            t_up = time.monotonic()
+            delays = rng.uniform(0.0, KILL_WINDOW_S, KILL_PARALLEL)
+            for delay, d in sorted(zip(delays, daemons, strict=True), key=lambda p: p[0]):
+                time.sleep(max(0.0, t_up + delay - time.monotonic()))
+                d.proc.send_signal(signal.SIGKILL)
+            for d in daemons:
+                assert d.proc.wait(10) == -signal.SIGKILL
+        finally:
+            for d in daemons:
+                d.kill_if_running()
+        for d in daemons:
+            store = open_store(d.store)
+            assert store.attrs["complete"] is False
+            committed.append(check_committed(store, sim))
+    elapsed = time.monotonic() - t0
+    print(f"{KILL_TRIALS} SIGKILLs in {elapsed:.1f} s; committed pulses: {committed}")
+    assert len(set(committed)) >= 4, committed  # the kills landed at different moments
+    assert sum(0 < n < N_PULSES for n in committed) >= 3, committed  # several mid-recording
+
+
+# -- SIGTERM ---------------------------------------------------------------------------------
+
+
+def test_sigterm_flushes_every_pulse_read_and_exits_0(sim: SimFiles, tmp_path: Path) -> None:
+    """SIGTERM as soon as the whole file is read: pulses still waiting for the INS are flushed."""
+    port = free_port(socket.SOCK_STREAM)
+    config = daemon_config(sim, tmp_path / "term.toml", status={"http_port": port})
+    d = Daemon(config, tmp_path / "term.zarr")
+    try:
+        assert d.started()["status_port"] == port
+        status = wait_status(port, "counters", "radar_frames", len(sim.packets))
+        assert d.stop() == 0, d.log.read_text()
+    finally:
+        d.kill_if_running()
+    assert status["counters"]["radar_parse_errors"] == 0
+    store = open_store(d.store)
+    assert store.attrs["complete"] is True
+    assert store.committed("pulses") == N_PULSES == store.attrs["metrics"]["pulses_received"]
+    assert check_committed(store, sim) == N_PULSES
+    assert store.committed("nav") == store.attrs["metrics"]["nav_samples"] > 0
+    pulses = xr.open_zarr(d.store, group="pulses", consolidated=False)
+    assert dict(pulses.sizes) == {"pulse": N_PULSES, "sample": sim.echo.shape[1], "iq": 2}
+    np.testing.assert_array_equal(pulses["t_ns"].values, sim.t_ns)
+    np.testing.assert_array_equal(pulses["echo"][-3:].values, sim.echo[-3:])
+    nav = xr.open_zarr(d.store, group="nav", consolidated=False)
+    assert nav.sizes["nav"] == store.committed("nav")
+    log = [json.loads(line) for line in d.log.read_text().splitlines()]
+    assert log[-1]["msg"] == "sarmoco stopped" and log[-1]["pulses_received"] == N_PULSES
+
+
+# -- live links: sd_notify and the status endpoint -----------------------------------------
+
+
+@dataclass
+class LiveRun:
+    """What a daemon on UDP links showed while the test fed it."""
+
+    notes: list[tuple[float, str]] = field(default_factory=list)
+    t_term: float = 0.0
+    exit_status: int | None = None
+    pages: dict[str, tuple[int, str]] = field(default_factory=dict)
+    healthy_pages: dict[str, tuple[int, str]] = field(default_factory=dict)
+    hello: dict[str, Any] = field(default_factory=dict)
+    packets_sent: int = 0
+
+
+def mavlink_frames(tlog: Path, n: int) -> list[bytes]:
+    """The first ``n`` MAVLink frames of a telemetry log, as sent on the wire."""
+    conn = mavutil.mavlink_connection(str(tlog))
+    frames: list[bytes] = []
+    while len(frames) < n and (msg := conn.recv_match()) is not None:
+        frames.append(bytes(msg.get_msgbuf()))
+    conn.close()
+    return frames
+
+
+@pytest.fixture(scope="module")
+def live(sim: SimFiles, tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveRun]:
+    """A daemon on UDP radar + MAVLink/UDP links, NOTIFY_SOCKET and WATCHDOG_USEC set.
+
+    The test sends the ``.vrt`` packets as datagrams, reads the status pages while no
+    INS has spoken (unhealthy), then sends MAVLink frames of the ``.tlog`` (healthy),
+    reads them again, and stops the daemon with SIGTERM; every notification is kept.
+    """
+    tmp = tmp_path_factory.mktemp("live")
+    radar_port, ins_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
+    http_port = free_port(socket.SOCK_STREAM)
+    config = daemon_config(
+        sim, tmp / "live.toml",
+        radar={"link": f"udp://127.0.0.1:{radar_port}"},
+        ins={"link": f"udpin:127.0.0.1:{ins_port}"},
+        status={"http_port": http_port},
+    )  # fmt: skip
+    run = LiveRun()
+    notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+    notify.bind(str(tmp / "notify.sock"))
+    notify.settimeout(0.1)
+    stop_listening = threading.Event()
+    t0 = time.monotonic()
+
+    def listen() -> None:
+        while not stop_listening.is_set():
+            try:
+                note = notify.recv(4096).decode()
+            except TimeoutError:
+                continue
+            run.notes.append((time.monotonic() - t0, note))
+
+    listener = threading.Thread(target=listen, daemon=True)
+    listener.start()
+    env = dict(os.environ, NOTIFY_SOCKET=str(tmp / "notify.sock"),
+               WATCHDOG_USEC=str(WATCHDOG_USEC))  # fmt: skip
+    d = Daemon(config, tmp / "live.zarr", env)
+    try:
+        run.hello = d.started()
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            for k, packet in enumerate(sim.packets):
+                tx.sendto(packet, ("127.0.0.1", radar_port))
+                run.packets_sent += 1
+                if k % 50 == 49:
+                    time.sleep(0.01)  # bursts well within the socket buffer
+            wait_status(http_port, "gauges", "pulses_received_total", N_PULSES)
+            for page in ("/status", "/metrics", "/health", "/nothing"):
+                run.pages[page] = http_get(http_port, page)
+            for frame in mavlink_frames(sim.dir / "nav.tlog", 200):
+                tx.sendto(frame, ("127.0.0.1", ins_port))
+                time.sleep(0.002)
+        wait_status(http_port, "counters", "ins_frames", 100)
+        time.sleep(1.2)  # one more pass of the health check and a STATUS line
+        for page in ("/status", "/health"):
+            run.healthy_pages[page] = http_get(http_port, page)
+        run.t_term = time.monotonic() - t0
+        run.exit_status = d.stop()
+        time.sleep(0.3)
+    finally:
+        d.kill_if_running()
+        stop_listening.set()
+        listener.join()
+        notify.close()
+    yield run
+
+
+def test_sd_notify_ready_watchdog_status_stopping(live: LiveRun) -> None:
+    assert live.exit_status == 0
+    keys = [(t, dict(line.split("=", 1) for line in note.splitlines())) for t, note in live.notes]
+    assert keys[0][1]["READY"] == "1", keys[0]
+    assert live.hello["store"] in keys[0][1]["STATUS"]
+    pings = [t for t, k in keys if k.get("WATCHDOG") == "1"]
+    assert len(pings) >= 10
+    assert pings[0] >= keys[0][0] and pings[-1] < live.t_term + 1.0
+    gaps = np.diff([keys[0][0], *pings, live.t_term])
+    assert gaps.max() < WATCHDOG_USEC / 1e6, gaps.max()  # never a watchdog period without one
+    statuses = [k["STATUS"] for _, k in keys[1:] if "STATUS" in k]
+    assert len(statuses) >= 2
+    assert any(s.startswith(f"{N_PULSES} pulses, INS age") and "backlog" in s for s in statuses)
+    stopping = [t for t, k in keys if k.get("STOPPING") == "1"]
+    assert len(stopping) == 1 and stopping[0] >= live.t_term
+    assert all(t <= stopping[0] for t in pings)  # no keep-alive after shutdown began
+
+
+def test_status_endpoint_serves_json_prometheus_and_health(live: LiveRun) -> None:
+    code, body = live.pages["/status"]
+    assert code == 200
+    status = json.loads(body)
+    assert status["counters"]["radar_frames"] == live.packets_sent
+    assert status["counters"]["radar_parse_errors"] == 0
+    assert status["gauges"]["pulses_received_total"] == N_PULSES
+    assert status["gauges"]["pulses_dropped_ring_total"] == 0
+    assert status["healthy"] is False and status["components"]["ins"]["ok"] is False
+    assert status["uptime_s"] > 0
+    code, metrics = live.pages["/metrics"]
+    assert code == 200
+    samples = {
+        line.split(" ")[0]: float(line.split(" ")[1])
+        for line in metrics.splitlines()
+        if line and not line.startswith("#")
+    }
+    assert samples["sarmoco_pulses_received_total"] == N_PULSES
+    assert samples["sarmoco_radar_frames_total"] == status["counters"]["radar_frames"]
+    assert samples['sarmoco_component_up{component="ins"}'] == 0
+    code, body = live.pages["/health"]
+    assert code == 503 and "ins" in json.loads(body)
+    assert live.pages["/nothing"][0] == 404
+    code, body = live.healthy_pages["/health"]
+    assert (code, body) == (200, "ok\n"), live.healthy_pages["/status"]
+    healthy = json.loads(live.healthy_pages["/status"][1])
+    assert healthy["healthy"] is True and healthy["counters"]["ins_frames"] >= 100
+    types = dict(line.split(" ")[2:4] for line in metrics.splitlines() if line.startswith("# TYPE"))
+    # Prometheus naming: a "_total" series is a counter (promtool lints a gauge so named).
+    not_counters = sorted(
+        n for n, kind in types.items() if n.endswith("_total") and kind != "counter"
+    )
+    assert not not_counters, f"typed gauge but named _total: {not_counters}"
+
+
+# -- bad configuration, garbage input -----------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("section", "values", "key"),
+    [
+        ("radar", {"prf_hz": -3.0}, "radar.prf_hz"),
+        ("recorder", {"fsync_s": 1.0}, "recorder.fsync_s"),
+        ("ins", {"protocol": "nmea"}, "ins.protocol"),
+    ],
+    ids=["bound", "unknown-key", "not-allowed"],
+)
+def test_bad_config_exits_2_naming_the_key(
+    sim: SimFiles, tmp_path: Path, section: str, values: dict[str, Any], key: str
+) -> None:
+    table = {name: dict(v) for name, v in sim.table.items()}
+    table.setdefault(section, {}).update(values)
+    (tmp_path / "bad.toml").write_text(tomli_w.dumps(table))
+    res = subprocess.run(
+        [*PY, "run", "--config", str(tmp_path / "bad.toml"), "--store", str(tmp_path / "s.zarr")],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert res.returncode == 2, res.stderr
+    assert key in res.stderr and "Traceback" not in res.stderr, res.stderr
+    assert not (tmp_path / "s.zarr").exists()
+
+
+def test_status_port_in_use_exits_2_naming_the_key(sim: SimFiles, tmp_path: Path) -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        config = daemon_config(
+            sim, tmp_path / "busy.toml", status={"http_port": busy.getsockname()[1]}
+        )
+        res = subprocess.run(
+            [*PY, "run", "--config", str(config), "--store", str(tmp_path / "s.zarr")],
+            capture_output=True, text=True, timeout=120,
+        )  # fmt: skip
+    assert res.returncode == 2, res.stderr
+    assert "status.http_port" in res.stderr and "Traceback" not in res.stderr, res.stderr
+
+
+def with_garbage(data: bytes, cuts: list[int], rng: np.random.Generator) -> bytes:
+    """``data`` with a burst of random bytes (1..600) inserted at each offset in ``cuts``."""
+    parts, last = [], 0
+    for cut in sorted(cuts):
+        parts += [data[last:cut], rng.bytes(int(rng.integers(1, 600)))]
+        last = cut
+    return b"".join([*parts, data[last:], rng.bytes(4096)])
+
+
+def test_garbage_in_the_radar_and_ins_files_is_counted_and_skipped(
+    sim: SimFiles, tmp_path: Path
+) -> None:
+    rng = np.random.default_rng(5)
+    sizes = np.cumsum([len(p) for p in sim.packets])
+    between = [int(sizes[k]) for k in rng.choice(len(sim.packets) - 1, 25, replace=False)]
+    (tmp_path / "radar.vrt").write_bytes(with_garbage(b"".join(sim.packets), between, rng))
+    tlog = (sim.dir / "nav.tlog").read_bytes()
+    anywhere = rng.choice(len(tlog), 25, replace=False).tolist()
+    (tmp_path / "nav.tlog").write_bytes(with_garbage(tlog, anywhere, rng))
+    port = free_port(socket.SOCK_STREAM)
+    config = daemon_config(
+        sim, tmp_path / "garbage.toml",
+        radar={"link": str(tmp_path / "radar.vrt")},
+        ins={"link": str(tmp_path / "nav.tlog")},
+        status={"http_port": port},
+    )  # fmt: skip
+    d = Daemon(config, tmp_path / "garbage.zarr")
+    try:
+        d.started()
+        wait_status(port, "gauges", "pulses_received_total", N_PULSES)
+        time.sleep(0.5)  # the INS log is read to its end meanwhile
+        status = json.loads(http_get(port, "/status")[1])
+        assert d.stop() == 0, d.log.read_text()
+    finally:
+        d.kill_if_running()
+    c = status["counters"]
+    assert c["radar_frames"] == len(sim.packets)  # every valid packet, context included
+    assert c["radar_skipped_bytes"] > 0
+    assert c["ins_crc_errors"] + c["ins_parse_errors"] + c["ins_skipped_bytes"] > 0, c
+    store = open_store(d.store)
+    assert store.attrs["complete"] is True
+    assert check_pulses(store, sim) == N_PULSES
+    rows = nav_rows(store)
+    assert len(rows) >= 0.9 * len(sim.nav)
+    expected = iter([nav_row(s) for s in sim.nav])
+    assert all(row in expected for row in rows)  # the files' samples, in order, some lost
