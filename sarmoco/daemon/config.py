@@ -95,6 +95,14 @@ class InsConfig:
         unit="s",
         gt=0,
     )
+    clock_step_tolerance_s: float = _key(
+        1.0,
+        "A change in INS latency (host receive time minus sample time) beyond this is a clock "
+        "step: samples are refused (pulses flagged) until the new latency has held 3 s. "
+        "Larger than the link's jitter and batching (SBG holds logs until its clock fit)",
+        unit="s",
+        gt=0,
+    )
     gps_minus_utc_s: int = _key(18, "GPS - UTC leap seconds", unit="s", ge=0)
     signing_key_hex: str = _key(
         "", "MAVLink 2 signing key (64 hex digits); when set, unsigned packets are rejected"

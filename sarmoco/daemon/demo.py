@@ -29,6 +29,12 @@ DAEMON_START_S = 60.0
 SIM_TIMEOUT_S = 600.0
 """Longest a simulated run may play, s."""
 
+IDLE_EXIT_S = 2.0
+"""The daemon stops by itself (as on SIGTERM) once no pulse came for this long, s."""
+
+DRAIN_TIMEOUT_S = 300.0
+"""After the simulator is done, how long the daemon may take to catch up before SIGTERM, s."""
+
 
 def free_udp_port() -> int:
     """A UDP port on 127.0.0.1 that is free right now."""
@@ -78,8 +84,9 @@ def run_loopback(
 
     The simulator starts first (it opens the pseudo-terminals and the TCP radar port and
     waits for the daemon); the daemon gets a configuration that matches the scenario and
-    the links the simulator announced. When the simulator is done the daemon gets SIGTERM
-    (a clean stop: flush, close the store, exit 0) and the report is written.
+    the links the simulator announced. When the simulator is done the daemon drains what
+    it has received and stops by itself once the radar has been idle for 2 s (the same
+    clean stop as SIGTERM: flush, close the store, exit 0), and the report is written.
 
     Parameters
     ----------
@@ -125,14 +132,18 @@ def run_loopback(
             table.setdefault(name, {}).update(values)
         cfg_path = write_config(out / "sarmoco.toml", table)
         daemon = subprocess.Popen(
-            [*py, "run", "--config", str(cfg_path), "--store", str(out / "run.zarr")],
+            [*py, "run", "--config", str(cfg_path), "--store", str(out / "run.zarr"),
+             "--exit-when-idle", str(IDLE_EXIT_S)],
             stdout=subprocess.PIPE, text=True,
         )  # fmt: skip
         _json_line(daemon, "the daemon", DAEMON_START_S)
         if sim.wait(timeout=SIM_TIMEOUT_S) != 0:
             raise SarmocoError(f"demo: the simulator failed (status {sim.returncode})")
-        daemon.send_signal(signal.SIGTERM)
-        status = daemon.wait(timeout=120)
+        try:
+            status = daemon.wait(timeout=DRAIN_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            daemon.send_signal(signal.SIGTERM)
+            status = daemon.wait(timeout=120)
         if status != 0:
             raise SarmocoError(f"demo: the daemon stopped with status {status}")
     finally:

@@ -37,6 +37,8 @@ from sarmoco.daemon.status import Counters
 from sarmoco.drivers.radar import RadarSource
 from sarmoco.drivers.samples import AttitudeSample, Sample, VelocitySample
 from sarmoco.processing.metrics import image_contrast, image_entropy
+from sarmoco.processing.navinterp import BoolArray
+from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 
 log = logging.getLogger(__name__)
 
@@ -91,7 +93,7 @@ class Pipeline:
         self.counters = counters
         capacity = max(1024, math.ceil(RING_SECONDS * cfg.radar.prf_hz))
         self.ring = EchoRing(capacity, cfg.radar.n_samples, ring_format(cfg))
-        self.nav = NavBuffer()
+        self.nav = NavBuffer(clock_tolerance_ns=round(cfg.ins.clock_step_tolerance_s * 1e9))
         self.aligner = Aligner(
             self.ring,
             self.nav,
@@ -111,6 +113,8 @@ class Pipeline:
         self._latest_pulse_mono_ns = 0
         self._pending: list[AlignedBlock] = []
         self._pending_n = 0
+        self._last_nav: tuple[int, FloatArray, FloatArray] = (0, np.zeros(3), np.eye(4)[0])
+        """Time (GPS ns), velocity and attitude of the last pulse with navigation."""
         fmt = ring_format(cfg)
         self._scratch = np.empty(
             (cfg.radar.n_samples, 2) if fmt == "int16" else (cfg.radar.n_samples,),
@@ -213,17 +217,70 @@ class Pipeline:
         quat = np.concatenate([b.nav.quat for b in blocks])
         usable = (flags & NAV_UNUSABLE) == 0
         self.summary.pulses_nav_flagged += int(np.count_nonzero(~usable))
-        if not usable.any():
-            return
-        t, ids, raw, pos, vel, quat = (a[usable] for a in (t, ids, raw, pos, vel, quat))
         if self.focuser is None:
-            self.focuser = Focuser(self.cfg, int(t[0]), vel.mean(axis=0))
+            if not usable.any():
+                return  # no navigation yet: the aperture has not begun
+            first = int(np.argmax(usable))
+            t, ids, raw, pos, vel, quat, usable = (
+                a[first:] for a in (t, ids, raw, pos, vel, quat, usable)
+            )
+            self.focuser = Focuser(self.cfg, int(t[0]), vel[usable].mean(axis=0))
+            track = self.focuser.track
+            self.recorder.set_attribute(
+                "reference_track",
+                {
+                    "t0_ns": track.t0_ns,
+                    "x_hat_ned": track.x_hat.tolist(),
+                    "y_hat_ned": track.y_hat.tolist(),
+                    "v0_mps": track.v0_mps,
+                    "origin": "APC at t0_ns (INS-only: no absolute position)",
+                },
+            )
+            self._last_nav = (int(t[0]), vel[0], quat[0])
+        if not usable.all():
+            raw, vel, quat = self._blank_unusable(t, raw, vel, quat, usable)
+        if usable.any():
+            k = int(np.flatnonzero(usable)[-1])
+            self._last_nav = (int(t[k]), vel[k], quat[k])
         out = self.focuser.push(raw, t, vel, quat)
         assert out.motion is not None
         m = out.motion
         self.recorder.append_motion(ids, t, pos, vel, quat, m.d_los_m, m.phase_rad, m.range_shift_m)
-        self.summary.pulses_processed += t.shape[0]
+        self.summary.pulses_processed += int(np.count_nonzero(usable))
         self._record(out)
+
+    def _blank_unusable(
+        self,
+        t: IntArray,
+        raw: ComplexArray,
+        vel: FloatArray,
+        quat: FloatArray,
+        usable: BoolArray,
+    ) -> tuple[ComplexArray, FloatArray, FloatArray]:
+        """Zero the echoes of pulses without navigation and give them placeholder motion.
+
+        The pulses keep their place in time, so the autofocus and the image see a
+        uniformly sampled aperture with a hole (zeros) rather than a silent jump. The
+        placeholder velocity is the straight line between the usable neighbours (the
+        last one of the previous block before the first): across the hole D_los
+        integrates exactly as if the pulses had been left out, and the placeholder
+        never reaches the image because those echoes are zero. The pulses stay
+        flagged in the store.
+        """
+        raw = raw.copy()
+        raw[~usable] = 0
+        known_t = t[usable].astype(np.float64)
+        known_v, known_q = vel[usable], quat[usable]
+        last_t, last_v, last_q = self._last_nav
+        if known_t.size == 0 or t[0] < known_t[0]:
+            known_t = np.concatenate([[float(last_t)], known_t])
+            known_v = np.concatenate([last_v[None, :], known_v])
+            known_q = np.concatenate([last_q[None, :], known_q])
+        tf = t.astype(np.float64)
+        vel = np.column_stack([np.interp(tf, known_t, known_v[:, k]) for k in range(3)])
+        nearest = np.clip(np.searchsorted(known_t, tf), 0, known_t.size - 1)
+        quat = np.where(usable[:, None], quat, known_q[nearest])
+        return raw, vel, quat
 
     def _record(self, out: FocusOutput) -> None:
         focuser = self.focuser

@@ -518,7 +518,11 @@ class Recorder:
 
     def set_metrics(self, metrics: Mapping[str, Any]) -> None:
         """Store run-level metrics (JSON-able) in the root ``metrics`` attribute."""
-        self.root.update_attributes({"metrics": json.loads(json.dumps(dict(metrics), default=str))})
+        self.set_attribute("metrics", metrics)
+
+    def set_attribute(self, name: str, value: Mapping[str, Any]) -> None:
+        """Store a JSON-able mapping in the root attribute ``name``."""
+        self.root.update_attributes({name: json.loads(json.dumps(dict(value), default=str))})
 
     def sync(self) -> int:
         """fsync what was written since the last sync; returns the number of files."""

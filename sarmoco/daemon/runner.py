@@ -76,7 +76,7 @@ def _keep_reading(
     name: str,
     opener: Callable[[], _Link],
     first: _Link,
-    read: Callable[[_Link], None],
+    read: Callable[[_Link], int],
     st: _LiveState,
 ) -> None:
     """Read a link until stop; reopen it when it fails or its peer goes away.
@@ -90,9 +90,8 @@ def _keep_reading(
                 link = opener()
                 log.info("link reopened", extra={"link": name})
                 st.link_down = ""
-            read(link)
-            if not link.eof:
-                continue
+            if read(link) or not link.eof:
+                continue  # at end of stream, read until what was buffered is out
             if not isinstance(link, RadarTcpSource):  # only files end; a TCP peer may return
                 return
             reason = "peer closed the link"
@@ -149,18 +148,21 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
     counters.add_source("radar", radar.decoder.counters.snapshot)
     counters.add_source("ins", ins.counters.snapshot)
 
-    def read_radar(link: _Link) -> None:
+    def read_radar(link: _Link) -> int:
         assert isinstance(link, RadarSource)
-        if pipe.read_radar(link, POLL_S):
+        n = pipe.read_radar(link, POLL_S)
+        if n:
             st.last_pulse_mono = time.monotonic()
             st.first_pulse_mono = st.first_pulse_mono or st.last_pulse_mono
+        return n
 
-    def read_ins(link: _Link) -> None:
+    def read_ins(link: _Link) -> int:
         assert isinstance(link, Source)
         samples = link.poll(POLL_S)
         if samples:
             st.last_nav_mono = time.monotonic()
             pipe.add_nav(samples, time.monotonic_ns())
+        return len(samples)
 
     threads = [
         threading.Thread(

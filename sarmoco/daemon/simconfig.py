@@ -41,7 +41,7 @@ def config_table(scn: Scenario, **sections: dict[str, Any]) -> dict[str, Any]:
         "imaging": {
             "swath_m": 1.1 * scn.swath_m,
             "tile_length_m": TILE_LENGTH_M,
-            "pixel_m": 0.25 * scn.azimuth_resolution_m,
+            "pixel_m": 0.5 * scn.azimuth_resolution_m,
             "azimuth_beamwidth_deg": math.degrees(scn.integration_angle_rad),
         },
     }

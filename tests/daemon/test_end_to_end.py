@@ -31,15 +31,18 @@ LINKS = [("mavlink", "udp"), ("sbg", "tcp"), ("sbg-can", "udp")]
 
 
 def targets_in_image(out: Path) -> list[tuple[float, float, float]]:
-    """Truth targets in the store's imaging frame: (x along track, y ground range, slant r)."""
+    """Truth targets in the store's imaging frame: (x along track, y ground range, slant r).
+
+    The frame is the one the daemon recorded (``reference_track``: its start time and
+    axes from the INS); the origin is the true APC at that time.
+    """
     truth = json.loads((out / "truth.json").read_text())
-    motion_t = open_store(out / "run.zarr").read("motion", ["t_ns"])["t_ns"]
+    track = open_store(out / "run.zarr").attrs["reference_track"]
     t_wire = np.asarray(truth["pulses"]["t_ns"], dtype=np.int64) + truth["wire"]["shift_ns"]
-    first = int(np.searchsorted(t_wire, motion_t[0]))
+    first = int(np.searchsorted(t_wire, track["t0_ns"]))
+    assert t_wire[first] == track["t0_ns"]
     apc0 = np.asarray(truth["pulses"]["apc_ned"][first])
-    vel = np.asarray(truth["pulses"]["vel_ned"]).mean(axis=0)
-    x_hat = np.array([vel[0], vel[1], 0.0]) / math.hypot(vel[0], vel[1])
-    y_hat = np.cross([0.0, 0.0, 1.0], x_hat)
+    x_hat, y_hat = np.asarray(track["x_hat_ned"]), np.asarray(track["y_hat_ned"])
     out_list = []
     for tgt in truth["targets"]:
         d = np.asarray(tgt["pos_ned"]) - apc0
