@@ -104,6 +104,7 @@ class Pipeline:
         )
         self.focuser: Focuser | None = None
         self.summary = RunSummary()
+        counters.add_source("pipeline", self.totals)
         self._nav_rows: queue.SimpleQueue[tuple[Sample, int | None, PushResult]] = (
             queue.SimpleQueue()
         )
@@ -344,12 +345,16 @@ class Pipeline:
         self.recorder.append_nav(t, kind, vel, pos, quat, result, rx)
         self.summary.nav_samples += len(rows)
 
+    def totals(self) -> dict[str, float]:
+        """Monotonic counts of the run (served as Prometheus counters ``pipeline_*``)."""
+        return {
+            "pulses_received": self.summary.pulses_received,
+            "pulses_processed": self.summary.pulses_processed,
+            "pulses_nav_flagged": self.summary.pulses_nav_flagged,
+            "pulses_dropped_ring": self.ring.dropped,
+            "nav_samples": self.summary.nav_samples,
+            "tiles": self.summary.tiles,
+        }
+
     def _update_counters(self) -> None:
-        c = self.counters
-        c.set("pulses_received_total", self.summary.pulses_received)
-        c.set("pulses_processed_total", self.summary.pulses_processed)
-        c.set("pulses_nav_flagged_total", self.summary.pulses_nav_flagged)
-        c.set("pulses_dropped_ring_total", self.ring.dropped)
-        c.set("echo_backlog_pulses", len(self.ring))
-        c.set("nav_samples_total", self.summary.nav_samples)
-        c.set("tiles_total", self.summary.tiles)
+        self.counters.set("echo_backlog_pulses", len(self.ring))

@@ -26,7 +26,7 @@ from sarmoco.daemon.store import open_store
 from sarmoco.drivers.radar import RadarSource, RadarTcpSource
 from sarmoco.drivers.samples import AttitudeSample, Validity, VelocitySample
 from sarmoco.drivers.source import Source
-from sarmoco.errors import SarmocoError
+from sarmoco.errors import ConfigError, SarmocoError
 
 log = logging.getLogger(__name__)
 
@@ -107,6 +107,22 @@ def _keep_reading(
         link.close()
 
 
+def _start_status(counters: Counters, health: Health, port: int) -> StatusServer | None:
+    """The status endpoint on 127.0.0.1:``port`` (None when ``port`` is 0).
+
+    Raises
+    ------
+    ConfigError
+        If the port cannot be bound (in use, or privileged).
+    """
+    if not port:
+        return None
+    try:
+        return StatusServer(counters, health, port=port).start()
+    except OSError as exc:
+        raise ConfigError(f"status.http_port: {port} cannot be bound: {exc.strerror}") from exc
+
+
 def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None = None) -> int:
     """Run the daemon until SIGTERM/SIGINT (or ``idle_exit_s`` without pulses after the first).
 
@@ -135,11 +151,7 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
 
     signal.signal(signal.SIGTERM, on_term)
     signal.signal(signal.SIGINT, on_term)
-    status = (
-        StatusServer(counters, health, port=cfg.status.http_port).start()
-        if cfg.status.http_port
-        else None
-    )
+    status = _start_status(counters, health, cfg.status.http_port)
     path = store or new_store_path(cfg.recorder.directory, "run")
     recorder = open_recorder(cfg, path)
     radar = open_radar(cfg)
