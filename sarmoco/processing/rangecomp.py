@@ -73,17 +73,20 @@ def _matched(radar: RadarParams, echo: ComplexArray, window: Window) -> ComplexA
     return scipy.fft.ifft(spec, axis=1)[:, :s].astype(np.complex64)
 
 
+def _alternating_sign(n: int) -> FloatArray:
+    """``(-1)**(n' + N/2)`` for n' = 0..N-1, float32 so complex64 data stay single precision."""
+    return (np.where(np.arange(n) % 2 == 0, 1.0, -1.0) * (-1.0) ** (n // 2)).astype(np.float32)
+
+
 def _centred_dft(x: ComplexArray) -> ComplexArray:
     """``X_i = sum_n x_n exp(+j 2 pi (i - N/2)(n - N/2) / N)`` along axis 1 (N even)."""
-    n = x.shape[1]
-    sign = np.where(np.arange(n) % 2 == 0, 1.0, -1.0) * (-1.0) ** (n // 2)
+    sign = _alternating_sign(x.shape[1])
     return scipy.fft.fftshift(scipy.fft.ifft(x, axis=1, norm="forward"), axes=1) * sign
 
 
 def _centred_idft(spec: ComplexArray) -> ComplexArray:
     """Inverse of :func:`_centred_dft`."""
-    n = spec.shape[1]
-    sign = np.where(np.arange(n) % 2 == 0, 1.0, -1.0) * (-1.0) ** (n // 2)
+    sign = _alternating_sign(spec.shape[1])
     return scipy.fft.fft(scipy.fft.ifftshift(spec * sign, axes=1), axis=1, norm="forward")
 
 
@@ -95,14 +98,16 @@ def _dechirp(radar: RadarParams, echo: ComplexArray, window: Window) -> ComplexA
     beat_hz = (np.arange(n) - n // 2) * radar.sample_rate_hz / n
     r_ref = C_MPS * radar.range_gate_delay_s / 2.0
     rvp = np.exp(-1j * np.pi * beat_hz**2 / k - 4j * np.pi * r_ref / radar.wavelength_m)
-    spec = _centred_dft(echo) * rvp.astype(np.complex64)
+    # the centred DFT's sign and the RVP factor in one complex64 pass over the data
+    spec = scipy.fft.fftshift(scipy.fft.ifft(echo, axis=1, norm="forward"), axes=1)
+    spec *= (_alternating_sign(n) * rvp).astype(np.complex64)
     if window is not None:
         u = (np.arange(n) - n // 2) / radar.sample_rate_hz
         support = np.flatnonzero(np.abs(u) < radar.pulse_width_s / 2.0)
         weights = np.zeros(n)
         weights[support] = _window_values(window, support.size)
         spec = _centred_dft(_centred_idft(spec) * weights.astype(np.float32))
-    return spec.astype(np.complex64)
+    return spec.astype(np.complex64, copy=False)
 
 
 def compress(radar: RadarParams, echo: ComplexArray, window: Window = None) -> ComplexArray:
