@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import shutil
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -86,6 +87,8 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     from sarmoco.daemon.demo import run_loopback
 
     out = Path(args.out)
+    if (out / "truth.json").exists():  # an earlier demo's output: replace it
+        shutil.rmtree(out)
     run_loopback(out, args.scale)
     print((out / "report" / "report.txt").read_text(), end="")
     print(f"store {out / 'run.zarr'}, quicklooks in {out / 'report'}")
