@@ -393,7 +393,7 @@ def live(sim: SimFiles, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Li
                 run.packets_sent += 1
                 if k % 50 == 49:
                     time.sleep(0.01)  # bursts well within the socket buffer
-            wait_status(http_port, "gauges", "pulses_received_total", N_PULSES)
+            wait_status(http_port, "counters", "pipeline_pulses_received", N_PULSES)
             for page in ("/status", "/metrics", "/health", "/nothing"):
                 run.pages[page] = http_get(http_port, page)
             for frame in mavlink_frames(sim.dir / "nav.tlog", 200):
@@ -438,8 +438,8 @@ def test_status_endpoint_serves_json_prometheus_and_health(live: LiveRun) -> Non
     status = json.loads(body)
     assert status["counters"]["radar_frames"] == live.packets_sent
     assert status["counters"]["radar_parse_errors"] == 0
-    assert status["gauges"]["pulses_received_total"] == N_PULSES
-    assert status["gauges"]["pulses_dropped_ring_total"] == 0
+    assert status["counters"]["pipeline_pulses_received"] == N_PULSES
+    assert status["gauges"]["echo_backlog_pulses"] == 0
     assert status["healthy"] is False and status["components"]["ins"]["ok"] is False
     assert status["uptime_s"] > 0
     code, metrics = live.pages["/metrics"]
@@ -449,7 +449,8 @@ def test_status_endpoint_serves_json_prometheus_and_health(live: LiveRun) -> Non
         for line in metrics.splitlines()
         if line and not line.startswith("#")
     }
-    assert samples["sarmoco_pulses_received_total"] == N_PULSES
+    assert samples["sarmoco_pipeline_pulses_received_total"] == N_PULSES
+    assert samples["sarmoco_pipeline_pulses_dropped_ring_total"] == 0
     assert samples["sarmoco_radar_frames_total"] == status["counters"]["radar_frames"]
     assert samples['sarmoco_component_up{component="ins"}'] == 0
     code, body = live.pages["/health"]
@@ -538,7 +539,7 @@ def test_garbage_in_the_radar_and_ins_files_is_counted_and_skipped(
     d = Daemon(config, tmp_path / "garbage.zarr")
     try:
         d.started()
-        wait_status(port, "gauges", "pulses_received_total", N_PULSES)
+        wait_status(port, "counters", "pipeline_pulses_received", N_PULSES)
         time.sleep(0.5)  # the INS log is read to its end meanwhile
         status = json.loads(http_get(port, "/status")[1])
         assert d.stop() == 0, d.log.read_text()
