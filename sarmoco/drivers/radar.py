@@ -26,7 +26,12 @@ from sarmoco.errors import DriverError
 log = logging.getLogger(__name__)
 
 DEFAULT_RCVBUF_BYTES = 64 * 1024 * 1024
-"""Socket receive buffer asked for (the kernel caps it at net.core.rmem_max)."""
+"""Socket receive buffer asked for (the kernel caps it at net.core.rmem_max unless the
+process has CAP_NET_ADMIN)."""
+SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)
+"""Linux: set the receive buffer past net.core.rmem_max (needs CAP_NET_ADMIN)."""
+UDP_BATCH_PACKETS = 128
+"""Datagrams received before they are decoded together."""
 
 
 class RadarSource(ABC):
@@ -89,7 +94,10 @@ class RadarUdpSource(RadarSource):
     decoder : VitaDecoder
         Decoder configured with the radar's profile.
     rcvbuf_bytes : int
-        Socket receive buffer requested.
+        Socket receive buffer requested: it holds what arrives while the reader
+        is descheduled. Asked with SO_RCVBUFFORCE first (honoured with
+        CAP_NET_ADMIN), else SO_RCVBUF (capped at net.core.rmem_max); a smaller
+        grant is logged once.
     """
 
     def __init__(
@@ -98,36 +106,47 @@ class RadarUdpSource(RadarSource):
         super().__init__(decoder)
         try:
             self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf_bytes)
+            try:
+                self._sock.setsockopt(socket.SOL_SOCKET, SO_RCVBUFFORCE, rcvbuf_bytes)
+            except OSError:  # no CAP_NET_ADMIN
+                self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, rcvbuf_bytes)
             self._sock.bind((host, port))
         except OSError as exc:
             raise DriverError(f"radar udp {host}:{port}: cannot bind: {exc}") from exc
         self._sock.setblocking(False)
         self.address: tuple[str, int] = self._sock.getsockname()
         self.rcvbuf_bytes = self._sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
-        self._buf = bytearray(decoder.max_packet_bytes + 4)
-        self._view = memoryview(self._buf)
+        if self.rcvbuf_bytes < rcvbuf_bytes:  # Linux reports twice what it was asked
+            log.warning(
+                "radar udp %s: receive buffer %d bytes, asked %d: raise net.core.rmem_max "
+                "or give the daemon CAP_NET_ADMIN, or pulses are lost whenever it stalls",
+                self.address, self.rcvbuf_bytes, rcvbuf_bytes,
+            )  # fmt: skip
+        self._stage = np.empty((UDP_BATCH_PACKETS, decoder.max_packet_bytes + 4), np.uint8)
+        self._rows = [row.data for row in self._stage]
 
     def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.1) -> list[EchoPacket]:
         got: list[EchoPacket] = []
         rows = out.shape[0]
         if rows == 0 or not select.select([self._sock], [], [], timeout_s)[0]:
             return got
-        recv_into, decode, view = self._sock.recv_into, self.decoder.decode_into, self._view
+        recv_into = self._sock.recv_into
         while len(got) < rows:
+            want = min(rows - len(got), UDP_BATCH_PACKETS)
+            lengths: list[int] = []
             try:
-                n = recv_into(self._buf)
+                for view in self._rows[:want]:
+                    lengths.append(recv_into(view))
             except BlockingIOError:
-                break
+                pass
             except OSError as exc:
                 raise DriverError(f"radar udp {self.address}: {exc}") from exc
-            pkt = decode(view[:n], out[len(got)])
-            if pkt is not None:
-                got.append(pkt)
+            got += self.decoder.decode_batch(self._stage, lengths, out[len(got) :])
+            if len(lengths) < want:  # the socket is drained
+                break
         return got
 
     def close(self) -> None:
-        self._view.release()
         self._sock.close()
 
 

@@ -202,3 +202,97 @@ def test_damaged_stream_recovers_intact_packets(
     for k in range(6):
         if k < idx or k > idx + 1:
             assert ts[k] in seen
+
+
+# --- batched UDP decoding equals packet-by-packet ----------------------------------------
+
+
+def _one_by_one(
+    datagrams: list[bytes], fmt: str = "int16", int16_ring: bool = False
+) -> tuple[list[EchoPacket], np.ndarray, dict[str, int]]:
+    dec = VitaDecoder(N, fmt, leap_s=18)  # type: ignore[arg-type]
+    out = (
+        np.zeros((len(datagrams), N, 2), np.int16)
+        if int16_ring
+        else np.zeros((len(datagrams), N), np.complex64)
+    )
+    got: list[EchoPacket] = []
+    for d in datagrams:
+        if (e := dec.decode_into(d, out[len(got)])) is not None:
+            got.append(e)
+    return got, out[: len(got)], dec.counters.snapshot()
+
+
+def _mixed_datagrams(fmt: str = "int16") -> list[bytes]:
+    iq = pulses(12, seed=5)
+    ts = times(12)
+    ctx = encode_context_packet(
+        2, T0, 0, bandwidth_hz=1.5e8, rf_reference_hz=9.6e9, sample_rate_hz=1.8e8
+    )
+    out: list[bytes] = []
+    for k in range(12):
+        for sid in (1, 2, 7):  # three receive channels, interleaved
+            if (sid, k) in ((2, 4), (2, 5), (7, 9)):
+                continue  # lost on the link
+            base = "utc" if k % 3 == 0 else "gps"
+            out.append(encode_signal_packet(
+                sid, ts[k] + sid, k, iq[k], fmt, time_base=base,  # type: ignore[arg-type]
+                valid_data=k != 6, sample_loss=k == 7, over_range=sid == 7,
+            ))  # fmt: skip
+        if k == 3:
+            out += [ctx, b"garbage!", out[-1][:-4]]  # context, junk, a torn packet
+        if k == 8:
+            bad_ps = bytearray(out[-1])
+            bad_ps[20:28] = (10**12).to_bytes(8, "big")  # fraction of a second >= 1 s
+            ignored = bytearray(out[-2])
+            ignored[0] |= 0x03  # header bits 25/24, which the profile ignores
+            out += [bytes(bad_ps), bytes(ignored)]
+    return out
+
+
+@pytest.mark.parametrize(("fmt", "int16_ring"), [("int16", False), ("float32", False),
+                                                  ("int16", True)])  # fmt: skip
+def test_udp_batches_equal_packet_by_packet(fmt: str, int16_ring: bool) -> None:
+    datagrams = _mixed_datagrams(fmt)
+    want, rows, counters = _one_by_one(datagrams, fmt, int16_ring)
+    dec = VitaDecoder(N, fmt, leap_s=18)  # type: ignore[arg-type]
+    with RadarUdpSource("127.0.0.1", 0, dec) as src:
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        for d in datagrams:
+            tx.sendto(d, src.address)
+        tx.close()
+        out = np.zeros_like(rows, shape=(len(datagrams), *rows.shape[1:]))
+        got: list[EchoPacket] = []
+        while len(got) < len(want):
+            batch = src.read_into(out[len(got) :], timeout_s=1.0)
+            assert batch, "timed out"
+            got += batch
+    assert got == want
+    np.testing.assert_array_equal(out[: len(got)], rows)
+    assert dec.counters.snapshot() == counters
+    assert counters["gaps"] == 3 and counters["parse_errors"] == 3  # (the mix is as meant)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    picks=st.lists(st.integers(0, 40), min_size=32, max_size=60),  # batches >= BATCH_MIN_PACKETS
+    flips=st.lists(st.tuples(st.integers(0, 60), st.integers(0, 290), st.integers(0, 7))),
+)
+def test_batch_decoder_equals_packet_decoder(
+    picks: list[int], flips: list[tuple[int, int, int]]
+) -> None:
+    pool = _mixed_datagrams()
+    datagrams = [bytearray(pool[i % len(pool)]) for i in picks]
+    for which, byte, bit in flips:
+        if which < len(datagrams) and byte < len(datagrams[which]):
+            datagrams[which][byte] ^= 1 << bit
+    want, rows, counters = _one_by_one([bytes(d) for d in datagrams])
+    dec = VitaDecoder(N, leap_s=18)
+    stage = np.zeros((len(datagrams), dec.max_packet_bytes + 4), np.uint8)
+    for i, d in enumerate(datagrams):
+        stage[i, : len(d)] = np.frombuffer(bytes(d), np.uint8)
+    out = np.zeros((len(datagrams), N), np.complex64)
+    got = dec.decode_batch(stage, [len(d) for d in datagrams], out)
+    assert got == want
+    np.testing.assert_array_equal(out[: len(got)], rows)
+    assert dec.counters.snapshot() == counters
