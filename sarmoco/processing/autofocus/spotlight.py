@@ -9,18 +9,21 @@ is compared with the pixel value ``I_q = Σ_p c_pq``; the phase ``φ_p = arg Σ_
 maximises the energy of those pixels. Iterated with the correction applied, it converges
 like PGA with a window shrunk to the resolution cell.
 
-Phase only: an envelope error of a few range cells decorrelates a pulse's contribution from
-the bright pixel and is not corrected here (its carrier phase is wrapped pulse to pulse, so it
-cannot be turned into a range shift; a magnitude-based range alignment would be needed).
+The estimator is phase only: an envelope error of a few range cells decorrelates a pulse's
+contribution from the bright pixel. :func:`spotlight_two_step` therefore first aligns the range
+profiles (:func:`~sarmoco.processing.autofocus.range_alignment.align_ranges`, envelope step),
+then repeats the phase estimator on a fresh image, re-selecting the bright pixels each time.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from sarmoco.errors import ProcessingError
+from sarmoco.processing.autofocus.range_alignment import align_ranges
 from sarmoco.processing.types import C_MPS, ComplexArray, FloatArray
 
 
@@ -51,13 +54,19 @@ class SpotlightResult:
 def pulse_contributions(
     ph: ComplexArray, freq_hz: FloatArray, apc_m: FloatArray, r0_m: FloatArray, pix_m: FloatArray
 ) -> ComplexArray:
-    """Contribution of every pulse to every pixel, shape (P, Q): exact float64 backprojection."""
+    """Contribution of every pulse to every pixel, shape (P, Q): exact float64 backprojection.
+
+    The frequencies are taken as the uniform grid fitted to ``freq_hz`` (first value and mean
+    step), so the sum over frequency is a polynomial in ``exp(j 4π df Δr / c)`` (Horner).
+    """
     d_r = np.linalg.norm(pix_m[None, :, :] - apc_m[:, None, :], axis=2) - r0_m[:, None]
-    out = np.empty(d_r.shape, dtype=np.complex128)
-    for p in range(ph.shape[0]):
-        kern = np.exp(4j * np.pi / C_MPS * d_r[p][:, None] * freq_hz[None, :])
-        out[p] = kern @ ph[p].astype(np.complex128)
-    return out
+    n_f = freq_hz.size
+    step = np.exp(4j * np.pi / C_MPS * d_r * (freq_hz[-1] - freq_hz[0]) / (n_f - 1))
+    ph64 = ph.astype(np.complex128)
+    out = np.zeros(d_r.shape, dtype=np.complex128)
+    for k in range(n_f - 1, -1, -1):
+        out = out * step + ph64[:, k, None]
+    return out * np.exp(4j * np.pi / C_MPS * d_r * freq_hz[0])
 
 
 def _detrend(y: FloatArray) -> FloatArray:
@@ -117,3 +126,47 @@ def spotlight_autofocus(
         if updates[-1] < tol_rad:
             break
     return SpotlightResult(np.zeros(ph.shape[0]), _detrend(phi), updates)
+
+
+def spotlight_two_step(
+    ph: ComplexArray,
+    freq_hz: FloatArray,
+    apc_m: FloatArray,
+    r0_m: FloatArray,
+    pixels_m: FloatArray,
+    form_image: Callable[[ComplexArray], ComplexArray],
+    n_pixels: int = 200,
+    max_outer: int = 6,
+    tol_rad: float = 0.03,
+) -> SpotlightResult:
+    """Envelope alignment, then the phase estimator repeated on fresh images.
+
+    Parameters
+    ----------
+    ph, freq_hz, apc_m, r0_m, pixels_m
+        As for :func:`spotlight_autofocus`.
+    form_image : callable
+        Phase history (P, F) to the complex image on ``pixels_m`` (any shape, N values).
+    n_pixels : int
+        Bright pixels used by each phase pass (re-selected on every new image).
+    max_outer, tol_rad
+        At most ``max_outer`` phase passes; stop when a pass removes less than ``tol_rad``
+        RMS, rad.
+
+    Returns
+    -------
+    SpotlightResult
+        ``los_m`` from the envelope step (zero mean and trend); ``phase_rad`` the sum of the
+        phase passes; ``rms_updates_rad`` the RMS phase removed by each pass.
+    """
+    res = SpotlightResult(align_ranges(ph, freq_hz), np.zeros(ph.shape[0]))
+    for _ in range(max_outer):
+        cur = res.apply(ph, freq_hz)
+        step = spotlight_autofocus(
+            cur, freq_hz, apc_m, r0_m, pixels_m, form_image(cur).ravel(), n_pixels
+        )
+        res.phase_rad = res.phase_rad + step.phase_rad
+        res.rms_updates_rad.append(float(np.sqrt(np.mean(step.phase_rad**2))))
+        if res.rms_updates_rad[-1] < tol_rad:
+            break
+    return res
