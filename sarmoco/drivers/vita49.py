@@ -30,11 +30,7 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
-from sarmoco.drivers.clock import (
-    NS_PER_S,
-    gps_ns_to_unix_ns,
-    unix_ns_to_gps_ns,
-)
+from sarmoco.drivers.clock import NS_PER_S, gps_ns_to_unix_ns, unix_ns_to_gps_ns
 from sarmoco.drivers.counters import BurstLog, DriverCounters
 from sarmoco.drivers.samples import EchoPacket
 from sarmoco.errors import ConfigError
@@ -461,7 +457,7 @@ class VitaDecoder:
                 if pkt is not None:
                     got.append(pkt)
             return got
-        self.check_row(out[0])
+        flat_dtype = self.check_row(out[0]).dtype
         hdr = stage[:k, : _FULL_HEADER.itemsize].view(_FULL_HEADER)[:, 0]
         w0, tsi = hdr["w0"], (hdr["w0"] >> 22) & 3
         template = (TYPE_SIGNAL_SID << 28) | (3 << 26) | (TSF_REALTIME_PS << 20) | (end + 4) // 4
@@ -470,8 +466,7 @@ class VitaDecoder:
         fast &= (tsi == TSI_UTC) | (tsi == TSI_GPS)
         fields = (w0.tolist(), hdr["sid"].tolist(), hdr["sec"].tolist(), hdr["ps"].tolist(),
                   stage[:k, end : end + 4].view(">u4")[:, 0].tolist())  # fmt: skip
-        dest = out.reshape(out.shape[0], -1)
-        dest = dest.view(np.float32) if out.dtype == np.complex64 else dest
+        dest = out.reshape(out.shape[0], -1).view(flat_dtype)
         got = []
         i = 0
         for j in [*np.flatnonzero(~fast).tolist(), k]:  # a slow packet ends a fast run
@@ -492,14 +487,11 @@ class VitaDecoder:
     ) -> list[EchoPacket]:
         """Counters and metadata of a run of full-profile signal packets (already checked)."""
         got = []
-        n, leap = self.n_samples, self.leap_s
+        n = self.n_samples
         for w0, sid, sec, ps, tr in zip(w0s, sids, secs, pss, trs, strict=True):
-            t = sec * NS_PER_S + (ps + PS_PER_NS // 2) // PS_PER_NS
-            if (w0 >> 22) & 3 == TSI_UTC:
-                t = unix_ns_to_gps_ns(t, leap)
             count = (w0 >> 16) & 0xF
             got.append(EchoPacket(
-                sid, t, count, n, _indicator(tr, _TR_VALID, True),
+                sid, self._time((w0 >> 22) & 3, sec, ps), count, n, _indicator(tr, _TR_VALID, True),
                 _indicator(tr, _TR_SAMPLE_LOSS, False), _indicator(tr, _TR_OVER_RANGE, False),
                 self._count(TYPE_SIGNAL_SID, sid, count),
             ))  # fmt: skip
