@@ -190,6 +190,8 @@ class LiveResult:
     """(s since the daemon started, VmRSS kB)."""
     status: dict[str, Any] = field(default_factory=dict)
     exit_status: int | None = None
+    died_after_s: float | None = None
+    """Seconds after start of the last RSS sample when the daemon died before SIGTERM."""
     latency_s: np.ndarray = field(default_factory=lambda: np.zeros(0))
     committed: int = 0
 
@@ -244,7 +246,7 @@ def _watch(pid: int, store: Path, result: LiveResult, stop: threading.Event) -> 
         time.sleep(POLL_S)
 
 
-def live_run(work: Path, live_s: float) -> LiveResult:
+def live_run(work: Path, live_s: float, autofocus: bool) -> LiveResult:
     """A long ku-vehicle run from ``sarmoco sim --serve`` into ``sarmoco run``."""
     scn = load_preset("ku-vehicle", LIVE_SCALE)
     n_pulses = round(live_s * scn.radar.prf_hz)
@@ -270,6 +272,7 @@ def live_run(work: Path, live_s: float) -> LiveResult:
             ins={"protocol": "mavlink", "link": hello["ins"][0]["connect"]},
             recorder={"directory": str(out)},
             status={"http_port": http_port},
+            autofocus={"enabled": autofocus},
         )
         cfg_path = write_config(out / "sarmoco.toml", table)
         store = out / "run.zarr"
@@ -283,12 +286,15 @@ def live_run(work: Path, live_s: float) -> LiveResult:
         watcher.start()
         sim.wait(timeout=live_s + START_TIMEOUT_S)
         time.sleep(3.0)  # the last pulses wait for INS samples that never come
-        url = f"http://127.0.0.1:{http_port}/status"
-        with urllib.request.urlopen(url, timeout=10) as resp:
-            result.status = json.loads(resp.read())
         stop.set()
         watcher.join()
-        daemon.send_signal(signal.SIGTERM)
+        if daemon.poll() is None:
+            url = f"http://127.0.0.1:{http_port}/status"
+            with urllib.request.urlopen(url, timeout=10) as resp:
+                result.status = json.loads(resp.read())
+            daemon.send_signal(signal.SIGTERM)
+        else:  # it died during the run: when is the last RSS sample
+            result.died_after_s = result.rss[-1][0] if result.rss else 0.0
         result.exit_status = daemon.wait(timeout=300)
     finally:
         stop.set()
@@ -344,6 +350,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--skip-replay", action="store_true", help="only the live run")
     ap.add_argument("--skip-live", action="store_true", help="only the replay")
     ap.add_argument("--profile", action="store_true", help="per-stage profile of the replay")
+    ap.add_argument("--no-autofocus", action="store_true", help="live run without autofocus")
     args = ap.parse_args(argv)
     work = Path(args.work).resolve()
     work.mkdir(parents=True, exist_ok=True)
@@ -369,13 +376,15 @@ def main(argv: list[str] | None = None) -> None:
             rows += [("replay profile (cumulative)", ""), *prof_rows]
             print(table(prof_rows), flush=True)
     if not args.skip_live:
-        lv = live_run(work, args.live_s)
+        lv = live_run(work, args.live_s, not args.no_autofocus)
         lat = lv.latency_s
         c = lv.status.get("counters", {})
         rss = rss_summary(lv.rss)
         rows += [
             ("live ku-vehicle 0.1", f"{lv.pulses_sent} pulses over {lv.duration_s:.0f} s, "
-             f"{lv.committed} recorded, exit {lv.exit_status}"),
+             f"{lv.committed} recorded, exit {lv.exit_status}, autofocus "
+             f"{'off' if args.no_autofocus else 'on'}"
+             + ("" if lv.died_after_s is None else f", DIED after ~{lv.died_after_s:.0f} s")),
             ("  pipeline counters", f"received {c.get('pipeline_pulses_received', 0):.0f}, "
              f"processed {c.get('pipeline_pulses_processed', 0):.0f}, nav-flagged "
              f"{c.get('pipeline_pulses_nav_flagged', 0):.0f}, ring drops "
