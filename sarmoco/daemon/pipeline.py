@@ -125,14 +125,17 @@ class Pipeline:
 
     # -- readers --------------------------------------------------------------------------
 
-    def read_radar(self, source: RadarSource, timeout_s: float) -> int:
+    def read_radar(
+        self, source: RadarSource, timeout_s: float, max_pulses: int | None = None
+    ) -> int:
         """Decode the pulses ``source`` has within ``timeout_s`` into the ring; returns the count.
 
         When the ring is full the pulse is read into scratch space and dropped (counted by
-        the ring), so the socket is always drained.
+        the ring), so the socket is always drained. ``max_pulses`` stops after that many
+        (a file read at its own pace: a replay, a file link of ``run``).
         """
         n = 0
-        while True:
+        while max_pulses is None or n < max_pulses:
             slot = self.ring.reserve()
             row = slot.samples if slot is not None else self._scratch
             packets = source.read_into(row[None, ...], timeout_s if n == 0 else 0.0)
@@ -150,6 +153,7 @@ class Pipeline:
                 self._latest_pulse_ns = pkt.t_gps_ns
                 self._latest_pulse_mono_ns = time.monotonic_ns()
             self.ring.commit(slot, pkt.t_gps_ns, pid, pkt.stream_id, PulseFlag.from_packet(pkt))
+        return n
 
     def add_nav(self, samples: list[Sample], rx_ns: int | None) -> None:
         """Offer INS samples to the nav buffer and queue them for the recorder."""

@@ -24,7 +24,7 @@ from sarmoco.daemon.sdnotify import Notifier
 from sarmoco.daemon.status import Counters, Health, StatusServer
 from sarmoco.daemon.store import open_store
 from sarmoco.drivers.radar import RadarSource, RadarTcpSource
-from sarmoco.drivers.samples import AttitudeSample, Validity, VelocitySample
+from sarmoco.drivers.samples import AttitudeSample, Sample, Validity, VelocitySample
 from sarmoco.drivers.source import Source
 from sarmoco.errors import ConfigError, SarmocoError
 
@@ -162,7 +162,7 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
 
     def read_radar(link: _Link) -> int:
         assert isinstance(link, RadarSource)
-        n = pipe.read_radar(link, POLL_S)
+        n = pipe.read_radar(link, POLL_S, cfg.imaging.block_pulses)
         if n:
             st.last_pulse_mono = time.monotonic()
             st.first_pulse_mono = st.first_pulse_mono or st.last_pulse_mono
@@ -195,7 +195,14 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
     last_status = 0.0
     try:
         while not st.stop.is_set():
-            released = pipe.process(pipe.now_ns(live=True))
+            try:
+                released = pipe.process(pipe.now_ns(live=True))
+                health.set("processing", True)
+            except SarmocoError as exc:  # the pulses are recorded; only this block's focus is lost
+                released = 0
+                counters.inc("processing_errors")
+                health.set("processing", False, str(exc))
+                log.error("processing error, block skipped", extra={"error": str(exc)})
             now = time.monotonic()
             nav_age = now - st.last_nav_mono if st.last_nav_mono else float("inf")
             ok = all(t.is_alive() for t in threads) and not st.link_down
@@ -220,11 +227,13 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
         st.stop.set()
         for t in threads:
             t.join(timeout=5.0)
-        summary = pipe.finish()
-        recorder.close()
-        if status is not None:
-            status.stop()
-        notifier.close()
+        try:
+            summary = pipe.finish()
+        finally:  # a processing error in the last blocks must not leave the store open
+            recorder.close()
+            if status is not None:
+                status.stop()
+            notifier.close()
         log.info("sarmoco stopped", extra=summary.as_dict() | {"store": str(path)})
     return 0
 
@@ -244,14 +253,16 @@ def replay_files(
     lead_ns = round(cfg.ins.max_gap_s * 1e9)
     with open_recorder(cfg, out) as recorder:
         pipe = Pipeline(cfg, recorder, Counters())
-        newest_nav = -(2**62)
+        ahead: list[Sample] = []  # read from the log, not yet due (a poll may return seconds)
         while not radar.eof:
-            pipe.read_radar(radar, 0.0)
+            pipe.read_radar(radar, 0.0, cfg.imaging.block_pulses)
             now = pipe.now_ns(live=False)
-            while not ins.eof and (now is None or newest_nav < now + lead_ns):
-                samples = ins.poll(0.0)
-                pipe.add_nav(samples, None)
-                newest_nav = max([newest_nav, *(s.t_gps_ns for s in samples)])
+            horizon = None if now is None else now + lead_ns
+            while not ins.eof and (horizon is None or not ahead or ahead[-1].t_gps_ns < horizon):
+                ahead += ins.poll(0.0)
+            due = len(ahead) if horizon is None else sum(s.t_gps_ns <= horizon for s in ahead)
+            pipe.add_nav(ahead[:due], None)
+            del ahead[:due]
             pipe.process(now)
             if progress:
                 _progress(radar.decoder.counters.bytes / total)
