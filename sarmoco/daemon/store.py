@@ -14,10 +14,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import dask.array as da
 import numpy as np
 import numpy.typing as npt
 import xarray as xr
 import zarr
+from zarr.core.metadata import ArrayV3Metadata
 
 from sarmoco.daemon.recorder import COMMITTED_ATTR
 from sarmoco.errors import RecorderError
@@ -108,13 +110,21 @@ class RunStore:
         return out
 
     def dataset(self, table: str) -> xr.Dataset:
-        """A table as a lazy (dask) xarray Dataset cut to its committed rows."""
+        """A table as a lazy (dask) xarray Dataset cut to its committed rows.
+
+        Each array is cut on its own before the Dataset is assembled: after a crash the
+        arrays of a table may have been grown to different lengths (growth happens
+        before rows are written), which ``xarray.open_zarr`` on the group would refuse.
+        """
         n = self.committed(table)
-        ds = xr.open_zarr(str(self.path), group=table, consolidated=False, zarr_format=3)
-        first = next(iter(ds.data_vars.values()), None)
-        if first is None:
-            return ds
-        return ds.isel({first.dims[0]: slice(0, n)})
+        group = self._group(table)
+        data_vars = {}
+        for name, arr in sorted(group.arrays()):
+            if not isinstance(arr.metadata, ArrayV3Metadata):
+                raise RecorderError(f"{self.path}: {table}/{name} is not a zarr v3 array")
+            dims = tuple(str(d) for d in arr.metadata.dimension_names or ())
+            data_vars[name] = (dims, da.from_zarr(arr)[:n])
+        return xr.Dataset(data_vars)
 
     @property
     def n_images(self) -> int:
