@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 
 from sarmoco.daemon.config import load_config
-from sarmoco.daemon.demo import free_udp_port
+from sarmoco.daemon.demo import free_udp_port, read_json_line
 from sarmoco.daemon.runner import replay_files
 from sarmoco.daemon.simconfig import config_table, write_config
 from sarmoco.daemon.store import open_store
@@ -196,20 +196,6 @@ class LiveResult:
     committed: int = 0
 
 
-def _json_line(proc: subprocess.Popen[str], timeout_s: float) -> dict[str, Any]:
-    """The first stdout line of ``proc`` that is a JSON object."""
-    assert proc.stdout is not None
-    deadline = time.monotonic() + timeout_s
-    while time.monotonic() < deadline:
-        line = proc.stdout.readline()
-        if not line:
-            raise RuntimeError(f"process exited with {proc.wait()} before its JSON line")
-        if line.lstrip().startswith("{"):
-            record: dict[str, Any] = json.loads(line)
-            return record
-    raise RuntimeError("no JSON line in time")
-
-
 def vm_rss_kb(pid: int) -> int:
     """Resident set size of ``pid`` from /proc, kB."""
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
@@ -262,7 +248,7 @@ def live_run(work: Path, live_s: float, autofocus: bool) -> LiveResult:
     result = LiveResult(pulses_sent=n_pulses, duration_s=n_pulses / scn.radar.prf_hz)
     stop = threading.Event()
     try:
-        hello = _json_line(sim, START_TIMEOUT_S)
+        hello = read_json_line(sim, "the simulator", START_TIMEOUT_S)
         with socket.socket() as s:
             s.bind(("127.0.0.1", 0))
             http_port = int(s.getsockname()[1])
@@ -281,7 +267,7 @@ def live_run(work: Path, live_s: float, autofocus: bool) -> LiveResult:
                 [*PY, "run", "--config", str(cfg_path), "--store", str(store)],
                 stdout=subprocess.PIPE, stderr=err, text=True,
             )  # fmt: skip
-        _json_line(daemon, START_TIMEOUT_S)
+        read_json_line(daemon, "the daemon", START_TIMEOUT_S)
         watcher = threading.Thread(target=_watch, args=(daemon.pid, store, result, stop))
         watcher.start()
         sim.wait(timeout=live_s + START_TIMEOUT_S)

@@ -43,7 +43,7 @@ def free_udp_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _json_line(proc: subprocess.Popen[str], what: str, timeout_s: float) -> dict[str, Any]:
+def read_json_line(proc: subprocess.Popen[str], what: str, timeout_s: float) -> dict[str, Any]:
     """Read stdout lines of ``proc`` until one parses as a JSON object."""
     deadline = time.monotonic() + timeout_s
     assert proc.stdout is not None
@@ -120,7 +120,7 @@ def run_loopback(
     )  # fmt: skip
     daemon: subprocess.Popen[str] | None = None
     try:
-        hello = _json_line(sim, "the simulator", DAEMON_START_S)
+        hello = read_json_line(sim, "the simulator", DAEMON_START_S)
         table = config_table(
             load_preset(PRESET, scale),
             radar={"link": hello["radar"]["connect"]},
@@ -136,7 +136,7 @@ def run_loopback(
              "--exit-when-idle", str(IDLE_EXIT_S)],
             stdout=subprocess.PIPE, text=True,
         )  # fmt: skip
-        _json_line(daemon, "the daemon", DAEMON_START_S)
+        read_json_line(daemon, "the daemon", DAEMON_START_S)
         if sim.wait(timeout=SIM_TIMEOUT_S) != 0:
             raise SarmocoError(f"demo: the simulator failed (status {sim.returncode})")
         try:

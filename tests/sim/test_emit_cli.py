@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import contextlib
 import json
-import socket
 import subprocess
 import sys
 from collections.abc import Callable
@@ -15,6 +14,7 @@ import can
 import numpy as np
 import pytest
 
+from sarmoco.daemon.demo import free_udp_port
 from sarmoco.drivers.can_source import CanSource
 from sarmoco.drivers.mavlink import MavlinkSource
 from sarmoco.drivers.radar import RadarSource, RadarTcpSource, RadarUdpSource
@@ -28,12 +28,6 @@ SCENARIO = ["--preset", "thz-spotlight", "--scale", "0.02", "--motion", "turbule
 
 
 SIM = [sys.executable, "-m", "sarmoco", "sim"]
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def serve(

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import socket
 import threading
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from sarmoco.daemon.demo import free_udp_port
 from sarmoco.drivers.mavlink import DEFAULT_RATES_HZ as DAEMON_RATES
 from sarmoco.drivers.mavlink import MavlinkSource
 from sarmoco.drivers.samples import AttitudeSample, Sample, VelocitySample
@@ -25,12 +25,6 @@ CLOCK = Faults(clock_offset_s=0.2, clock_drift_ppm=3.0)
 def feed(faults: Faults = CLOCK) -> InsFeed:
     run = tiny_run(clock_offset_s=faults.clock_offset_s, clock_drift_ppm=faults.clock_drift_ppm)
     return InsFeed.from_run(run, faults)
-
-
-def free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
 
 
 def live(em: MavlinkEmitter, url: str) -> tuple[list[Sample], PlayResult, MavlinkSource]:
