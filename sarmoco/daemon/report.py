@@ -31,6 +31,10 @@ BRIGHT_POINTS = 5
 POINT_SEPARATION_M = 5.0
 """Minimum distance between two measured scatterers, m."""
 
+POINT_CONTRAST_DB = 20.0
+"""A scatterer is measured only if its peak stands this far above the image's median
+magnitude (noise and clutter peaks, whose PSLR means nothing, stand ~10 dB above it), dB."""
+
 
 def strip(store: RunStore) -> Image | None:
     """The recorded tiles joined along track (axis 0) in index order; None without tiles."""
@@ -47,25 +51,33 @@ def strip(store: RunStore) -> Image | None:
 
 
 def bright_points(image: Image, n: int = BRIGHT_POINTS) -> list[dict[str, float]]:
-    """Point-target measures of the ``n`` brightest scatterers at least 5 m apart."""
+    """Point-target measures of the ``n`` brightest isolated scatterers.
+
+    A candidate pixel is measured only if it is the maximum of the window of
+    ``POINT_SEPARATION_M`` around it (a sidelobe of a brighter neighbour is not), stands
+    ``POINT_CONTRAST_DB`` above the image's median magnitude, and is at least
+    ``POINT_SEPARATION_M`` from a scatterer already measured.
+    """
     mag = np.abs(image.data)
     dx, dy = image.spacing_m
+    half0, half1 = round(POINT_SEPARATION_M / abs(dx)), round(POINT_SEPARATION_M / abs(dy))
+    floor = float(np.median(mag)) * 10 ** (POINT_CONTRAST_DB / 20)
     found: list[dict[str, float]] = []
     order = np.argsort(mag, axis=None)[::-1]
     taken: list[tuple[float, float]] = []
     for flat in order[: 200 * n]:
-        i, j = np.unravel_index(int(flat), mag.shape)
+        i, j = (int(k) for k in np.unravel_index(int(flat), mag.shape))
+        if mag[i, j] < floor:
+            break
         x, y = float(image.axis0_m[i]), float(image.axis1_m[j])
         if any(np.hypot(x - a, y - b) < POINT_SEPARATION_M for a, b in taken):
             continue
+        rows = slice(max(i - half0, 0), i + half0 + 1)
+        cols = slice(max(j - half1, 0), j + half1 + 1)
+        if mag[rows, cols].max() > mag[i, j]:
+            continue
         taken.append((x, y))
-        half0, half1 = round(POINT_SEPARATION_M / abs(dx)), round(POINT_SEPARATION_M / abs(dy))
-        sub = Image(
-            image.data[max(i - half0, 0) : i + half0 + 1, max(j - half1, 0) : j + half1 + 1],
-            image.axis0_m[max(i - half0, 0) : i + half0 + 1],
-            image.axis1_m[max(j - half1, 0) : j + half1 + 1],
-            image.frame,
-        )
+        sub = Image(image.data[rows, cols], image.axis0_m[rows], image.axis1_m[cols], image.frame)
         try:
             m = point_target_metrics(sub)
         except ProcessingError:

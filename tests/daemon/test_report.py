@@ -1,0 +1,43 @@
+"""The report's bright-point search: real point targets only, measured to theory."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sarmoco.daemon.report import bright_points
+from sarmoco.processing.types import Image
+
+SPACING_M = 0.1
+"""Pixel spacing of the test image, m (the sinc's IRW is 0.886 × RESOLUTION_M)."""
+
+RESOLUTION_M = 0.4
+"""Null-to-peak width of the unweighted sinc response, m."""
+
+
+def _sinc_image(targets: list[tuple[float, float, float]], noise: float) -> Image:
+    """Unweighted 2-D sinc responses (x_m, y_m, amplitude) on a 40 m grid, plus noise."""
+    axis = np.arange(-200, 200) * SPACING_M
+    x, y = np.meshgrid(axis, axis, indexing="ij")
+    data = np.zeros(x.shape, complex)
+    for x0, y0, amp in targets:
+        data += amp * np.sinc((x - x0) / RESOLUTION_M) * np.sinc((y - y0) / RESOLUTION_M)
+    rng = np.random.default_rng(3)
+    data += noise * (rng.standard_normal(x.shape) + 1j * rng.standard_normal(x.shape))
+    return Image(data, axis, axis, "ground")
+
+
+def test_bright_points_reports_targets_not_their_sidelobes_or_noise() -> None:
+    """Two targets of 0 and -6 dB over noise at -50 dB: exactly two points, at -13.26 dB PSLR.
+
+    The sidelobes of the brighter target (the first at -13.26 dB, one resolution away, the
+    ones past the 5 m separation at about -40 dB) and the noise peaks are not reported.
+    """
+    truth = [(-7.05, 3.02, 1.0), (8.0, -6.0, 0.5)]
+    points = bright_points(_sinc_image(truth, noise=10 ** (-50 / 20)), n=5)
+    assert len(points) == 2
+    for p, (x0, y0, amp) in zip(points, truth, strict=True):
+        assert abs(p["x_m"] - x0) < SPACING_M / 2 and abs(p["y_m"] - y0) < SPACING_M / 2
+        assert abs(p["peak_db"] - 20 * np.log10(amp)) < 0.5
+        for axis in ("az", "rg"):
+            assert abs(p[f"pslr_{axis}_db"] + 13.26) < 0.3
+            assert abs(p[f"irw_{axis}_m"] / (0.886 * RESOLUTION_M) - 1) < 0.05
