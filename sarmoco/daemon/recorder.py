@@ -48,7 +48,6 @@ import threading
 import time
 from collections.abc import Collection, Coroutine, Mapping
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 import numpy as np
@@ -58,6 +57,7 @@ from zarr.core.buffer import Buffer
 from zarr.core.sync import sync as zarr_sync
 from zarr.storage import LocalStore
 
+from sarmoco.closing import Closing
 from sarmoco.daemon.echoring import SampleFormat, sample_dtype, sample_shape
 from sarmoco.daemon.flags import FLAG_DTYPE
 from sarmoco.errors import RecorderError
@@ -224,7 +224,7 @@ class Table:
                 arr.resize((self.committed, *arr.shape[1:]))
 
 
-class Recorder:
+class Recorder(Closing):
     """Writes one run into a new zarr v3 store (the layout is in the module doc).
 
     Parameters
@@ -544,14 +544,3 @@ class Recorder:
         self.root.update_attributes({"complete": True})
         self.sync()
         self._closed = True
-
-    def __enter__(self) -> Recorder:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()

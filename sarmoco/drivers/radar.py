@@ -12,14 +12,14 @@ import logging
 import select
 import socket
 import time
-from abc import ABC, abstractmethod
+from abc import abstractmethod
 from pathlib import Path
-from types import TracebackType
-from typing import BinaryIO, Self
+from typing import BinaryIO
 
 import numpy as np
 import numpy.typing as npt
 
+from sarmoco.closing import Closing
 from sarmoco.drivers.samples import EchoPacket
 from sarmoco.drivers.vita49 import BATCH_MIN_PACKETS, VitaDecoder, VitaStreamFramer
 from sarmoco.errors import DriverError
@@ -38,7 +38,7 @@ UDP_GATHER_S = 0.002
 pause (once per call) that lets a batch build up: fewer wake-ups, batched decoding."""
 
 
-class RadarSource(ABC):
+class RadarSource(Closing):
     """A source of radar pulses decoded by a :class:`VitaDecoder`.
 
     Attributes
@@ -71,21 +71,6 @@ class RadarSource(ABC):
         list of EchoPacket
             Metadata of the pulses written, in row order.
         """
-
-    @abstractmethod
-    def close(self) -> None:
-        """Release the link; idempotent."""
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
 
 
 class RadarUdpSource(RadarSource):

@@ -10,16 +10,15 @@ links share the implementation: only the transport differs.
 
 from __future__ import annotations
 
-from abc import ABC, abstractmethod
+from abc import abstractmethod
 from collections.abc import Iterator
-from types import TracebackType
-from typing import Self
 
+from sarmoco.closing import Closing
 from sarmoco.drivers.counters import DriverCounters
 from sarmoco.drivers.samples import Sample
 
 
-class Source(ABC):
+class Source(Closing):
     """Base class of the navigation sources (MAVLink, SBG serial, SBG CAN)."""
 
     def __init__(self) -> None:
@@ -30,22 +29,7 @@ class Source(ABC):
     def poll(self, timeout_s: float = 0.0) -> list[Sample]:
         """Decode what arrives within ``timeout_s`` seconds; return the new samples."""
 
-    @abstractmethod
-    def close(self) -> None:
-        """Release the link; idempotent."""
-
     def samples(self, timeout_s: float = 0.1) -> Iterator[Sample]:
         """Iterate over samples until end of file (file sources) or forever (live)."""
         while not self.eof:
             yield from self.poll(timeout_s)
-
-    def __enter__(self) -> Self:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
