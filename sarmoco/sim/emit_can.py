@@ -34,13 +34,12 @@ from sarmoco.drivers.clock import NS_PER_S
 from sarmoco.sim.emit_sbg import (
     SOLUTION_NAV_POSITION,
     UTC_STATUS,
+    SbgDevice,
     gps_tow_ms,
     utc_fields,
     vec3,
     vec4,
 )
-from sarmoco.sim.emitter import Emitter
-from sarmoco.sim.faults import PacketFaults
 from sarmoco.sim.insfeed import InsFeed
 from sarmoco.sim.links import Link, TcpServerLink
 from sarmoco.sim.pacing import Event, merge
@@ -60,7 +59,7 @@ def _unix_seconds(unix_ns: int) -> str:
     return f"{seconds}.{ns // 1000:06d}"
 
 
-class SbgCanEmitter(Emitter):
+class SbgCanEmitter(SbgDevice):
     """Plays a run's INS samples as SBG CAN frames.
 
     Parameters
@@ -71,37 +70,18 @@ class SbgCanEmitter(Emitter):
         Samples, device clock and pulse events.
     framing : {"slcan", "socketcand", "candump"}
         How frames are written on the link.
-    attitude : {"quat", "euler"}
-        EKF_QUAT or EKF_EULER.
-    utc_period_s : float
-        Interval between time references (UTC_0/UTC_1 and status), s.
-    events : bool
-        Send an EVENT_INFO_A per radar pulse.
-    faults, seed, rank
-        See :class:`~sarmoco.sim.emitter.Emitter` (one CAN frame is one packet).
+    **options
+        ``attitude`` (EKF_QUAT or EKF_EULER), ``utc_period_s`` (interval between the time
+        references UTC_0/UTC_1 and status, s), ``events`` (an EVENT_INFO_A per radar pulse),
+        ``faults``, ``seed``, ``rank``: see :class:`~sarmoco.sim.emit_sbg.SbgDevice` (one CAN
+        frame is one packet).
     """
 
     protocol = "sbg-can"
 
-    def __init__(
-        self,
-        link: Link,
-        feed: InsFeed,
-        framing: Framing,
-        *,
-        attitude: Literal["quat", "euler"] = "quat",
-        utc_period_s: float = 0.2,
-        events: bool = True,
-        faults: PacketFaults | None = None,
-        seed: int = 0,
-        rank: int = 1,
-    ) -> None:
-        super().__init__(link, faults, seed, rank)
-        self.feed = feed
+    def __init__(self, link: Link, feed: InsFeed, framing: Framing, **options: Any) -> None:
+        super().__init__(link, feed, **options)
         self.framing: Framing = framing
-        self.attitude = attitude
-        self.utc_every = feed.every(utc_period_s)
-        self.with_events = events
         self.solution = SOLUTION_NAV_POSITION | sbg_codec.SOL_ATTITUDE_VALID
         self.solution |= sbg_codec.SOL_HEADING_VALID | sbg_codec.SOL_VELOCITY_VALID
         self.channel_open = framing == "candump"
@@ -117,18 +97,9 @@ class SbgCanEmitter(Emitter):
 
     def events(self) -> Iterator[Event]:
         """Samples, time references (on whole GPS ms) and pulse events, after the latency."""
-        f, lat = self.feed, self.feed.latency_ns
-        streams = [
-            (
-                Event(int(f.t_ns[i]) + lat, self.rank, partial(self._sample, i))
-                for i in range(f.t_ns.size)
-            ),
-            self._references(),
-        ]
+        streams = [self._samples(), self._references()]
         if self.with_events:
-            streams.append(
-                Event(int(t) + lat, self.rank, partial(self._event, int(t))) for t in f.pulse_t_ns
-            )
+            streams.append(self._pulse_events())
         yield from merge(streams)
 
     def _references(self) -> Iterator[Event]:

@@ -11,6 +11,7 @@ drivers' encoder (:func:`sarmoco.drivers.sbg_codec.encode_message`).
 from __future__ import annotations
 
 import datetime as dt
+from abc import abstractmethod
 from collections.abc import Iterator
 from functools import partial
 from typing import Any, Literal
@@ -59,26 +60,24 @@ def gps_tow_ms(gps_ns: int) -> int:
     return (gps_ns % (SECONDS_PER_WEEK * NS_PER_S)) // 1_000_000
 
 
-class SbgEmitter(Emitter):
-    """Plays a run's INS samples as sbgECom logs.
+class SbgDevice(Emitter):
+    """What the SBG INS does on every link: samples, time references and pulse events.
 
     Parameters
     ----------
     link : Link
-        Pseudo-terminal or file (frames back to back).
+        Where the frames go.
     feed : InsFeed
         Samples, device clock and pulse events.
     attitude : {"quat", "euler"}
-        EKF_QUAT or EKF_EULER.
+        Attitude as a quaternion or as Euler angles.
     utc_period_s : float
-        Interval between UTC_TIME logs, s.
+        Interval between time references, s.
     events : bool
-        Send an EVENT_A per radar pulse.
+        Send a pulse event (sync-in) per radar pulse.
     faults, seed, rank
         See :class:`~sarmoco.sim.emitter.Emitter`.
     """
-
-    protocol = "sbgecom"
 
     def __init__(
         self,
@@ -97,6 +96,45 @@ class SbgEmitter(Emitter):
         self.attitude = attitude
         self.utc_every = feed.every(utc_period_s)
         self.with_events = events
+
+    def _samples(self) -> Iterator[Event]:
+        """One event per INS sample, after the output latency."""
+        f = self.feed
+        return (
+            Event(int(f.t_ns[i]) + f.latency_ns, self.rank, partial(self._sample, i))
+            for i in range(f.t_ns.size)
+        )
+
+    def _pulse_events(self) -> Iterator[Event]:
+        """One event per radar pulse, after the output latency."""
+        f = self.feed
+        return (
+            Event(int(t) + f.latency_ns, self.rank, partial(self._event, int(t)))
+            for t in f.pulse_t_ns
+        )
+
+    @abstractmethod
+    def _sample(self, i: int) -> None:
+        """Send the frames of INS sample ``i``."""
+
+    @abstractmethod
+    def _event(self, t_pulse_ns: int) -> None:
+        """Send the pulse event of a pulse transmitted at ``t_pulse_ns`` (scenario GPS ns)."""
+
+
+class SbgEmitter(SbgDevice):
+    """Plays a run's INS samples as sbgECom logs (EKF_QUAT or EKF_EULER, UTC_TIME, EVENT_A).
+
+    Parameters
+    ----------
+    link, feed, attitude, utc_period_s, events, faults, seed, rank
+        See :class:`SbgDevice` (link: a pseudo-terminal or a file, frames back to back).
+    """
+
+    protocol = "sbgecom"
+
+    def __init__(self, link: Link, feed: InsFeed, **options: Any) -> None:
+        super().__init__(link, feed, **options)
         self.geodetic = None if feed.pos_ned is None else ned_to_geodetic(feed.pos_ned)
         g = feed.grade
         self.vel_std = vec3(np.full(3, max(g.vel_noise_mps, MIN_STD)))
@@ -110,18 +148,9 @@ class SbgEmitter(Emitter):
 
     def events(self) -> Iterator[Event]:
         """Samples (UTC_TIME first when due) and pulse events, each after the output latency."""
-        f, lat = self.feed, self.feed.latency_ns
-        samples = (
-            Event(int(f.t_ns[i]) + lat, self.rank, partial(self._sample, i))
-            for i in range(f.t_ns.size)
-        )
         if not self.with_events:
-            yield from samples
-            return
-        pulses = (
-            Event(int(t) + lat, self.rank, partial(self._event, int(t))) for t in f.pulse_t_ns
-        )
-        yield from merge([samples, pulses])
+            return self._samples()
+        return merge([self._samples(), self._pulse_events()])
 
     def _send_msg(self, msg: codec.Message, name: str, t_ns: int) -> None:
         self.sent[name] += 1
