@@ -88,24 +88,20 @@ def test_noise_level_and_illumination() -> None:
     )
 
 
-def test_shapes_checked() -> None:
+@pytest.mark.parametrize(
+    ("n_times", "n_targets"),
+    [(3, 1), (2, 2)],
+    ids=["times-vs-positions", "targets-vs-amplitudes"],
+)
+def test_shapes_checked(n_times: int, n_targets: int) -> None:
+    """Two pulse positions with 3 pulse times, or 2 targets with 1 amplitude, are refused."""
     radar = load_preset("ku-vehicle", scale=0.1).radar
     with pytest.raises(ProcessingError):
         synthesize(
             radar,
-            np.arange(3, dtype=np.int64),
+            np.arange(n_times, dtype=np.int64),
             np.zeros((2, 3)),
-            np.zeros((1, 3)),
-            np.ones(1),
-            None,
-            np.random.default_rng(),
-        )
-    with pytest.raises(ProcessingError):
-        synthesize(
-            radar,
-            np.arange(2, dtype=np.int64),
-            np.zeros((2, 3)),
-            np.zeros((2, 3)),
+            np.zeros((n_targets, 3)),
             np.ones(1),
             None,
             np.random.default_rng(),
