@@ -1,17 +1,21 @@
 """Preallocated ring of radar pulses, written in place by the decoder.
 
-The radar reader thread :meth:`EchoRing.reserve` s a slot, lets the decoder
-write the samples straight into ``slot.samples`` (no intermediate copy) and
-:meth:`EchoRing.commit` s it with the pulse metadata. The consumer (the
-aligner) looks at the oldest committed pulses with :meth:`EchoRing.peek_times`
-and takes them out with :meth:`EchoRing.pop`. The ring is bounded and never
-blocks the producer: when it is full, :meth:`EchoRing.reserve` returns
-``None``, counts a drop, and the next committed pulse carries
-:attr:`~sarmoco.daemon.flags.PulseFlag.DROPPED_BEFORE`.
+The radar reader thread reserves a block of contiguous slots
+(:meth:`EchoRing.reserve_block`, or one slot with :meth:`EchoRing.reserve`),
+lets the decoder write the samples straight into them (no intermediate copy)
+and publishes the rows it filled with :meth:`EchoRing.commit_block` (or
+:meth:`EchoRing.commit`). The consumer (the aligner) looks at the oldest
+committed pulses with :meth:`EchoRing.peek_times` and takes them out with
+:meth:`EchoRing.pop`. The ring is bounded and never blocks the producer: when
+it is full, a reservation returns ``None``; the producer then reads the waiting
+packets into scratch space and reports them with :meth:`EchoRing.note_dropped`,
+which counts them and flags the next committed pulse
+:attr:`~sarmoco.daemon.flags.PulseFlag.DROPPED_BEFORE`. A full ring polled
+while nothing arrives counts nothing.
 
 Pulses leave the ring in reservation order. Any number of producers may hold
-slots at once; a reserved slot that is neither committed nor aborted holds back
-the pulses reserved after it.
+slots at once; a reserved slot that is neither committed nor given back holds
+back the pulses reserved after it.
 """
 
 from __future__ import annotations
@@ -78,6 +82,26 @@ class Slot:
 
 
 @dataclass(frozen=True)
+class Block:
+    """Contiguous reserved ring slots (a block never wraps around the ring's end).
+
+    Attributes
+    ----------
+    seq : int
+        Reservation number of the first slot (ring position = ``seq % capacity``).
+    samples : ndarray
+        View of the rows: complex64 ``(n, S)`` or int16 ``(n, S, 2)``. The decoder
+        writes pulse ``k`` into ``samples[k]`` before :meth:`EchoRing.commit_block`.
+    """
+
+    seq: int
+    samples: npt.NDArray[np.generic]
+
+    def __len__(self) -> int:
+        return int(self.samples.shape[0])
+
+
+@dataclass(frozen=True)
 class EchoBatch:
     """Pulses taken out of the ring (copies, oldest first).
 
@@ -124,9 +148,10 @@ class EchoRing:
     Attributes
     ----------
     dropped : int
-        Pulses refused because the ring was full.
+        Pulses read while the ring was full and discarded (:meth:`note_dropped`).
     committed_total, aborted_total, popped_total : int
-        Running counts of committed, aborted and consumed slots.
+        Running counts of committed pulses, slots given back by :meth:`abort`, and
+        consumed pulses.
     """
 
     def __init__(
@@ -161,17 +186,40 @@ class EchoRing:
         self.aborted_total = 0
         self.popped_total = 0
 
-    def reserve(self) -> Slot | None:
-        """Reserve the next slot for one pulse; ``None`` (and a counted drop) when full."""
+    def reserve_block(self, max_n: int) -> Block | None:
+        """Reserve up to ``max_n`` contiguous slots; ``None`` when the ring is full.
+
+        Fewer are given when fewer are free or the ring's end comes first. A full
+        ring counts no drop by itself: the producer calls :meth:`note_dropped` for
+        the packets it actually discards.
+        """
         with self._lock:
-            if self._head - self._tail >= self.capacity:
-                self.dropped += 1
-                self._drop_pending = True
+            free = self.capacity - (self._head - self._tail)
+            if free <= 0 or max_n < 1:
                 return None
+            start = self._head % self.capacity
+            n = min(max_n, free, self.capacity - start)
             seq = self._head
-            self._head += 1
-            self._state[seq % self.capacity] = _RESERVED
-        return Slot(seq, self._samples[seq % self.capacity])
+            self._head += n
+            self._state[start : start + n] = _RESERVED
+        return Block(seq, self._samples[start : start + n])
+
+    def reserve(self) -> Slot | None:
+        """Reserve the next slot for one pulse; ``None`` when the ring is full."""
+        block = self.reserve_block(1)
+        return None if block is None else Slot(block.seq, block.samples[0])
+
+    def note_dropped(self, n: int) -> None:
+        """Count ``n`` pulses read while the ring was full and discarded.
+
+        The next committed pulse carries
+        :attr:`~sarmoco.daemon.flags.PulseFlag.DROPPED_BEFORE`.
+        """
+        if n <= 0:
+            return
+        with self._lock:
+            self.dropped += n
+            self._drop_pending = True
 
     def commit(
         self, slot: Slot, t_ns: int, pulse_id: int, channel: int = 0, flags: int = PulseFlag.NONE
@@ -191,26 +239,79 @@ class EchoRing:
         flags : int
             :class:`~sarmoco.daemon.flags.PulseFlag` bits known at decode time.
         """
-        i = self._check(slot)
+        i = self._check(slot.seq, 1)
         self._t_ns[i] = t_ns
         self._pulse_id[i] = pulse_id
         self._channel[i] = channel
+        self._flags[i] = flags
         with self._lock:
-            if self._drop_pending:
-                flags |= PulseFlag.DROPPED_BEFORE
-                self._drop_pending = False
-            self._flags[i] = flags
-            self._state[i] = _COMMITTED
-            self.committed_total += 1
-            self._advance_ready()
+            self._publish(slot.seq, 1, 1)
+
+    def commit_block(
+        self,
+        block: Block,
+        t_ns: npt.ArrayLike,
+        pulse_id: npt.ArrayLike,
+        channel: npt.ArrayLike,
+        flags: npt.ArrayLike,
+    ) -> None:
+        """Publish the first ``n = len(t_ns)`` rows of a block; give the rest back.
+
+        Parameters
+        ----------
+        block : Block
+            From :meth:`reserve_block`, rows ``0 .. n-1`` written.
+        t_ns, pulse_id : array_like of int, shape (n,)
+            Transmit times (GPS ns) and running pulse numbers.
+        channel, flags : array_like of int, shape (n,)
+            Receive channels and :class:`~sarmoco.daemon.flags.PulseFlag` bits.
+
+        Raises
+        ------
+        ProcessingError
+            If the block is not reserved or ``n`` exceeds its length.
+        """
+        t = np.asarray(t_ns, dtype=np.int64)
+        n = int(t.shape[0])
+        i = self._check(block.seq, len(block))
+        if n > len(block):
+            raise ProcessingError(f"EchoRing: {n} pulses committed to a block of {len(block)}")
+        rows = slice(i, i + n)
+        self._t_ns[rows] = t
+        self._pulse_id[rows] = pulse_id
+        self._channel[rows] = channel
+        self._flags[rows] = flags
+        with self._lock:
+            self._publish(block.seq, n, len(block))
 
     def abort(self, slot: Slot) -> None:
         """Give a reserved slot back unpublished (the decoder rejected the packet)."""
-        i = self._check(slot)
+        self._check(slot.seq, 1)
         with self._lock:
-            self._state[i] = _ABORTED
             self.aborted_total += 1
-            self._advance_ready()
+            self._publish(slot.seq, 0, 1)
+
+    def _publish(self, seq: int, n: int, reserved: int) -> None:
+        """Mark ``n`` slots from ``seq`` committed and give back the rest (lock held).
+
+        The first committed slot takes a pending drop flag. Slots given back at the
+        head are simply unreserved; others are marked aborted and freed when they
+        reach the tail.
+        """
+        i = seq % self.capacity
+        if n:
+            if self._drop_pending:
+                self._flags[i] |= PulseFlag.DROPPED_BEFORE
+                self._drop_pending = False
+            self._state[i : i + n] = _COMMITTED
+            self.committed_total += n
+        if n < reserved:
+            if seq + reserved == self._head:
+                self._head = seq + n
+                self._state[i + n : i + reserved] = _FREE
+            else:
+                self._state[i + n : i + reserved] = _ABORTED
+        self._advance_ready()
 
     def __len__(self) -> int:
         """Committed pulses ready to be taken, oldest first, in order."""
@@ -274,8 +375,9 @@ class EchoRing:
             else:
                 break
 
-    def _check(self, slot: Slot) -> int:
-        i = slot.seq % self.capacity
-        if self._state[i] != _RESERVED or not self._tail <= slot.seq < self._head:
-            raise ProcessingError(f"EchoRing: slot {slot.seq} is not reserved")
+    def _check(self, seq: int, n: int) -> int:
+        """Ring position of ``n`` reserved slots from ``seq``; raises if any is not reserved."""
+        i = seq % self.capacity
+        if not self._tail <= seq <= self._head - n or (self._state[i : i + n] != _RESERVED).any():
+            raise ProcessingError(f"EchoRing: slots {seq}..{seq + n - 1} are not reserved")
         return int(i)

@@ -28,14 +28,14 @@ import numpy as np
 
 from sarmoco.daemon.aligner import AlignedBlock, Aligner
 from sarmoco.daemon.config import Config
-from sarmoco.daemon.echoring import EchoRing, SampleFormat
-from sarmoco.daemon.flags import NAV_UNUSABLE, PulseFlag
+from sarmoco.daemon.echoring import Block, EchoRing, SampleFormat, sample_dtype, sample_shape
+from sarmoco.daemon.flags import FLAG_DTYPE, NAV_UNUSABLE, PulseFlag
 from sarmoco.daemon.focuser import Focuser, FocusOutput
 from sarmoco.daemon.navbuffer import NavBuffer, PushResult
 from sarmoco.daemon.recorder import NAV_KIND_ATTITUDE, NAV_KIND_VELOCITY, Recorder
 from sarmoco.daemon.status import Counters
-from sarmoco.drivers.radar import RadarSource
-from sarmoco.drivers.samples import AttitudeSample, Sample, VelocitySample
+from sarmoco.drivers.radar import UDP_BATCH_PACKETS, RadarSource
+from sarmoco.drivers.samples import AttitudeSample, EchoPacket, Sample, VelocitySample
 from sarmoco.processing.metrics import image_contrast, image_entropy
 from sarmoco.processing.navinterp import BoolArray
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
@@ -44,6 +44,10 @@ log = logging.getLogger(__name__)
 
 RING_SECONDS = 4.0
 """Echo ring capacity in seconds of pulses at the nominal PRF."""
+READ_BLOCK_PULSES = UDP_BATCH_PACKETS
+"""Ring slots reserved per radar read: room for one batch of the UDP driver (batched
+receive and decode, and its short gathering pause, need at least
+:data:`~sarmoco.drivers.vita49.BATCH_MIN_PACKETS` rows)."""
 
 
 def ring_format(cfg: Config) -> SampleFormat:
@@ -118,10 +122,9 @@ class Pipeline:
         """Time (GPS ns), velocity and attitude of the last pulse with navigation."""
         fmt = ring_format(cfg)
         self._scratch = np.empty(
-            (cfg.radar.n_samples, 2) if fmt == "int16" else (cfg.radar.n_samples,),
-            np.int16 if fmt == "int16" else np.complex64,
+            (READ_BLOCK_PULSES, *sample_shape(cfg.radar.n_samples, fmt)), sample_dtype(fmt)
         )
-        """Where a pulse that finds the ring full is decoded, then dropped."""
+        """Where pulses that find the ring full are decoded, then dropped."""
 
     # -- readers --------------------------------------------------------------------------
 
@@ -130,30 +133,41 @@ class Pipeline:
     ) -> int:
         """Decode the pulses ``source`` has within ``timeout_s`` into the ring; returns the count.
 
-        When the ring is full the pulse is read into scratch space and dropped (counted by
-        the ring), so the socket is always drained. ``max_pulses`` stops after that many
-        (a file read at its own pace: a replay, a file link of ``run``).
+        Pulses are read a block of ring slots at a time (:data:`READ_BLOCK_PULSES`), so
+        the driver's batched receive and decode serve many pulses per call. When the
+        ring is full the pulses are read into scratch space and dropped (counted by
+        the ring, and the next stored pulse flagged), so the socket is always drained.
+        ``max_pulses`` stops after that many (a file read at its own pace: a replay, a
+        file link of ``run``).
         """
-        n = 0
-        while max_pulses is None or n < max_pulses:
-            slot = self.ring.reserve()
-            row = slot.samples if slot is not None else self._scratch
-            packets = source.read_into(row[None, ...], timeout_s if n == 0 else 0.0)
-            if not packets:
-                if slot is not None:
-                    self.ring.abort(slot)
-                return n
-            pkt = packets[0]
-            n += 1
-            if slot is None:
-                continue
-            with self._id_lock:
-                pid = self._next_pulse_id
-                self._next_pulse_id += 1
-                self._latest_pulse_ns = pkt.t_gps_ns
-                self._latest_pulse_mono_ns = time.monotonic_ns()
-            self.ring.commit(slot, pkt.t_gps_ns, pid, pkt.stream_id, PulseFlag.from_packet(pkt))
+        n, limit = 0, math.inf if max_pulses is None else max_pulses
+        while n < limit:
+            want = int(min(READ_BLOCK_PULSES, limit - n))
+            block = self.ring.reserve_block(want)
+            rows = self._scratch[:want] if block is None else block.samples
+            packets = source.read_into(rows, timeout_s if n == 0 else 0.0)
+            n += len(packets)
+            if block is None:
+                self.ring.note_dropped(len(packets))
+            else:
+                self._commit(block, packets)
+            if len(packets) < rows.shape[0]:
+                break  # the source has nothing more now
         return n
+
+    def _commit(self, block: Block, packets: list[EchoPacket]) -> None:
+        """Publish the pulses decoded into ``block`` with running ids (gives back the rest)."""
+        k = len(packets)
+        t_ns = np.fromiter((p.t_gps_ns for p in packets), np.int64, k)
+        channel = np.fromiter((p.stream_id for p in packets), np.int32, k)
+        flags = np.fromiter((PulseFlag.from_packet(p) for p in packets), FLAG_DTYPE, k)
+        with self._id_lock:
+            first = self._next_pulse_id
+            self._next_pulse_id += k
+            if k:
+                self._latest_pulse_ns = int(t_ns[-1])
+                self._latest_pulse_mono_ns = time.monotonic_ns()
+        self.ring.commit_block(block, t_ns, np.arange(first, first + k), channel, flags)
 
     def add_nav(self, samples: list[Sample], rx_ns: int | None) -> None:
         """Offer INS samples to the nav buffer and queue them for the recorder."""

@@ -42,18 +42,55 @@ def test_int16_iq_to_complex() -> None:
     np.testing.assert_array_equal(to_complex64(iq), [[1 - 2j, 3 + 4j]])
 
 
-def test_full_ring_drops_and_flags_next_pulse() -> None:
+def test_full_ring_counts_only_real_drops_and_flags_next_pulse() -> None:
     ring = EchoRing(4, 3)
     assert all(_fill(ring, k) for k in range(4))
-    assert not _fill(ring, 4)
-    assert not _fill(ring, 5)
+    for _ in range(10):  # polling a full ring while nothing arrives drops nothing
+        assert ring.reserve() is None and ring.reserve_block(8) is None
+    assert ring.dropped == 0
+    ring.note_dropped(2)  # the reader read two pulses into scratch and discarded them
+    ring.note_dropped(0)
     assert ring.dropped == 2
     ring.pop(2)
     assert _fill(ring, 6)
-    batch = ring.pop(3)
-    np.testing.assert_array_equal(batch.pulse_id, [2, 3, 6])
-    assert batch.flags[2] == PulseFlag.DROPPED_BEFORE
-    assert batch.flags[0] == 0
+    assert _fill(ring, 7)
+    batch = ring.pop(4)
+    np.testing.assert_array_equal(batch.pulse_id, [2, 3, 6, 7])
+    np.testing.assert_array_equal(batch.flags, [0, 0, PulseFlag.DROPPED_BEFORE, 0])
+
+
+def test_blocks_stop_at_the_ring_end_and_give_back_unused_rows() -> None:
+    ring = EchoRing(10, 2, "int16")
+    a = ring.reserve_block(6)
+    assert a is not None and len(a) == 6 and a.samples.shape == (6, 2, 2)
+    a.samples[:4] = 7
+    ring.commit_block(a, [10, 11, 12, 13], [0, 1, 2, 3], [0, 0, 1, 1], [0, 0, 0, 8])
+    assert len(ring) == 4
+    b = ring.reserve_block(100)  # unused rows of a went back: 6 free to the end
+    assert b is not None and (b.seq, len(b)) == (4, 6)
+    ring.commit_block(b, [14], [4], [0], [0])
+    batch = ring.pop(5)
+    np.testing.assert_array_equal(batch.t_ns, [10, 11, 12, 13, 14])
+    np.testing.assert_array_equal(batch.channel, [0, 0, 1, 1, 0])
+    assert batch.flags[3] == 8 and (batch.samples[:4] == 7).all()
+    c = ring.reserve_block(100)  # wraps: the block never crosses the ring's end
+    assert c is not None and (c.seq, len(c)) == (5, 5)
+    d = ring.reserve_block(100)
+    assert d is not None and (d.seq, len(d)) == (10, 5)  # positions 0..4
+    ring.commit_block(d, [30, 31], [30, 31], [0, 0], [0, 0])
+    assert len(ring) == 0  # c, reserved first, holds d back
+    ring.commit_block(c, [20, 21], [20, 21], [0, 0], [0, 0])  # c's rest is aborted, not at head
+    assert len(ring) == 2
+    np.testing.assert_array_equal(ring.pop(2).pulse_id, [20, 21])
+    assert len(ring) == 2  # c's given-back rows are freed, d's pulses follow
+    np.testing.assert_array_equal(ring.pop(2).pulse_id, [30, 31])
+    assert ring.committed_total == ring.popped_total == 9 and ring.aborted_total == 0
+    with pytest.raises(ProcessingError):
+        ring.commit_block(c, [1], [1], [0], [0])
+    e = ring.reserve_block(3)
+    assert e is not None
+    with pytest.raises(ProcessingError, match="4 pulses committed to a block of 3"):
+        ring.commit_block(e, [1, 2, 3, 4], [1, 2, 3, 4], [0] * 4, [0] * 4)
 
 
 def test_out_of_order_commit_and_abort_keep_reservation_order() -> None:
@@ -76,18 +113,36 @@ def test_out_of_order_commit_and_abort_keep_reservation_order() -> None:
 
 
 def test_threaded_producer_never_blocks_and_nothing_is_corrupted() -> None:
+    """A reader thread writing blocks of varying fill, as the radar reader does.
+
+    Every pulse is either consumed intact and in order or counted as dropped, and a
+    pulse carries DROPPED_BEFORE exactly when pulses before it were dropped.
+    """
     ring = EchoRing(64, 256, "int16")
     n_total = 20_000
+    rng = np.random.default_rng(3)
+    sizes = rng.integers(1, 40, n_total).tolist()
     seen: list[int] = []
+    flags: list[int] = []
     done = threading.Event()
 
     def produce() -> None:
-        for k in range(n_total):
-            slot = ring.reserve()
-            if slot is not None:
-                slot.samples[:, 0] = k % 30_000
-                slot.samples[:, 1] = -(k % 30_000)
-                ring.commit(slot, t_ns=k, pulse_id=k)
+        k = 0
+        for want in sizes:
+            if k >= n_total:
+                break
+            arrived = min(want, n_total - k, int(rng.integers(0, want + 1)))
+            block = ring.reserve_block(want)
+            if block is None:
+                ring.note_dropped(arrived)  # read into scratch and discarded
+                k += arrived
+                continue
+            m = min(arrived, len(block))
+            ids = np.arange(k, k + m)
+            block.samples[:m, :, 0] = (ids % 30_000)[:, None]
+            block.samples[:m, :, 1] = -(ids % 30_000)[:, None]
+            ring.commit_block(block, ids, ids, np.zeros(m), np.zeros(m))
+            k += m
         done.set()
 
     thread = threading.Thread(target=produce)
@@ -101,7 +156,10 @@ def test_threaded_producer_never_blocks_and_nothing_is_corrupted() -> None:
         assert (batch.samples[:, :, 0] == expect[:, None]).all()
         assert (batch.samples[:, :, 1] == -expect[:, None]).all()
         seen.extend(batch.pulse_id.tolist())
+        flags.extend(batch.flags.tolist())
     thread.join()
     assert seen == sorted(seen)
-    assert len(seen) + ring.dropped == n_total
+    assert ring.dropped > 0 and len(seen) + ring.dropped == n_total
+    jumped = np.diff([-1, *seen]) > 1
+    np.testing.assert_array_equal(np.array(flags) == PulseFlag.DROPPED_BEFORE, jumped)
     assert ring.committed_total == len(seen) == ring.popped_total

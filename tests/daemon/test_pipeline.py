@@ -10,19 +10,24 @@ IRW ≤ 1.1 × theory) at the right place.
 from __future__ import annotations
 
 import math
+import socket
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from sarmoco.daemon.config import Config
+from sarmoco.daemon.config import Config, parse_config
+from sarmoco.daemon.flags import PulseFlag
+from sarmoco.daemon.links import open_radar
 from sarmoco.daemon.pipeline import Pipeline
 from sarmoco.daemon.report import write_report
 from sarmoco.daemon.runner import open_recorder
 from sarmoco.daemon.simconfig import scenario_config
 from sarmoco.daemon.status import Counters
 from sarmoco.daemon.store import open_store
-from sarmoco.drivers.samples import AttitudeSample, Validity, VelocitySample
+from sarmoco.drivers.radar import RadarUdpSource
+from sarmoco.drivers.samples import AttitudeSample, EchoPacket, Validity, VelocitySample
+from sarmoco.drivers.vita49 import encode_signal_packet
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
 from sarmoco.sim.trajectory import MotionSpec
@@ -103,3 +108,75 @@ def test_pipeline_focuses_and_records(run: SimRun, tmp_path: Path, autofocus: bo
         irw_rg = 0.886 * scn.radar.range_resolution_m * np.hypot(tgt[1], tgt[2]) / tgt[1]
         assert p["pslr_az_db"] <= -12.5 and p["pslr_rg_db"] <= -12.5, p
         assert p["irw_az_m"] <= 1.1 * irw_az and p["irw_rg_m"] <= 1.1 * irw_rg, p
+
+
+# -- the radar reader on a real UDP socket --------------------------------------------------
+
+READ_SAMPLES = 64
+T0_NS = 1_400_000_000 * 10**9
+"""GPS time of the first test pulse, ns."""
+
+
+def test_read_radar_reads_blocks_and_counts_only_real_drops(tmp_path: Path) -> None:
+    """VITA 49 datagrams on 127.0.0.1 into a pipeline whose ring (1024 slots) is never drained.
+
+    The reader fills the ring with few driver calls (blocks, not one row per call);
+    polling the full ring while nothing arrives drops nothing; pulses that arrive while
+    it is full are read and counted as dropped; the first pulse stored after room is
+    made is flagged DROPPED_BEFORE, and nothing else is.
+    """
+    cfg = parse_config(
+        {
+            "radar": {"n_samples": READ_SAMPLES, "prf_hz": 100.0, "sample_format": "int16"},
+            "status": {"http_port": 0},
+        }
+    )
+    with open_recorder(cfg, tmp_path / "read.zarr") as rec:
+        pipe = Pipeline(cfg, rec, Counters())
+        assert pipe.ring.capacity == 1024
+        calls = 0
+        with open_radar(cfg, "udp://127.0.0.1:0") as src:
+            assert isinstance(src, RadarUdpSource)
+            read_into = src.read_into
+
+            def counted(out: np.ndarray, timeout_s: float = 0.1) -> list[EchoPacket]:
+                nonlocal calls
+                calls += 1
+                return read_into(out, timeout_s)
+
+            src.read_into = counted  # type: ignore[method-assign]
+            with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+                sent = 0
+
+                def send_and_read(n: int) -> int:
+                    nonlocal sent
+                    got = 0
+                    for k in range(sent, sent + n):
+                        iq = np.full((READ_SAMPLES, 2), k % 30_000, np.int16)
+                        tx.sendto(encode_signal_packet(0, T0_NS + k * 10**7, k, iq), src.address)
+                        if k % 100 == 99:
+                            got += pipe.read_radar(src, 1.0)
+                    sent += n
+                    while got < n and (more := pipe.read_radar(src, 1.0)):
+                        got += more
+                    return got
+
+                assert send_and_read(1024) == 1024
+                assert len(pipe.ring) == 1024 and pipe.ring.dropped == 0
+                assert calls <= 1024 // 16, calls  # blocks of rows per driver call
+                for _ in range(20):  # a full ring polled while nothing arrives
+                    assert pipe.read_radar(src, 0.01) == 0
+                assert pipe.ring.dropped == 0
+                assert send_and_read(300) == 300  # read into scratch and dropped
+                assert pipe.ring.dropped == 300 and len(pipe.ring) == 1024
+                first = pipe.ring.pop(1024)
+                assert send_and_read(5) == 5
+                last = pipe.ring.pop(5)
+    np.testing.assert_array_equal(first.t_ns, T0_NS + np.arange(1024) * 10**7)
+    np.testing.assert_array_equal(first.samples[:, 0, 0], np.arange(1024))
+    np.testing.assert_array_equal(first.pulse_id, np.arange(1024))
+    assert not first.flags.any()
+    np.testing.assert_array_equal(last.t_ns, T0_NS + np.arange(1324, 1329) * 10**7)
+    np.testing.assert_array_equal(last.samples[:, -1, 1], np.arange(1324, 1329))
+    np.testing.assert_array_equal(last.pulse_id, np.arange(1024, 1029))
+    np.testing.assert_array_equal(last.flags, [PulseFlag.DROPPED_BEFORE, 0, 0, 0, 0])
