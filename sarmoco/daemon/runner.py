@@ -209,7 +209,7 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
             health.set("links", ok, st.link_down)
             health.set("ins", nav_age < INS_STALE_S, f"newest sample {nav_age:.2f} s old")
             if ok:
-                notifier.watchdog()
+                notifier.keepalive()
             if now - last_status >= 1.0:
                 last_status = now
                 counters.set("ins_age_seconds", nav_age)

@@ -7,8 +7,10 @@ When the variable is unset (not started by systemd) every call is a no-op.
 
 from __future__ import annotations
 
+import math
 import os
 import socket
+import time
 from collections.abc import Mapping
 
 from sarmoco.errors import DriverError
@@ -38,6 +40,7 @@ class Notifier:
             raise DriverError(f"NOTIFY_SOCKET: {name!r} is neither a path nor an @abstract name")
         self._watchdog_s = self._parse_watchdog(env)
         self._sock: socket.socket | None = None
+        self._last_keepalive_s = -math.inf
 
     @staticmethod
     def _parse_watchdog(env: Mapping[str, str]) -> float | None:
@@ -91,6 +94,31 @@ class Notifier:
     def watchdog(self) -> None:
         """``WATCHDOG=1``: the keep-alive ping."""
         self.notify({"WATCHDOG": 1})
+
+    def keepalive(self, now_s: float | None = None) -> bool:
+        """``WATCHDOG=1`` if systemd watches this process and half its interval has passed.
+
+        Call it as often as convenient (every pass of a loop that is healthy): it pings
+        at most once per ``WATCHDOG_USEC / 2``, as sd_watchdog_enabled(3) recommends.
+
+        Parameters
+        ----------
+        now_s : float, optional
+            Monotonic time, s (default ``time.monotonic()``).
+
+        Returns
+        -------
+        bool
+            Whether a ping was sent.
+        """
+        if self._watchdog_s is None or self._address is None:
+            return False
+        now = time.monotonic() if now_s is None else now_s
+        if now - self._last_keepalive_s < self._watchdog_s / 2:
+            return False
+        self.watchdog()
+        self._last_keepalive_s = now
+        return True
 
     def stopping(self) -> None:
         """``STOPPING=1``: shutdown has begun."""

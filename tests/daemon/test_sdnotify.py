@@ -82,3 +82,14 @@ def test_bad_socket_name_and_dead_socket(tmp_path: Path) -> None:
     dead = Notifier({"NOTIFY_SOCKET": str(tmp_path / "nobody-listens")})
     with pytest.raises(DriverError, match="sd_notify"):
         dead.ready()
+
+
+def test_keepalive_at_most_every_half_watchdog_interval(
+    path_socket: tuple[socket.socket, str],
+) -> None:
+    sock, name = path_socket
+    notifier = Notifier({"NOTIFY_SOCKET": name, "WATCHDOG_USEC": "2000000"})
+    sent = [t for t in (10.0, 10.5, 10.99, 11.0, 11.2, 12.1, 13.0) if notifier.keepalive(t)]
+    assert sent == [10.0, 11.0, 12.1]
+    assert [sock.recv(4096) for _ in sent] == [b"WATCHDOG=1"] * 3
+    assert not Notifier({"NOTIFY_SOCKET": name}).keepalive(10.0)  # systemd does not watch
