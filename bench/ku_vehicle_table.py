@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,9 +37,14 @@ import pytest
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing import rangecomp
-from sarmoco.processing.autofocus import AutofocusConfig, AutofocusGeometry, autofocus_offline
+from sarmoco.processing.autofocus import (
+    AutofocusConfig,
+    AutofocusGeometry,
+    Corrections,
+    autofocus_offline,
+)
 from sarmoco.processing.autofocus.pga import pga_stripmap
-from sarmoco.processing.autofocus.splice import line_fit
+from sarmoco.processing.autofocus.splice import integrate_twice, line_fit
 from sarmoco.processing.geometry import (
     ReferenceTrack,
     fit_reference_track,
@@ -57,7 +63,7 @@ ROWS = ("nav only", "baseline", "two-step", "two-step+PGA")
 EAST_FRAC = (-0.45, -0.3, -0.15, 0.0, 0.15, 0.3, 0.45)
 """Targets across the swath (ground-range fractions); near, centre and far are evaluated."""
 EVALUATED = (0, 3, 6)
-_KEYS = ("pslr_az_db", "pslr_rg_db", "irw_az_ratio", "irw_rg_ratio")
+_KEYS = ("pslr_az_db", "pslr_rg_db", "irw_az_ratio", "irw_rg_ratio", "pos_az_m", "pos_rg_m")
 
 
 @dataclass(frozen=True)
@@ -83,17 +89,79 @@ def scenario(case: Case) -> Scenario:
     return load_preset("ku-vehicle", case.scale, targets=targets, **dict(case.preset_overrides))
 
 
+PhaseFn = Callable[[float], FloatArray]
+"""Phase removed from every pulse at one slant range, rad (shape (P,)), by a correction."""
+
+
+def _no_phase(n: int) -> PhaseFn:
+    return lambda _r: np.zeros(n)
+
+
+def expected_position(
+    run: SimRun, track: ReferenceTrack, k: int, los_m: FloatArray, phase: PhaseFn
+) -> FloatArray:
+    """Where target ``k`` appears in a backprojection on ``track`` of the corrected data, NED m.
+
+    The corrections cannot observe a constant or a linear LOS displacement (METHODS §3), and
+    GPS-grade navigation leaves both against the fitted track (with 0.3 m noise over a
+    1.4 s aperture the track's LOS slope is off by about 0.01 v): a linear range error ``b t``
+    moves a target by ``-b R / v`` along track, a constant one moves it in range. So the
+    expected position is the point whose reference range history matches the corrected one:
+    along track, the least-squares fit (with a free constant) of the corrected carrier range
+    ``R_true + λ φ / 4π`` to the reference history; across track, the mean of the corrected
+    envelope ``R_true + los``. Both over the pulses that illuminate the target; three
+    Gauss-Newton steps.
+    """
+    scn = run.scenario
+    lam = scn.radar.wavelength_m
+    target = run.targets_ned[k]
+    lit = scn.illumination(run.apc_ned, target[None, :])[:, 0] > 0
+    apc = track.position_ned(run.t_ns)[lit]
+    r_true = np.linalg.norm(run.apc_ned[lit] - target, axis=1)
+    r0 = float(np.min(np.linalg.norm(apc - target, axis=1)))
+    carrier = r_true + lam * phase(r0)[lit] / (4.0 * np.pi)
+    envelope = r_true + los_m[lit]
+    pos = target.copy()
+    for _ in range(3):
+        los = pos - apc
+        r_ref = np.linalg.norm(los, axis=1)
+        g_x = los @ track.x_hat / r_ref
+        g_y = los @ track.y_hat / r_ref
+        design = np.column_stack([np.ones_like(g_x), g_x])
+        dx = np.linalg.lstsq(design, carrier - r_ref, rcond=None)[0][1]
+        dy = float(np.mean(envelope - r_ref)) / float(np.mean(g_y))
+        pos = pos + dx * track.x_hat + dy * track.y_hat
+    return np.asarray(pos, dtype=float)
+
+
 def _grid_images(
-    rc: ComplexArray, run: SimRun, track: ReferenceTrack, range_m: FloatArray
+    rc: ComplexArray,
+    run: SimRun,
+    track: ReferenceTrack,
+    range_m: FloatArray,
+    los_m: FloatArray | None = None,
+    phase: PhaseFn | None = None,
 ) -> list[Any]:
+    """Backprojections on ``track`` of small grids centred on each evaluated target's
+    :func:`expected_position` (``los_m``/``phase``: the corrections applied to ``rc``)."""
     apc = track.position_ned(run.t_ns)
-    offset = np.mean(apc - run.apc_ned, axis=0)
+    n = run.t_ns.size
     images = []
     for k in EVALUATED:
-        centre = run.targets_ned[k] + offset
+        centre = expected_position(
+            run, track, k, np.zeros(n) if los_m is None else los_m, phase or _no_phase(n)
+        )
         grid = PlaneGrid.centred((centre[0], centre[1], 0.0), 320, 128, 0.04, 0.04)
         images.append(backproject(rc, range_m, apc, run.scenario.radar.wavelength_m, grid))
     return images
+
+
+def _corrected_phase(corr: Corrections, extra_rad: FloatArray | None = None) -> PhaseFn:
+    def phase(r: float) -> FloatArray:
+        out = corr.phase_rad(np.array([r]))[:, 0]
+        return out if extra_rad is None else out + extra_rad
+
+    return phase
 
 
 def _row(images: list[Any], theory: list[tuple[float, float]]) -> list[dict[str, float]]:
@@ -110,6 +178,8 @@ def _row(images: list[Any], theory: list[tuple[float, float]]) -> list[dict[str,
                 "pslr_rg_db": m.axis1.pslr_db,
                 "irw_az_ratio": m.axis0.irw_m / irw_az,
                 "irw_rg_ratio": m.axis1.irw_m / irw_rg,
+                "pos_az_m": float(m.position_error_m[0]) if m.position_error_m else np.nan,
+                "pos_rg_m": float(m.position_error_m[1]) if m.position_error_m else np.nan,
             }
         )
     return out
@@ -174,8 +244,9 @@ so the vertical motion's LOS projection changes strongly and non-linearly across
 
 def wide_low_case(scale: float = 0.2, motion_seed: int = 2) -> Case:
     """Acceptance 3 case: mostly vertical motion on WIDE_LOW, fast enough (corner 0.12 Hz) that
-    the order-1 model's truth residual is 1.1 / 0.7 / 0.8 rad rms at near / centre / far
-    (order 2: 0.18 / 0.03 / 0.14 rad), with a 2.4-cell vertical spread."""
+    the κ models fall visibly short of the true range dependence (:func:`range_model_limit`,
+    rad rms at near / centre / far: order 1 0.33 / 0.46 / 0.78, order 2 0.05 / 0.02 / 0.13),
+    with a 2.4-cell vertical spread."""
     return Case(
         scale=scale,
         cross_track_rms_m=0.3,
@@ -186,32 +257,73 @@ def wide_low_case(scale: float = 0.2, motion_seed: int = 2) -> Case:
     )
 
 
+def range_model_limit(p: Prepared, order: int) -> list[float]:
+    """Phase residual (rad rms) that a κ model of ``order`` leaves even with exact rates.
+
+    The true rate error of every target's range line (second derivative of its true minus
+    reference range history, all targets as if lit all the time) is fitted at each pulse
+    with ``order + 1`` powers of ``Δd = R - R_c`` through the targets' ranges (unweighted);
+    the misfit at each evaluated target is integrated twice and its linear trend over the
+    target's lit pulses removed.
+    """
+    run, track = p.run, p.track
+    t = (run.t_ns - run.t_ns[0]) * 1e-9
+    apc = track.position_ned(run.t_ns)
+    true_r = np.linalg.norm(run.apc_ned[:, None, :] - run.targets_ned[None], axis=2)
+    ref_r = np.linalg.norm(apc[:, None, :] - run.targets_ned[None], axis=2)
+    rate = np.gradient(
+        np.gradient(-2.0 * (true_r - ref_r) / p.geom.wavelength_m, t, axis=0), t, axis=0
+    )
+    dd = ref_r.min(axis=0) - p.geom.ref_range_m
+    design = dd[:, None] ** np.arange(order + 1)[None, :]
+    misfit = rate - (design @ np.linalg.lstsq(design, rate.T, rcond=None)[0]).T
+    zero = np.zeros(misfit.shape[1])
+    cycles = integrate_twice(t, misfit, zero, zero)[0]
+    out = []
+    for k in EVALUATED:
+        lit = run.scenario.illumination(run.apc_ned, run.targets_ned[k][None, :])[:, 0] > 0
+        res = 2.0 * np.pi * cycles[lit, k]
+        out.append(float(np.std(res - line_fit(t[lit], res[:, None])[:, 0])))
+    return out
+
+
 def format_range_orders(result: dict[int, Any]) -> str:
     """Acceptance 3 table: one line per range order and target."""
-    lines = [f"{'κ order':<9}{'target':<8}{'PSLR az':>9}{'PSLR rg':>9}{'IRW az/th':>11}"]
+    lines = [
+        f"{'κ order':<9}{'target':<8}{'PSLR az':>9}{'PSLR rg':>9}{'IRW az/th':>11}{'Δaz m':>8}"
+        f"{'model rad':>11}"
+    ]
     for order, rows in result.items():
         for name, m in zip(("near", "centre", "far"), rows, strict=True):
             lines.append(
                 f"{order:<9}{name:<8}{m['pslr_az_db']:>9.2f}{m['pslr_rg_db']:>9.2f}"
-                f"{m['irw_az_ratio']:>11.3f}"
+                f"{m['irw_az_ratio']:>11.3f}{m['pos_az_m']:>8.3f}{m['model_rad']:>11.3f}"
             )
     return "\n".join(lines)
 
 
 def range_orders(case: Case, config: AutofocusConfig | None = None) -> dict[int, Any]:
-    """Acceptance 3: the two-step method with a κ range model of order 1 and of order 2.
+    """Acceptance 3: the two-step method with a κ range model of order 0, 1 and 2.
 
-    Returns, per order, the near/centre/far metrics of :func:`run_case`'s rows.
+    Returns, per order, the near/centre/far metrics of :func:`run_case`'s rows, with the
+    model's own limit (:func:`range_model_limit`) as ``model_rad``. The images are centred on
+    :func:`expected_position`: GPS leaves the fitted track a LOS slope that no autofocus can
+    see, which moves the targets along track by up to 5 m here (range-proportional).
     """
     cfg = config or AutofocusConfig()
     p = prepare(case)
     out: dict[int, Any] = {}
-    for order in (1, 2):
+    for order in (0, 1, 2):
         corr, _ = autofocus_offline(
             p.rc, p.run.t_ns, p.range_m, p.geom, dataclasses.replace(cfg, range_order=order)
         )
-        images = _grid_images(corr.apply(p.rc, p.range_m), p.run, p.track, p.range_m)
+        focused = corr.apply(p.rc, p.range_m)
+        images = _grid_images(
+            focused, p.run, p.track, p.range_m, corr.los_m, _corrected_phase(corr)
+        )
         out[order] = _row(images, p.theory)
+        for m, limit in zip(out[order], range_model_limit(p, order), strict=True):
+            m["model_rad"] = limit
     return out
 
 
@@ -232,19 +344,22 @@ def run_case(case: Case, config: AutofocusConfig | None = None) -> dict[str, Any
     corr_b, _ = autofocus_offline(rc, run.t_ns, range_m, geom, baseline_cfg)
     result["timing_s"]["baseline"] = time.process_time() - t0
     focused_b = corr_b.apply(rc, range_m)
-    result["rows"]["baseline"] = _row(_grid_images(focused_b, run, track, range_m), theory)
+    images = _grid_images(focused_b, run, track, range_m, corr_b.los_m, _corrected_phase(corr_b))
+    result["rows"]["baseline"] = _row(images, theory)
 
     t0 = time.process_time()
     corr, report = autofocus_offline(rc, run.t_ns, range_m, geom, cfg)
     result["timing_s"]["two-step"] = time.process_time() - t0
     focused = corr.apply(rc, range_m)
-    result["rows"]["two-step"] = _row(_grid_images(focused, run, track, range_m), theory)
+    images = _grid_images(focused, run, track, range_m, corr.los_m, _corrected_phase(corr))
+    result["rows"]["two-step"] = _row(images, theory)
 
     t0 = time.process_time()
     phase, updates = pga_stripmap(focused, t_s, range_m, geom.speed_mps, geom.wavelength_m)
     result["timing_s"]["pga"] = time.process_time() - t0
     refined = focused * np.exp(-1j * phase)[:, None].astype(np.complex64)
-    result["rows"]["two-step+PGA"] = _row(_grid_images(refined, run, track, range_m), theory)
+    images = _grid_images(refined, run, track, range_m, corr.los_m, _corrected_phase(corr, phase))
+    result["rows"]["two-step+PGA"] = _row(images, theory)
     result["pga_rms_updates_rad"] = updates
 
     los_true = truth["los_m"] - line_fit(t_s, truth["los_m"][:, None])[:, 0]
