@@ -9,7 +9,7 @@ import sys
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
 
@@ -70,6 +70,8 @@ class _LiveState:
     last_pulse_mono: float = 0.0
     first_pulse_mono: float = 0.0
     link_down: str = ""
+    finished: set[str] = field(default_factory=set)
+    """Links that were files and reached their end (not a failure)."""
 
 
 def _keep_reading(
@@ -81,7 +83,8 @@ def _keep_reading(
 ) -> None:
     """Read a link until stop; reopen it when it fails or its peer goes away.
 
-    File links (a log given to ``run``) end at their end of file instead.
+    File links (a log given to ``run``) end at their end of file instead: the link
+    is then *finished* (``st.finished``), which is not a failure.
     """
     link: _Link | None = first
     while not st.stop.is_set():
@@ -93,7 +96,9 @@ def _keep_reading(
             if read(link) or not link.eof:
                 continue  # at end of stream, read until what was buffered is out
             if not isinstance(link, RadarTcpSource):  # only files end; a TCP peer may return
-                return
+                st.finished.add(name)
+                log.info("link finished: end of file", extra={"link": name})
+                break
             reason = "peer closed the link"
         except SarmocoError as exc:  # the link itself failed: port gone, socket refused
             reason = str(exc)
@@ -105,6 +110,11 @@ def _keep_reading(
         st.stop.wait(REOPEN_S)
     if link is not None:
         link.close()
+
+
+def _finished_text(names: list[str]) -> str:
+    """How status and health name file links that reached their end."""
+    return "; ".join(f"{name}: finished (end of file)" for name in names)
 
 
 def _start_status(counters: Counters, health: Health, port: int) -> StatusServer | None:
@@ -140,7 +150,9 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
     int
         Exit status 0 (a clean stop). A link that fails is reopened every second
         meanwhile; while it is down the daemon reports itself unhealthy and stops
-        sending WATCHDOG=1, so systemd restarts it if the outage lasts.
+        sending WATCHDOG=1, so systemd restarts it if the outage lasts. A file link
+        that reaches its end is finished, not failed: health and ``STATUS=`` say so
+        and the keep-alive goes on.
     """
     notifier = Notifier()
     counters, health = Counters(), Health()
@@ -205,9 +217,13 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
                 log.error("processing error, block skipped", extra={"error": str(exc)})
             now = time.monotonic()
             nav_age = now - st.last_nav_mono if st.last_nav_mono else float("inf")
-            ok = all(t.is_alive() for t in threads) and not st.link_down
-            health.set("links", ok, st.link_down)
-            health.set("ins", nav_age < INS_STALE_S, f"newest sample {nav_age:.2f} s old")
+            ended = sorted(st.finished)
+            ok = all(t.is_alive() or t.name in ended for t in threads) and not st.link_down
+            health.set("links", ok, st.link_down or _finished_text(ended))
+            ins_detail = f"newest sample {nav_age:.2f} s old"
+            if "ins" in ended:  # a log read to its end: no newer sample will come
+                ins_detail = f"{_finished_text(['ins'])}, {ins_detail}"
+            health.set("ins", nav_age < INS_STALE_S or "ins" in ended, ins_detail)
             if ok:
                 notifier.keepalive()
             if now - last_status >= 1.0:
@@ -215,7 +231,7 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
                 counters.set("ins_age_seconds", nav_age)
                 notifier.status(
                     f"{pipe.summary.pulses_received} pulses, INS age {nav_age:.2f} s, "
-                    f"backlog {len(pipe.ring)}"
+                    f"backlog {len(pipe.ring)}{'; ' if ended else ''}{_finished_text(ended)}"
                 )
             if idle_exit_s is not None and st.first_pulse_mono:
                 if now - st.last_pulse_mono > idle_exit_s:

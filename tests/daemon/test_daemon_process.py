@@ -14,6 +14,7 @@ MAVLink source of the ``.tlog``).
 - sd_notify on a real AF_UNIX datagram socket: READY=1, WATCHDOG=1 while healthy (every
   half watchdog period, not every loop pass), STATUS=, STOPPING=1 at SIGTERM.
 - The HTTP status endpoint: /status, /metrics, /health.
+- File links read to their end are "finished", not failed: healthy, watchdog kept alive.
 - A bad configuration exits with status 2 naming the key; garbage inserted into the
   ``.vrt`` and the ``.tlog`` is counted and skipped, the valid pulses are recorded.
 """
@@ -348,6 +349,54 @@ def mavlink_frames(tlog: Path, n: int) -> list[bytes]:
     return frames
 
 
+class NotifyListener:
+    """An AF_UNIX datagram socket in systemd's place: keeps every note with its arrival time.
+
+    Parameters
+    ----------
+    path : Path
+        Where the socket is bound (``NOTIFY_SOCKET``).
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.notes: list[tuple[float, str]] = []
+        """(seconds since the listener started, the datagram's text)."""
+        self._t0 = time.monotonic()
+        self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
+        self._sock.bind(str(path))
+        self._sock.settimeout(0.1)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._listen, daemon=True)
+        self._thread.start()
+
+    def _listen(self) -> None:
+        while not self._stop.is_set():
+            try:
+                note = self._sock.recv(4096).decode()
+            except TimeoutError:
+                continue
+            self.notes.append((self.now(), note))
+
+    def now(self) -> float:
+        """Seconds since the listener started (the time base of :attr:`notes`)."""
+        return time.monotonic() - self._t0
+
+    def env(self, watchdog_usec: int) -> dict[str, str]:
+        """The environment of a daemon that systemd watches with ``WATCHDOG_USEC``."""
+        return dict(os.environ, NOTIFY_SOCKET=str(self.path), WATCHDOG_USEC=str(watchdog_usec))
+
+    def pings(self) -> list[float]:
+        """Arrival times of the WATCHDOG=1 notes."""
+        return [t for t, note in self.notes if "WATCHDOG=1" in note.splitlines()]
+
+    def close(self) -> None:
+        """Stop listening and close the socket."""
+        self._stop.set()
+        self._thread.join()
+        self._sock.close()
+
+
 @pytest.fixture(scope="module")
 def live(sim: SimFiles, tmp_path_factory: pytest.TempPathFactory) -> Iterator[LiveRun]:
     """A daemon on UDP radar + MAVLink/UDP links, NOTIFY_SOCKET and WATCHDOG_USEC set.
@@ -366,24 +415,9 @@ def live(sim: SimFiles, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Li
         status={"http_port": http_port},
     )  # fmt: skip
     run = LiveRun()
-    notify = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
-    notify.bind(str(tmp / "notify.sock"))
-    notify.settimeout(0.1)
-    stop_listening = threading.Event()
-    t0 = time.monotonic()
-
-    def listen() -> None:
-        while not stop_listening.is_set():
-            try:
-                note = notify.recv(4096).decode()
-            except TimeoutError:
-                continue
-            run.notes.append((time.monotonic() - t0, note))
-
-    listener = threading.Thread(target=listen, daemon=True)
-    listener.start()
-    env = dict(os.environ, NOTIFY_SOCKET=str(tmp / "notify.sock"),
-               WATCHDOG_USEC=str(WATCHDOG_USEC))  # fmt: skip
+    notify = NotifyListener(tmp / "notify.sock")
+    run.notes = notify.notes
+    env = notify.env(WATCHDOG_USEC)
     d = Daemon(config, tmp / "live.zarr", env)
     try:
         run.hello = d.started()
@@ -403,13 +437,11 @@ def live(sim: SimFiles, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Li
         time.sleep(1.2)  # one more pass of the health check and a STATUS line
         for page in ("/status", "/health"):
             run.healthy_pages[page] = http_get(http_port, page)
-        run.t_term = time.monotonic() - t0
+        run.t_term = notify.now()
         run.exit_status = d.stop()
         time.sleep(0.3)
     finally:
         d.kill_if_running()
-        stop_listening.set()
-        listener.join()
         notify.close()
     yield run
 
@@ -468,6 +500,46 @@ def test_status_endpoint_serves_json_prometheus_and_health(live: LiveRun) -> Non
         n for n, kind in types.items() if n.endswith("_total") and kind != "counter"
     )
     assert not not_counters, f"typed gauge but named _total: {not_counters}"
+
+
+def test_file_links_that_end_are_finished_not_failed(sim: SimFiles, tmp_path: Path) -> None:
+    """The ``.vrt`` and ``.tlog`` as file links, under a watchdog: once both are read to
+    their end the daemon stays healthy (the links and the INS are "finished"), says so
+    in /status and STATUS=, keeps sending WATCHDOG=1 (no restart loop) and exits 0."""
+    port = free_port(socket.SOCK_STREAM)
+    config = daemon_config(sim, tmp_path / "files.toml", status={"http_port": port})
+    notify = NotifyListener(tmp_path / "notify.sock")
+    d = Daemon(config, tmp_path / "files.zarr", notify.env(WATCHDOG_USEC))
+    try:
+        d.started()
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while True:
+            status = json.loads(http_get(port, "/status")[1])
+            links = status["components"].get("links", {"detail": ""})["detail"]
+            if "radar: finished" in links and "ins: finished" in links:
+                break
+            assert time.monotonic() < deadline, status
+            time.sleep(0.1)
+        t_finished = notify.now()
+        time.sleep(2.5)  # past the INS staleness limit (2 s) and several watchdog periods
+        health = http_get(port, "/health")
+        status = json.loads(http_get(port, "/status")[1])
+        t_checked = notify.now()
+        assert d.stop() == 0, d.log.read_text()
+    finally:
+        d.kill_if_running()
+        notify.close()
+    assert health == (200, "ok\n"), status
+    links, ins = status["components"]["links"], status["components"]["ins"]
+    assert links == {
+        "ok": True,
+        "detail": "ins: finished (end of file); radar: finished (end of file)",
+    }
+    assert ins["ok"] and ins["detail"].startswith("ins: finished (end of file), newest"), ins
+    assert status["counters"]["pipeline_pulses_received"] == N_PULSES
+    pings = [t for t in notify.pings() if t_finished <= t <= t_checked]
+    assert len(pings) >= 3, notify.notes
+    assert any("radar: finished (end of file)" in note for _, note in notify.notes)
 
 
 # -- bad configuration, garbage input -----------------------------------------------------
