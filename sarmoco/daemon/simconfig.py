@@ -8,11 +8,50 @@ from typing import Any
 
 import tomli_w
 
-from sarmoco.daemon.config import Config, parse_config
+from sarmoco.daemon.config import AutofocusConfig, Config, parse_config
 from sarmoco.sim.scenario import Scenario
 
 TILE_LENGTH_M = 10.0
 """Along-track tile length used for simulated scenes, m."""
+SUBAPERTURES_PER_APERTURE = 4.0
+"""A simulated scene's autofocus subaperture is at most this fraction of its synthetic
+aperture time (and never longer than the ``autofocus.subaperture_s`` default)."""
+MIN_SUBAPERTURE_PULSES = 32
+"""Fewest pulses in a subaperture: the Doppler-rate estimators need some Doppler resolution."""
+
+
+def synthetic_aperture_s(scn: Scenario) -> float:
+    """Time the scene centre spends in the synthetic aperture, ``2 R_c tan(theta/2) / v``, s.
+
+    Spotlight: the whole aperture; stripmap: the time a point stays in the beam.
+    """
+    half = math.tan(scn.integration_angle_rad / 2.0)
+    return 2.0 * scn.center_slant_range_m * half / scn.speed_mps
+
+
+def autofocus_table(scn: Scenario) -> dict[str, Any]:
+    """``autofocus`` keys that fit the subapertures into the scene's synthetic aperture.
+
+    The subaperture is the configured default, or a quarter of the synthetic aperture
+    time when that is shorter (a ``thz-spotlight`` aperture is 0.12 s, the default
+    subaperture 0.4 s), but at least :data:`MIN_SUBAPERTURE_PULSES` at the PRF; the hop
+    keeps the default's overlap. When the aperture cannot hold two such subapertures
+    the autofocus is switched off (INS-only focusing).
+
+    Returns
+    -------
+    dict
+        ``{"subaperture_s": ..., "hop_s": ...}`` or ``{"enabled": False}``.
+    """
+    default = AutofocusConfig()
+    aperture_s = synthetic_aperture_s(scn)
+    sub_s = max(
+        min(default.subaperture_s, aperture_s / SUBAPERTURES_PER_APERTURE),
+        MIN_SUBAPERTURE_PULSES / scn.radar.prf_hz,
+    )
+    if 2.0 * sub_s > aperture_s:
+        return {"enabled": False}
+    return {"subaperture_s": sub_s, "hop_s": default.hop_s * (sub_s / default.subaperture_s)}
 
 
 def config_table(scn: Scenario, **sections: dict[str, Any]) -> dict[str, Any]:
@@ -44,6 +83,7 @@ def config_table(scn: Scenario, **sections: dict[str, Any]) -> dict[str, Any]:
             "pixel_m": 0.5 * scn.azimuth_resolution_m,
             "azimuth_beamwidth_deg": math.degrees(scn.integration_angle_rad),
         },
+        "autofocus": autofocus_table(scn),
     }
     for name, values in sections.items():
         table.setdefault(name, {}).update(values)
