@@ -56,13 +56,15 @@ def open_radar(cfg: Config, link: str | None = None) -> RadarSource:
     )
 
 
-def open_ins(cfg: Config, link: str | None = None) -> Source:
+def open_ins(cfg: Config, link: str | None = None, keep_raw: bool = False) -> Source:
     """Open ``ins.link`` (or ``link``) with the configured protocol.
 
     MAVLink: any pymavlink connection string, a ``.tlog`` or a dataflash ``.bin``.
     SBG: a serial device (a pseudo-terminal in simulation) or a file of logged bytes.
     SBG CAN: ``INTERFACE:CHANNEL`` (``socketcan:can0``, ``slcan:/dev/ttyACM0``,
     ``socketcand:HOST:PORT:CHANNEL``, ``virtual:NAME``) or a CAN log file.
+    With ``keep_raw`` the source keeps what it receives for
+    :meth:`~sarmoco.drivers.source.Source.take_raw` (not a dataflash ``.bin``).
 
     Raises
     ------
@@ -71,8 +73,14 @@ def open_ins(cfg: Config, link: str | None = None) -> Source:
     DriverError
         If it cannot be opened.
     """
+    source = _open_ins(cfg, cfg.ins.link if link is None else link)
+    if keep_raw:
+        source.keep_raw()
+    return source
+
+
+def _open_ins(cfg: Config, text: str) -> Source:
     ins = cfg.ins
-    text = ins.link if link is None else link
     leap = ins.gps_minus_utc_s
     if ins.protocol == "mavlink":
         key = bytes.fromhex(ins.signing_key_hex) if ins.signing_key_hex else None

@@ -22,7 +22,7 @@ import queue
 import threading
 import time
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 
@@ -44,6 +44,9 @@ log = logging.getLogger(__name__)
 
 RING_SECONDS = 4.0
 """Echo ring capacity in seconds of pulses at the nominal PRF."""
+INS_RECORD_S = 0.25
+"""Queued INS samples and raw INS bytes go to the store at most this often (host clock):
+each write costs milliseconds, the processing loop passes every 50 ms, s."""
 READ_BLOCK_PULSES = UDP_BATCH_PACKETS
 """Ring slots reserved per radar read: room for one batch of the UDP driver (batched
 receive and decode, and its short gathering pause, need at least
@@ -112,6 +115,8 @@ class Pipeline:
         self._nav_rows: queue.SimpleQueue[tuple[Sample, int | None, PushResult]] = (
             queue.SimpleQueue()
         )
+        self._ins_raw: queue.SimpleQueue[tuple[bytes, int | None]] = queue.SimpleQueue()
+        self._ins_recorded_mono = -math.inf
         self._id_lock = threading.Lock()
         self._next_pulse_id = 0
         self._latest_pulse_ns: int | None = None
@@ -176,6 +181,20 @@ class Pipeline:
                 result = self.nav.push_sample(s, rx_ns)
                 self._nav_rows.put((s, rx_ns, result))
 
+    def add_ins_raw(self, data: bytes, rx_ns: int | None) -> None:
+        """Queue bytes received from the INS link (as its driver keeps them) for the store.
+
+        Parameters
+        ----------
+        data : bytes
+            :meth:`~sarmoco.drivers.source.Source.take_raw` of the INS source (nothing
+            is queued when empty).
+        rx_ns : int or None
+            Host receive clock, ns (None: unknown, a replay).
+        """
+        if data:
+            self._ins_raw.put((data, rx_ns))
+
     # -- processing loop --------------------------------------------------------------------
 
     def now_ns(self, live: bool) -> int | None:
@@ -187,11 +206,13 @@ class Pipeline:
             return self._latest_pulse_ns + elapsed
 
     def process(self, now_ns: int | None) -> int:
-        """Record queued INS samples, release aligned pulses, focus and record them.
+        """Record queued INS samples (every :data:`INS_RECORD_S`), release aligned pulses,
+        focus and record them.
 
         Returns the number of pulses released by the aligner.
         """
-        self._record_nav()
+        if time.monotonic() - self._ins_recorded_mono >= INS_RECORD_S:
+            self._record_nav()
         if now_ns is None:
             return 0
         released = 0
@@ -335,12 +356,15 @@ class Pipeline:
         return 0 if table is None else table.committed
 
     def _record_nav(self) -> None:
-        rows: list[tuple[Sample, int | None, PushResult]] = []
-        while True:
-            try:
-                rows.append(self._nav_rows.get_nowait())
-            except queue.Empty:
-                break
+        """Write the queued INS samples and raw INS bytes (the bytes as one chunk whose
+        ``rx_ns`` is that of its newest part)."""
+        self._ins_recorded_mono = time.monotonic()
+        chunks = _drain(self._ins_raw)
+        if chunks:
+            rx_ns = chunks[-1][1]
+            data = b"".join(c for c, _ in chunks)
+            self.recorder.append_ins_bytes(data, -1 if rx_ns is None else rx_ns)
+        rows = _drain(self._nav_rows)
         if not rows:
             return
         nan3 = (math.nan,) * 3
@@ -376,3 +400,16 @@ class Pipeline:
 
     def _update_counters(self) -> None:
         self.counters.set("echo_backlog_pulses", len(self.ring))
+
+
+_T = TypeVar("_T")
+
+
+def _drain(q: queue.SimpleQueue[_T]) -> list[_T]:
+    """Everything queued now, oldest first."""
+    items: list[_T] = []
+    while True:
+        try:
+            items.append(q.get_nowait())
+        except queue.Empty:
+            return items

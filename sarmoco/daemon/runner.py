@@ -59,6 +59,18 @@ def open_recorder(cfg: Config, path: Path) -> Recorder:
     )
 
 
+def record_ins_format(recorder: Recorder, ins: Source) -> None:
+    """Name the format of the store's raw INS bytes (``ins_raw`` attribute) if it keeps any.
+
+    ``ins_bytes`` then holds what the driver received, back to back, in that format:
+    ``tlog`` (MAVLink: a telemetry log), ``sbgecom`` (SBG: the bytes as read),
+    ``candump`` (SBG CAN: a ``candump -L`` log); written to a file with the suffix
+    ``.tlog``, ``.sbg`` or ``.log`` it is an INS log the daemon reads again.
+    """
+    if ins.raw_format:
+        recorder.set_attribute("ins_raw", {"format": ins.raw_format})
+
+
 REOPEN_S = 1.0
 """Pause between attempts to reopen a failed live link, s."""
 
@@ -167,8 +179,9 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
     path = store or new_store_path(cfg.recorder.directory, "run")
     recorder = open_recorder(cfg, path)
     radar = open_radar(cfg)
-    ins = open_ins(cfg)
+    ins = open_ins(cfg, keep_raw=True)
     pipe = Pipeline(cfg, recorder, counters)
+    record_ins_format(recorder, ins)
     counters.add_source("radar", radar.decoder.counters.snapshot)
     counters.add_source("ins", ins.counters.snapshot)
 
@@ -183,9 +196,11 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
     def read_ins(link: _Link) -> int:
         assert isinstance(link, Source)
         samples = link.poll(POLL_S)
+        rx_ns = time.monotonic_ns()
+        pipe.add_ins_raw(link.take_raw(), rx_ns)
         if samples:
             st.last_nav_mono = time.monotonic()
-            pipe.add_nav(samples, time.monotonic_ns())
+            pipe.add_nav(samples, rx_ns)
         return len(samples)
 
     threads = [
@@ -194,7 +209,8 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
             name="radar", daemon=True,
         ),
         threading.Thread(
-            target=_keep_reading, args=("ins", lambda: open_ins(cfg), ins, read_ins, st),
+            target=_keep_reading,
+            args=("ins", lambda: open_ins(cfg, keep_raw=True), ins, read_ins, st),
             name="ins", daemon=True,
         ),
     ]  # fmt: skip
@@ -264,11 +280,12 @@ def replay_files(
     CPU allows. The aligner's clock is the newest pulse time.
     """
     radar = open_radar(cfg, str(radar_file))
-    ins = open_ins(cfg, str(nav_file))
+    ins = open_ins(cfg, str(nav_file), keep_raw=True)
     total = max(radar_file.stat().st_size, 1)
     lead_ns = round(cfg.ins.max_gap_s * 1e9)
     with open_recorder(cfg, out) as recorder:
         pipe = Pipeline(cfg, recorder, Counters())
+        record_ins_format(recorder, ins)
         ahead: list[Sample] = []  # read from the log, not yet due (a poll may return seconds)
         while not radar.eof:
             pipe.read_radar(radar, 0.0, cfg.imaging.block_pulses)
@@ -276,6 +293,7 @@ def replay_files(
             horizon = None if now is None else now + lead_ns
             while not ins.eof and (horizon is None or not ahead or ahead[-1].t_gps_ns < horizon):
                 ahead += ins.poll(0.0)
+                pipe.add_ins_raw(ins.take_raw(), None)
             due = len(ahead) if horizon is None else sum(s.t_gps_ns <= horizon for s in ahead)
             pipe.add_nav(ahead[:due], None)
             del ahead[:due]

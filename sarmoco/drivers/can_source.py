@@ -10,6 +10,7 @@
 
 from __future__ import annotations
 
+import io
 import logging
 import socket
 from collections.abc import Iterator
@@ -66,13 +67,22 @@ def _stream_closed(bus: can.BusABC) -> bool:
 
 
 class _CanSourceBase(Source):
+    raw_format = "candump"
+
     def __init__(self, leap_s: int, link: str) -> None:
         super().__init__()
         self.decoder = SbgCanDecoder(leap_s, link)
         self.counters = self.decoder.counters
         self._burst = BurstLog(log, link)
+        self._raw_text = io.StringIO()
+        self._raw_writer = can.CanutilsLogWriter(self._raw_text)
 
     def _frame(self, msg: can.Message, out: list[Sample]) -> None:
+        if self._raw is not None:  # every frame as received, as a candump -L line
+            self._raw_writer.on_message_received(msg)
+            self._keep(self._raw_text.getvalue().encode())
+            self._raw_text.seek(0)
+            self._raw_text.truncate()
         if msg.is_error_frame or msg.is_remote_frame:
             self.counters.parse_errors += 1
             self._burst.error("bus", "error or remote frame")

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import logging
 import os
+import struct
 import time
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -262,6 +263,14 @@ def _rotate(
     )
 
 
+def tlog_record(msg: Any) -> bytes:
+    """A received message as a telemetry-log record: receive time (UNIX µs, 8 bytes
+    big-endian; the log's own time for a ``.tlog``) then the frame as on the wire."""
+    stamp = getattr(msg, "_timestamp", None)
+    us = round((time.time() if stamp is None else stamp) * 1e6)
+    return struct.pack(">Q", us) + bytes(msg.get_msgbuf())
+
+
 class MavlinkSource(Source):
     """A MAVLink link or ``.tlog`` file.
 
@@ -287,6 +296,8 @@ class MavlinkSource(Source):
     source_system, source_component : int
         Our MAVLink identity.
     """
+
+    raw_format = "tlog"
 
     def __init__(
         self,
@@ -404,6 +415,8 @@ class MavlinkSource(Source):
                 break
             if not self._count(msg):
                 continue
+            if self._raw is not None:
+                self._keep(tlog_record(msg))
             if not self.is_file:
                 self._link_message(msg)
             try:

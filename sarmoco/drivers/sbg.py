@@ -152,6 +152,8 @@ class SbgDecoder:
 class _SbgSource(Source):
     """An :class:`SbgDecoder` fed by a transport."""
 
+    raw_format = "sbgecom"
+
     def __init__(self, leap_s: int, link: str) -> None:
         super().__init__()
         self.decoder = SbgDecoder(leap_s, link)
@@ -190,6 +192,7 @@ class SbgSerialSource(_SbgSource):
                 data += self._ser.read(self._ser.in_waiting)
         except (serial.SerialException, OSError) as exc:
             raise DriverError(f"sbg {self.port}: {exc}") from exc
+        self._keep(data)
         return self.decoder.feed(data) if data else []
 
     def close(self) -> None:
@@ -224,6 +227,7 @@ class SbgFileSource(_SbgSource):
         if not data:
             self.eof = True
             return self.decoder.feed(b"", final=True)
+        self._keep(data)
         return self.decoder.feed(data)
 
     def close(self) -> None:

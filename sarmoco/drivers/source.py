@@ -19,11 +19,52 @@ from sarmoco.drivers.samples import Sample
 
 
 class Source(Closing):
-    """Base class of the navigation sources (MAVLink, SBG serial, SBG CAN)."""
+    """Base class of the navigation sources (MAVLink, SBG serial, SBG CAN).
+
+    Attributes
+    ----------
+    raw_format : str
+        What :meth:`take_raw` returns, concatenated over calls: ``"tlog"`` (MAVLink
+        frames each after an 8-byte big-endian receive time in UNIX µs, a telemetry
+        log), ``"sbgecom"`` (the bytes as read from the serial line or file),
+        ``"candump"`` (``candump -L`` log lines); empty when the source keeps none.
+    """
+
+    raw_format = ""
 
     def __init__(self) -> None:
         self.counters = DriverCounters()
         self.eof = False
+        self._raw: bytearray | None = None
+
+    def keep_raw(self) -> bool:
+        """Keep what is received, as :attr:`raw_format`, for :meth:`take_raw` from now on.
+
+        Returns
+        -------
+        bool
+            False when this source keeps no raw bytes (empty :attr:`raw_format`).
+        """
+        if not self.raw_format:
+            return False
+        self._raw = bytearray()
+        return True
+
+    def take_raw(self) -> bytes:
+        """What was received since the last call (``b""`` unless :meth:`keep_raw` was called).
+
+        Call it after each :meth:`poll` (from the same thread): the bytes wait here.
+        """
+        if not self._raw:
+            return b""
+        data = bytes(self._raw)
+        self._raw.clear()
+        return data
+
+    def _keep(self, data: bytes) -> None:
+        """Add received bytes for :meth:`take_raw` (no-op unless :meth:`keep_raw` was called)."""
+        if self._raw is not None:
+            self._raw += data
 
     @abstractmethod
     def poll(self, timeout_s: float = 0.0) -> list[Sample]:
