@@ -313,7 +313,7 @@ def replay_store(cfg: Config, recording: Path, out: Path, progress: bool = True)
 
     The INS samples the live run accepted are offered again in time order, ahead of the
     pulses by the longest bridged gap; the pulses go through the same ring, aligner,
-    focuser and recorder on a virtual clock.
+    focuser and recorder on a virtual clock. The recording's raw INS bytes are copied.
     """
     src = open_store(recording)
     n_pulses = src.committed("pulses")
@@ -326,6 +326,9 @@ def replay_store(cfg: Config, recording: Path, out: Path, progress: bool = True)
     step = cfg.imaging.block_pulses
     with open_recorder(cfg, out) as recorder:
         pipe = Pipeline(cfg, recorder, Counters())
+        if "ins_raw" in src.attrs:  # the recording's INS bytes, carried over as one chunk
+            recorder.set_attribute("ins_raw", src.attrs["ins_raw"])
+            pipe.add_ins_raw(src.ins_bytes(), None)
         for start in range(0, n_pulses, step):
             p = src.read("pulses", ["t_ns", "pulse_id", "channel", "flags", "echo"],
                          start, min(start + step, n_pulses))  # fmt: skip

@@ -50,6 +50,7 @@ from pymavlink import mavutil
 from sarmoco.daemon.config import Config, load_config
 from sarmoco.daemon.flags import NAV_UNUSABLE
 from sarmoco.daemon.links import open_ins, vita_decoder
+from sarmoco.daemon.runner import replay_store
 from sarmoco.daemon.simconfig import write_config
 from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.drivers.radar import RadarFileSource
@@ -353,6 +354,7 @@ class LiveRun:
     packets_sent: int = 0
     frames_sent: list[bytes] = field(default_factory=list)
     store: Path = Path()
+    config: Path = Path()
 
 
 def mavlink_frames(tlog: Path, n: int) -> list[bytes]:
@@ -435,7 +437,7 @@ def live(sim: SimFiles, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Li
     run.notes = notify.notes
     env = notify.env(WATCHDOG_USEC)
     d = Daemon(config, tmp / "live.zarr", env)
-    run.store = d.store
+    run.store, run.config = d.store, config
     try:
         run.hello = d.started()
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
@@ -485,12 +487,18 @@ def test_sd_notify_ready_watchdog_status_stopping(live: LiveRun) -> None:
 
 
 def test_live_ins_bytes_are_the_frames_received(live: LiveRun) -> None:
-    """MAVLink over UDP: the store's raw INS bytes are a telemetry log of the frames sent."""
+    """MAVLink over UDP: the store's raw INS bytes are a telemetry log of the frames sent,
+    and a replay of the store carries them over."""
     store = open_store(live.store)
     assert store.attrs["ins_raw"] == {"format": "tlog"}
     tlog = live.store.with_suffix(".raw.tlog")
     tlog.write_bytes(store.ins_bytes())
     assert mavlink_frames(tlog, 10**6) == live.frames_sent
+    replayed = live.store.with_suffix(".replay.zarr")
+    replay_store(load_config(live.config), live.store, replayed, progress=False)
+    again = open_store(replayed)
+    assert again.attrs["ins_raw"] == {"format": "tlog"}
+    assert again.ins_bytes() == store.ins_bytes()  # a replay carries the bytes over
 
 
 def test_status_endpoint_serves_json_prometheus_and_health(live: LiveRun) -> None:
