@@ -171,11 +171,25 @@ class ImagingConfig:
     )
     azimuth_beamwidth_deg: float = _key(
         3.0,
-        "Two-way azimuth beamwidth: pulses farther than its half-angle from a tile "
-        "do not contribute to it",
+        "Two-way azimuth beamwidth (the integration angle): pulses farther than its "
+        "half-angle times beam_margin from a pixel's broadside do not contribute to it",
         unit="deg",
         gt=0,
         lt=90,
+    )
+    beam_margin: float = _key(
+        1.25,
+        "Factor on the beamwidth for pixel culling and the pre-filter band (room for "
+        "heading errors, and in spotlight for pixels off the aperture centre)",
+        ge=1,
+    )
+    prefilter: bool = _key(
+        True,
+        "Low-pass filter and decimate the pulses in slow time to the Doppler band of "
+        "that beam before backprojection",
+    )
+    prefilter_oversampling: float = _key(
+        2.0, "Pulse rate after the pre-filter over the two-sided Doppler band it keeps", gt=1
     )
 
 

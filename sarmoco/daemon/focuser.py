@@ -2,10 +2,12 @@
 
 Per block of aligned pulses: range compression → INS-only compensation
 (D_los, METHODS §2) → sliding-subaperture autofocus (METHODS §3, optional) →
-backprojection onto ground tiles. Every stage is a processing object with its
-own carried state, so a live run and a replay of the same pulses give the same
-products. The reference track is fixed from the INS velocity of the first
-block (straight line at the mean horizontal velocity, METHODS §1).
+azimuth pre-filter (low-pass and decimate in slow time to the Doppler band of
+the culled beam, optional) → backprojection onto ground tiles. Every stage is a
+processing object with its own carried state, so a live run and a replay of the
+same pulses give the same products. The reference track is fixed from the INS
+velocity of the first block (straight line at the mean horizontal velocity,
+METHODS §1).
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from sarmoco.processing.autofocus import (
     SlidingSubapertureAutofocus,
 )
 from sarmoco.processing.geometry import ReferenceTrack
+from sarmoco.processing.imaging.presum import AzimuthPrefilter
 from sarmoco.processing.imaging.tiles import Tile, TileImager, TileLayout
 from sarmoco.processing.mocomp import InsMotionCompensator, LosGeometry, MocompSolution
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray, RadarParams
@@ -64,7 +67,7 @@ class FocusOutput:
 
 
 class Focuser:
-    """Range compression, INS compensation, autofocus and tiled backprojection.
+    """Range compression, INS compensation, autofocus, azimuth pre-filter, tiled backprojection.
 
     Parameters
     ----------
@@ -118,17 +121,25 @@ class Focuser:
             else None
         )
         ground_range = math.sqrt(max(geo.center_slant_range_m**2 - geo.height_m**2, 0.0))
+        im = cfg.imaging
+        beam_rad = math.radians(im.azimuth_beamwidth_deg) * im.beam_margin
         self.imager = TileImager(
             TileLayout(
                 height_m=geo.height_m,
                 ground_range_m=ground_range,
-                swath_m=cfg.imaging.swath_m,
-                tile_length_m=cfg.imaging.tile_length_m,
-                pixel_m=cfg.imaging.pixel_m,
-                beamwidth_rad=math.radians(cfg.imaging.azimuth_beamwidth_deg),
+                swath_m=im.swath_m,
+                tile_length_m=im.tile_length_m,
+                pixel_m=im.pixel_m,
+                beamwidth_rad=beam_rad,
             ),
             self.range_m,
             self.radar.wavelength_m,
+        )
+        doppler_hz = 2.0 * self.track.v0_mps * math.sin(beam_rad / 2.0) / self.radar.wavelength_m
+        self.prefilter = (
+            AzimuthPrefilter(self.radar.prf_hz, doppler_hz, im.prefilter_oversampling)
+            if im.prefilter and doppler_hz > 0
+            else None
         )
 
     def push(
@@ -159,15 +170,23 @@ class Focuser:
         return out
 
     def finish(self) -> FocusOutput:
-        """Release what autofocus still holds and close every tile (end of the run)."""
+        """Release what autofocus and the pre-filter still hold; close every tile (end of run)."""
         out = FocusOutput()
         if self.autofocus is not None:
             focused, corr = self.autofocus.flush()
             out.corrections.append(corr)
             out.tiles = self._image(focused, corr.t_ns)
+        if self.prefilter is not None:
+            out.tiles += self._backproject(*self.prefilter.flush())
         out.tiles += self.imager.close()
         return out
 
     def _image(self, rc: ComplexArray, t_ns: IntArray) -> list[Tile]:
-        apc = self.track.position_imaging(t_ns)
-        return self.imager.add(rc, t_ns, apc)
+        if self.prefilter is not None:
+            rc, t_ns = self.prefilter.push(rc, t_ns)
+        return self._backproject(rc, t_ns)
+
+    def _backproject(self, rc: ComplexArray, t_ns: IntArray) -> list[Tile]:
+        if rc.shape[0] == 0:
+            return []
+        return self.imager.add(rc, t_ns, self.track.position_imaging(t_ns))

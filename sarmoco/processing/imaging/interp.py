@@ -11,6 +11,7 @@ must be basebanded (spectrum centred on zero).
 from __future__ import annotations
 
 import numpy as np
+import scipy.fft
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.types import ComplexArray, FloatArray
@@ -73,7 +74,8 @@ def fft_upsample(x: ComplexArray, factor: int) -> ComplexArray:
     Returns
     -------
     ndarray of complex, shape (M, N * factor)
-        Sample ``i * factor`` of a row equals sample ``i`` of the input.
+        Sample ``i * factor`` of a row equals sample ``i`` of the input; the
+        precision of ``x`` is kept (complex64 is transformed in single precision).
     """
     if factor < 1:
         raise ProcessingError(f"fft_upsample: factor {factor!r} is not >= 1")
@@ -81,7 +83,7 @@ def fft_upsample(x: ComplexArray, factor: int) -> ComplexArray:
         return x
     n = x.shape[1]
     m = n * factor
-    spec = np.fft.fft(x, axis=1)
+    spec = scipy.fft.fft(x, axis=1)
     lo = (n + 1) // 2  # bins 0 .. lo-1 are the non-negative frequencies
     padded = np.zeros((x.shape[0], m), dtype=spec.dtype)
     padded[:, :lo] = spec[:, :lo]
@@ -90,4 +92,6 @@ def fft_upsample(x: ComplexArray, factor: int) -> ComplexArray:
         # the Nyquist bin -n/2 is split between -n/2 and +n/2
         padded[:, m - n // 2] *= 0.5
         padded[:, n // 2] = padded[:, m - n // 2]
-    return np.asarray(np.fft.ifft(padded, axis=1) * factor).astype(x.dtype, copy=False)
+    out = scipy.fft.ifft(padded, axis=1, overwrite_x=True)
+    out *= factor
+    return np.asarray(out).astype(x.dtype, copy=False)

@@ -3,11 +3,15 @@
 The imaging frame is that of METHODS §1 (x along the reference track, y toward
 the illuminated side, z down; origin at the reference APC at its start time).
 Tile ``k`` covers ``k L <= x < (k + 1) L`` and the ground-range band
-``y_c ± W/2`` on the flat ground ``z = H``. A pulse at along-track position
-``x_p`` contributes to every tile that meets its beam footprint
+``y_c ± W/2`` on the flat ground ``z = H``. A pixel takes the pulses that see
+it within half the azimuth beamwidth θ of broadside (squint from the plane
+normal to the track, beam culling of
+:func:`~sarmoco.processing.imaging.backprojection.backproject_into`), so a pulse
+at along-track position ``x_p`` reaches the tiles that meet its footprint
 ``|x - x_p| <= R_far tan(θ/2)``; a tile is finished, and handed out, once the
 platform is a half footprint past its end, so memory stays bounded however
-long the run.
+long the run. Each block of pulses is upsampled in range once (in chunks of
+``CHUNK_PULSES``) and accumulated in place into every tile it reaches.
 """
 
 from __future__ import annotations
@@ -18,9 +22,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from sarmoco.errors import ProcessingError
-from sarmoco.processing.imaging.backprojection import backproject
+from sarmoco.processing.imaging.backprojection import RangeLines, backproject_into
 from sarmoco.processing.imaging.grid import PlaneGrid
 from sarmoco.processing.types import ComplexArray, FloatArray, Image, IntArray
+
+CHUNK_PULSES = 128
+"""Pulses upsampled in range at a time (bounds the memory of a large block)."""
 
 
 @dataclass(frozen=True)
@@ -40,7 +47,7 @@ class TileLayout:
     pixel_m : float
         Pixel spacing on both axes, m.
     beamwidth_rad : float
-        Azimuth beamwidth θ that bounds which pulses see a tile, rad.
+        Azimuth beamwidth θ: a pixel takes the pulses within θ/2 of its broadside, rad.
     """
 
     height_m: float
@@ -74,7 +81,11 @@ class TileLayout:
 
 @dataclass
 class Tile:
-    """A tile being accumulated: its index, grid, pixels and time span (GPS ns)."""
+    """A tile being accumulated: its index, grid, pixels, time span (GPS ns) and pulse count.
+
+    ``n_pulses`` counts the pulses backprojected into the tile, i.e. after any
+    azimuth pre-filter's decimation.
+    """
 
     index: int
     grid: PlaneGrid
@@ -132,15 +143,33 @@ class TileImager:
                 grid = self.layout.grid(k)
                 shape = (grid.axis0_m.size, grid.axis1_m.size)
                 self._open[k] = Tile(k, grid, np.zeros(shape, np.complex64), int(t_ns[0]), 0)
+        for start in range(0, rc.shape[0], CHUNK_PULSES):
+            chunk = slice(start, start + CHUNK_PULSES)
+            self._backproject(rc[chunk], t_ns[chunk], apc_m[chunk])
+        return self._pop_below(math.floor((float(x[-1]) - half) / length))
+
+    def _backproject(self, rc: ComplexArray, t_ns: IntArray, apc_m: FloatArray) -> None:
+        x = apc_m[:, 0]
+        half = self.layout.half_footprint_m
+        length = self.layout.tile_length_m
+        lines: RangeLines | None = None
         for k, tile in self._open.items():
             sel = np.flatnonzero((x >= k * length - half) & (x <= (k + 1) * length + half))
             if sel.size == 0:
                 continue
-            img = backproject(rc[sel], self.range_axis_m, apc_m[sel], self.wavelength_m, tile.grid)
-            tile.data += img.data
+            if lines is None:
+                lines = RangeLines.upsample(rc, self.range_axis_m)
+            backproject_into(
+                tile.data,
+                lines,
+                apc_m,
+                self.wavelength_m,
+                tile.grid,
+                pulses=sel,
+                beam_half_angle_rad=self.layout.beamwidth_rad / 2.0,
+            )
             tile.n_pulses += sel.size
             tile.t1_ns = int(t_ns[sel[-1]])
-        return self._pop_below(math.floor((float(x[-1]) - half) / length))
 
     def close(self) -> list[Tile]:
         """Hand out every tile still open (end of the run)."""
