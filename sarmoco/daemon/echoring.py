@@ -313,6 +313,12 @@ class EchoRing:
                 self._state[i + n : i + reserved] = _ABORTED
         self._advance_ready()
 
+    @property
+    def free(self) -> int:
+        """Slots neither reserved nor holding a pulse not yet taken."""
+        with self._lock:
+            return self.capacity - (self._head - self._tail)
+
     def __len__(self) -> int:
         """Committed pulses ready to be taken, oldest first, in order."""
         with self._lock:

@@ -23,7 +23,7 @@ from sarmoco.daemon.recorder import NAV_KIND_ATTITUDE, NAV_KIND_VELOCITY, Record
 from sarmoco.daemon.sdnotify import Notifier
 from sarmoco.daemon.status import Counters, Health, StatusServer
 from sarmoco.daemon.store import open_store
-from sarmoco.drivers.radar import RadarSource, RadarTcpSource
+from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource
 from sarmoco.drivers.samples import AttitudeSample, Sample, Validity, VelocitySample
 from sarmoco.drivers.source import Source
 from sarmoco.errors import ConfigError, SarmocoError
@@ -187,7 +187,13 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
 
     def read_radar(link: _Link) -> int:
         assert isinstance(link, RadarSource)
-        n = pipe.read_radar(link, POLL_S, cfg.imaging.block_pulses)
+        limit = cfg.imaging.block_pulses
+        if isinstance(link, RadarFileSource):  # a file waits for room instead of dropping
+            limit = min(limit, pipe.ring.free)
+            if not limit:
+                st.stop.wait(POLL_S)
+                return 0
+        n = pipe.read_radar(link, POLL_S, limit)
         if n:
             st.last_pulse_mono = time.monotonic()
             st.first_pulse_mono = st.first_pulse_mono or st.last_pulse_mono

@@ -15,6 +15,7 @@ MAVLink source of the ``.tlog``).
   half watchdog period, not every loop pass), STATUS=, STOPPING=1 at SIGTERM.
 - The HTTP status endpoint: /status, /metrics, /health.
 - File links read to their end are "finished", not failed: healthy, watchdog kept alive.
+- A radar file longer than the echo ring is read at the processing pace, without drops.
 - The INS bytes as received (MAVLink, SBG, SBG CAN logs) are recorded and decode again.
 - A bad configuration exits with status 2 naming the key; garbage inserted into the
   ``.vrt`` and the ``.tlog`` is counted and skipped, the valid pulses are recorded.
@@ -48,7 +49,7 @@ import zarr
 from pymavlink import mavutil
 
 from sarmoco.daemon.config import Config, load_config
-from sarmoco.daemon.flags import NAV_UNUSABLE
+from sarmoco.daemon.flags import NAV_UNUSABLE, PulseFlag
 from sarmoco.daemon.links import open_ins, vita_decoder
 from sarmoco.daemon.runner import replay_store
 from sarmoco.daemon.simconfig import write_config
@@ -85,10 +86,12 @@ class SimFiles:
     nav: list[VelocitySample | AttitudeSample]
 
 
-def decode_radar(cfg_path: Path, vrt: Path) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int16]]:
+def decode_radar(
+    cfg_path: Path, vrt: Path, n_pulses: int = N_PULSES
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int16]]:
     """Pulse times (GPS ns) and int16 I/Q echoes of a ``.vrt`` file, read by the radar driver."""
     cfg = load_config(cfg_path)
-    rows = np.empty((N_PULSES + 64, cfg.radar.n_samples, 2), np.int16)
+    rows = np.empty((n_pulses + 64, cfg.radar.n_samples, 2), np.int16)
     t: list[int] = []
     with RadarFileSource(vrt, vita_decoder(cfg)) as src:
         while not src.eof:
@@ -119,15 +122,20 @@ def decode_nav(cfg_path: Path) -> list[VelocitySample | AttitudeSample]:
     return out
 
 
-@pytest.fixture(scope="module")
-def sim(tmp_path_factory: pytest.TempPathFactory) -> SimFiles:
-    out = tmp_path_factory.mktemp("sim")
+def simulate_files(out: Path, n_pulses: int) -> None:
+    """``sarmoco sim --out``: the scaled ku-vehicle run of ``n_pulses`` pulses in ``out``."""
     subprocess.run(
         [*PY, "sim", "--preset", "ku-vehicle", "--scale", str(SCALE), "--pulses",
-         str(N_PULSES), "--motion", "turbulence", "--motion-seed", "1", "--ins-grade",
+         str(n_pulses), "--motion", "turbulence", "--motion-seed", "1", "--ins-grade",
          "tactical", "--out", str(out)],
         check=True, capture_output=True,
     )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def sim(tmp_path_factory: pytest.TempPathFactory) -> SimFiles:
+    out = tmp_path_factory.mktemp("sim")
+    simulate_files(out, N_PULSES)
     cfg_path = out / "sarmoco.toml"
     t_ns, echo = decode_radar(cfg_path, out / "radar.vrt")
     assert t_ns.size == N_PULSES
@@ -568,6 +576,32 @@ def test_file_links_that_end_are_finished_not_failed(sim: SimFiles, tmp_path: Pa
     pings = [t for t in notify.pings() if t_finished <= t <= t_checked]
     assert len(pings) >= 3, notify.notes
     assert any("radar: finished (end of file)" in note for _, note in notify.notes)
+
+
+def test_a_file_longer_than_the_ring_is_read_at_the_processing_pace(tmp_path: Path) -> None:
+    """A ``.vrt`` of 3000 pulses (the echo ring holds 1024) as the radar file link: the
+    reader waits for room instead of dropping, so every pulse is recorded, none flagged."""
+    n_pulses = 3000
+    simulate_files(tmp_path, n_pulses)
+    table = tomllib.loads((tmp_path / "sarmoco.toml").read_text())
+    table["status"] = {"http_port": free_port(socket.SOCK_STREAM)}
+    table["autofocus"] = {"enabled": False}  # the pace of focusing does not matter here
+    config = write_config(tmp_path / "long.toml", table)
+    d = Daemon(config, tmp_path / "long.zarr")
+    try:
+        d.started()
+        status = wait_finished(table["status"]["http_port"])
+        assert d.stop() == 0, d.log.read_text()
+    finally:
+        d.kill_if_running()
+    assert status["counters"]["pipeline_pulses_dropped_ring"] == 0
+    store = open_store(d.store)
+    assert store.committed("pulses") == n_pulses
+    t_ns, echo = decode_radar(config, tmp_path / "radar.vrt", n_pulses)
+    got = store.read("pulses", ["t_ns", "echo", "flags"])
+    np.testing.assert_array_equal(got["t_ns"], t_ns)
+    np.testing.assert_array_equal(got["echo"], echo)
+    assert not (got["flags"] & np.uint32(PulseFlag.DROPPED_BEFORE)).any()
 
 
 @pytest.mark.parametrize("protocol", ["mavlink", "sbg", "sbg-can"])
