@@ -341,9 +341,7 @@ class Pipeline:
                     row_dim="subaperture",
                 )
         for tile in out.tiles:
-            metrics = {
-                "entropy": image_entropy(tile.data),
-                "contrast": image_contrast(tile.data),
+            metrics = tile_metrics(tile.data) | {
                 "pulses": float(tile.n_pulses),
                 "index": float(tile.index),
             }
@@ -400,6 +398,17 @@ class Pipeline:
 
     def _update_counters(self) -> None:
         self.counters.set("echo_backlog_pulses", len(self.ring))
+
+
+def tile_metrics(data: ComplexArray) -> dict[str, float]:
+    """Entropy and contrast of a focused tile; NaN for a tile with no energy.
+
+    A tile no echo reached (every pulse of its aperture without navigation, or
+    culled) is a valid, empty product, not a processing error.
+    """
+    if not np.any(data):
+        return {"entropy": math.nan, "contrast": math.nan}
+    return {"entropy": image_entropy(data), "contrast": image_contrast(data)}
 
 
 _T = TypeVar("_T")

@@ -20,7 +20,7 @@ import pytest
 from sarmoco.daemon.config import Config, parse_config
 from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.links import open_radar
-from sarmoco.daemon.pipeline import Pipeline
+from sarmoco.daemon.pipeline import Pipeline, tile_metrics
 from sarmoco.daemon.report import strip, write_report
 from sarmoco.daemon.runner import open_recorder
 from sarmoco.daemon.simconfig import (
@@ -116,6 +116,14 @@ def test_pipeline_focuses_and_records(run: SimRun, tmp_path: Path, autofocus: bo
         irw_rg = 0.886 * scn.radar.range_resolution_m * np.hypot(tgt[1], tgt[2]) / tgt[1]
         assert p["pslr_az_db"] <= -12.5 and p["pslr_rg_db"] <= -12.5, p
         assert p["irw_az_m"] <= 1.1 * irw_az and p["irw_rg_m"] <= 1.1 * irw_rg, p
+
+
+def test_an_empty_tile_is_a_product_not_an_error() -> None:
+    empty = tile_metrics(np.zeros((4, 5), np.complex64))
+    assert math.isnan(empty["entropy"]) and math.isnan(empty["contrast"])
+    point = np.zeros((4, 5), np.complex64)
+    point[1, 2] = 3.0
+    assert tile_metrics(point) == {"entropy": 0.0, "contrast": pytest.approx(np.sqrt(19.0))}
 
 
 # -- autofocus subapertures scaled to the scenario ------------------------------------------
