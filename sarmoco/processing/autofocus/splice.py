@@ -3,14 +3,10 @@ the corrections built from them (range shift of the envelope, phase per range bi
 
 from __future__ import annotations
 
-from typing import Literal
-
 import numpy as np
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.types import ComplexArray, FloatArray
-
-Pin = Literal["mean_trend", "start"]
 
 
 def splice(
@@ -93,21 +89,25 @@ def integrate_twice(
     return value, slope
 
 
-def double_integrate(t_s: FloatArray, second_derivative: FloatArray, pin: Pin) -> FloatArray:
-    """Integrate twice with the unobservable constant and linear terms pinned.
+def zero_line_start(
+    t_s: FloatArray, second_derivative: FloatArray, window: slice
+) -> tuple[FloatArray, FloatArray]:
+    """Start value and slope that pin the unobservable constant and linear terms.
 
-    ``pin="mean_trend"`` removes the least-squares line (zero mean and zero trend over the
-    span: the offline choice); ``pin="start"`` starts with zero value and slope (the
-    streaming choice). Shapes and units as :func:`integrate_twice`.
+    The double integral of ``second_derivative`` started with the returned value and slope
+    at ``t_s[0]`` has zero mean and zero trend (least squares) over the samples ``window``
+    (at least two). Shapes and units as :func:`integrate_twice`; returns ``value0, slope0``
+    of shape (n,).
     """
     f = np.asarray(second_derivative, dtype=float).reshape(len(t_s), -1)
     zero = np.zeros(f.shape[1])
-    out = integrate_twice(t_s, f, zero, zero)[0]
-    if pin == "mean_trend":
-        out = out - line_fit(t_s, out)
-    elif pin != "start":
-        raise ProcessingError(f"double_integrate: pin {pin!r} is not 'mean_trend' or 'start'")
-    return out
+    value = integrate_twice(t_s, f, zero, zero)[0]
+    idx = np.arange(len(t_s))[window]
+    if idx.size < 2:
+        idx = np.arange(min(2, len(t_s)))
+    design = np.column_stack([np.ones(idx.size), np.asarray(t_s[idx], dtype=float) - t_s[0]])
+    coef = np.linalg.lstsq(design, value[idx], rcond=None)[0]
+    return -coef[0], -coef[1]
 
 
 def line_fit(t_s: FloatArray, y: FloatArray) -> FloatArray:

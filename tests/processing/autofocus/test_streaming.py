@@ -9,6 +9,7 @@ import numpy as np
 from sarmoco.processing.autofocus import (
     AutofocusConfig,
     AutofocusGeometry,
+    Corrections,
     SlidingSubapertureAutofocus,
     autofocus_offline,
 )
@@ -19,49 +20,103 @@ from sarmoco.processing.metrics import point_target_metrics
 from tests.processing.autofocus import _synth as S
 
 
-def _scene() -> S.Synthetic:
-    dur = 2.0
+def _scene(dur: float = 2.0) -> S.Synthetic:
     t = np.arange(round(dur * S.PRF_HZ)) / S.PRF_HZ - dur / 2
     d, a = S.sine_motion(t, (0.25, 0.1), (0.3, 0.45))
     xr = [(0, 1000), (4, 920), (-5, 1080), (8, 960), (-10, 1040), (10, 1050)]
     return S.make(dur, [S.ground_target(x, r) for x, r in xr], d, a, snr_db=0.0)
 
 
+def _push_all(
+    af: SlidingSubapertureAutofocus, syn: S.Synthetic, t_ns: np.ndarray, block: int
+) -> tuple[np.ndarray, Corrections, list[float]]:
+    """Stream ``syn`` in blocks; return the released data, their corrections, and how long
+    each released pulse waited (s, from its arrival to the end of the block that released
+    it; the flush at the end counts as the last block)."""
+    out, corrs, waits = [], [], []
+    for i in range(0, t_ns.size, block):
+        rel, corr = af.push(syn.rc[i : i + block], t_ns[i : i + block])
+        now = float(syn.t_s[min(i + block, t_ns.size) - 1])
+        out.append(rel)
+        corrs.append(corr)
+        waits += list(now - ((corr.t_ns - t_ns[0]) * 1e-9 + syn.t_s[0]))
+    rel, corr = af.flush()
+    out.append(rel)
+    corrs.append(corr)
+    waits += list(float(syn.t_s[-1]) - ((corr.t_ns - t_ns[0]) * 1e-9 + syn.t_s[0]))
+    joined = Corrections(
+        np.concatenate([c.t_ns for c in corrs]),
+        np.concatenate([c.los_m for c in corrs]),
+        np.concatenate([c.phase_cycles for c in corrs]),
+        corrs[0].ref_range_m,
+    )
+    return np.concatenate(out), joined, waits
+
+
+def _detrended(t: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return y - line_fit(t, y[:, None])[:, 0]
+
+
 def test_streaming_matches_offline_up_to_a_line() -> None:
+    """With a pin window shorter than the run (pulses are released during it), streaming
+    and offline estimates agree up to the unobservable line; the release delay is bounded."""
     syn = _scene()
     geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0)
-    cfg = AutofocusConfig(phase_passes=1)
+    cfg = AutofocusConfig(pin_window_s=0.5)
     t_ns = np.round(syn.t_s * 1e9).astype(np.int64) + 10**18
     offline, _ = autofocus_offline(syn.rc, t_ns, syn.range_m, geo, cfg)
-
     af = SlidingSubapertureAutofocus(geo, syn.range_m, cfg)
-    los, phase, released_t = [], [], []
-    late = 0.0
-    for i in range(0, t_ns.size, 37):
-        _, corr = af.push(syn.rc[i : i + 37], t_ns[i : i + 37])
-        now = float(syn.t_s[min(i + 36, t_ns.size - 1)])
-        if corr.t_ns.size:
-            late = max(late, now - (float(corr.t_ns[0] - t_ns[0]) * 1e-9 + syn.t_s[0]))
-        los.append(corr.los_m)
-        phase.append(corr.phase_rad(np.array([1000.0]))[:, 0])
-        released_t.append(corr.t_ns)
-    _, corr = af.flush()
-    los.append(corr.los_m)
-    phase.append(corr.phase_rad(np.array([1000.0]))[:, 0])
-    released_t.append(corr.t_ns)
+    _, corr, waits = _push_all(af, syn, t_ns, 37)
 
-    np.testing.assert_array_equal(np.concatenate(released_t), t_ns)
-    assert late <= af.latency_s + 37 / S.PRF_HZ + 1e-9
-    assert af.latency_s <= cfg.subaperture_s + cfg.hop_s
+    np.testing.assert_array_equal(corr.t_ns, t_ns)
+    block_s = 37 / S.PRF_HZ
+    assert waits[0] <= af.startup_s + block_s + 1e-9
+    steady = np.array(waits)[syn.t_s - syn.t_s[0] >= af.startup_s]
+    assert steady.size and np.max(steady) <= af.latency_s + block_s + 1e-9
     t = syn.t_s
-    inner = (t > t[0] + 0.3) & (t < t[-1] - 0.3)  # the ends are extrapolated differently
-    d_los = np.concatenate(los) - offline.los_m
-    d_los -= line_fit(t, d_los[:, None])[:, 0]
-    assert np.max(np.abs(d_los[inner])) < 0.01  # m, against 0.46 m of motion
-    d_ph = np.concatenate(phase) - offline.phase_rad(np.array([1000.0]))[:, 0]
-    d_ph -= line_fit(t[inner], d_ph[inner, None])[:, 0].mean() + 0.0
-    d_ph = d_ph[inner] - line_fit(t[inner], d_ph[inner, None])[:, 0]
-    assert np.std(d_ph) < 0.5  # rad, against ~150 rad of phase error
+    inner = (t > t[0] + 0.3) & (t < t[-1] - 0.3)  # the ends are extrapolated
+    d_los = _detrended(t[inner], (corr.los_m - offline.los_m)[inner])
+    assert np.max(np.abs(d_los)) < 0.002  # m, against 0.46 m of motion
+    r = np.array([1000.0])
+    d_ph = _detrended(t[inner], (corr.phase_rad(r) - offline.phase_rad(r))[inner, 0])
+    # The estimates differ only through the envelope's line while they are made (over the
+    # known pulses here, the whole aperture offline): on this strong motion (LOS velocity
+    # up to 0.45 m/s) it moves the lines by centimetres inside a subaperture, and map drift
+    # answers with ~1 Hz/s. Measured 0.16 rad rms (the old streaming too); on the
+    # ku-vehicle table case 0.01 rad (test_ku_vehicle).
+    assert np.std(d_ph) < 0.25  # rad, against ~150 rad of phase error
+
+
+def test_streaming_places_targets_where_the_navigation_is_right_on_average() -> None:
+    """A linear phase is not observable from Doppler rates and moves targets along track.
+    With motion of zero mean and trend over the pin window (the navigation right on average
+    there), streaming puts every target at its true azimuth to a fraction of the IRW. The old
+    streaming (zero value and slope at the first pulse, passes extrapolated ahead) left them
+    up to 0.86 m off and unfocused (azimuth PSLR -4.9 to +0.1 dB) on this scene."""
+    dur = 3.0
+    cfg = AutofocusConfig(pin_window_s=1.0)
+    t = np.arange(round(dur * S.PRF_HZ)) / S.PRF_HZ - dur / 2
+    t_mid = t[0] + 0.5 * cfg.subaperture_s + 0.5 * cfg.pin_window_s  # centre of the window
+    w = np.pi / cfg.pin_window_s  # half a period over the window: zero trend over it
+    d = np.column_stack([0.01 * np.cos(w * (t - t_mid)), 0.006 * np.cos(w * (t - t_mid))])
+    xr = [(0, 1000), (4, 920), (-5, 1080), (8, 960), (-10, 1040), (10, 1050)]
+    syn = S.make(dur, [S.ground_target(x, r) for x, r in xr], d, -(w**2) * d, snr_db=0.0)
+    geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0)
+    t_ns = np.round(syn.t_s * 1e9).astype(np.int64) + 10**18
+    focused, _, _ = _push_all(SlidingSubapertureAutofocus(geo, syn.range_m, cfg), syn, t_ns, 25)
+    apc = np.column_stack([S.SPEED_MPS * syn.t_s, np.zeros((syn.t_s.size, 2))])
+    err, irw = [], []
+    for tg in syn.targets:
+        grid = PlaneGrid.centred((tg[0], tg[1], tg[2]), 200, 32, 0.01, 0.06)
+        img = backproject(focused, syn.range_m, apc, S.WAVELENGTH_M, grid)
+        m = point_target_metrics(img, (0.0, 0.0), search_radius_m=0.9)
+        err.append(abs(m.axis0.peak_m))
+        irw.append(m.axis0.irw_m)
+    print("azimuth position error / IRW", np.round(np.array(err) / np.array(irw), 2))
+    # measured: 0.02-0.66 IRW, median 0.13 (IRW 0.15-0.18 m); the worst is the least focused
+    # target (azimuth PSLR -7.7 dB), whose peak an asymmetric residual moves as well.
+    assert np.median(np.array(err) / np.array(irw)) < 0.25
+    assert np.max(np.array(err) / np.array(irw)) < 0.75
 
 
 def test_offline_recovers_los_and_focus_phase() -> None:
@@ -71,14 +126,16 @@ def test_offline_recovers_los_and_focus_phase() -> None:
     corr, report = autofocus_offline(syn.rc, t_ns, syn.range_m, geo, AutofocusConfig())
     beta = np.arccos(S.DEPTH_M / 1000.0)
     truth = syn.d_yz_m @ np.array([np.sin(beta), np.cos(beta)])
-    truth -= line_fit(syn.t_s, truth[:, None])[:, 0]
+    # The constant and linear terms are pinned between the first and last subaperture
+    # centres; between them the rates are interpolated, beyond them (0.2 s at each end)
+    # extrapolated and the error is larger.
+    centres = report.series()["t_center_s"] + syn.t_s[0]
+    inner = (syn.t_s >= centres[0]) & (syn.t_s <= centres[-1])
+    design = np.column_stack([np.ones(syn.t_s.size), syn.t_s])
+    truth -= design @ np.linalg.lstsq(design[inner], truth[inner], rcond=None)[0]
     assert np.sqrt(np.mean((corr.los_m - truth) ** 2)) < S.RES_M / 4
     ph = corr.phase_rad(np.array([1000.0]))[:, 0]
     err = ph - 4 * np.pi * truth / S.WAVELENGTH_M
-    # Between the first and last subaperture centres the rates are interpolated; beyond them
-    # (0.2 s at each end) they are extrapolated and the error is larger.
-    centres = report.series()["t_center_s"] + syn.t_s[0]
-    inner = (syn.t_s >= centres[0]) & (syn.t_s <= centres[-1])
     err = err[inner] - line_fit(syn.t_s[inner], err[inner, None])[:, 0]
     assert np.std(err) < 0.5
     assert len(report.subapertures) == report.series()["kappa"].shape[0] > 10
