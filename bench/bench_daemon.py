@@ -74,7 +74,10 @@ STAGES = {
     "INS motion compensation": ("mocomp.py", "compensate"),
     "autofocus push": ("streaming.py", "push"),
     "autofocus flush": ("streaming.py", "flush"),
-    "backprojection kernel": ("backprojection.py", "backproject"),
+    "azimuth pre-filter": ("presum.py", "_filter"),
+    "tile imager (the next two)": ("tiles.py", "add"),
+    "range upsampling (x8)": ("backprojection.py", "upsample"),
+    "backprojection kernel": ("backprojection.py", "backproject_into"),
     "recording pulses": ("recorder.py", "append_pulses"),
     "recording image tiles": ("recorder.py", "add_image"),
 }

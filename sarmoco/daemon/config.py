@@ -171,22 +171,25 @@ class ImagingConfig:
     )
     azimuth_beamwidth_deg: float = _key(
         3.0,
-        "Two-way azimuth beamwidth (the integration angle): pulses farther than its "
-        "half-angle times beam_margin from a pixel's broadside do not contribute to it",
+        "Two-way azimuth beamwidth (the integration angle): a pixel takes only the pulses "
+        "that see it within half this plus squint_tolerance_deg of broadside",
         unit="deg",
         gt=0,
         lt=90,
     )
-    beam_margin: float = _key(
-        1.25,
-        "Factor on the beamwidth for pixel culling and the pre-filter band (room for "
-        "heading errors, and in spotlight for pixels off the aperture centre)",
-        ge=1,
+    squint_tolerance_deg: float = _key(
+        0.3,
+        "Extra squint on each side of the beam that pixels still take, and the pre-filter "
+        "passes: covers the heading error of the INS-only reference track (3-4 mrad in the "
+        "simulated runs) and spotlight targets off the aperture centre; raise it for crab",
+        unit="deg",
+        ge=0,
+        lt=45,
     )
     prefilter: bool = _key(
         True,
         "Low-pass filter and decimate the pulses in slow time to the Doppler band of "
-        "that beam before backprojection",
+        "those squints before backprojection",
     )
     prefilter_oversampling: float = _key(
         2.0, "Pulse rate after the pre-filter over the two-sided Doppler band it keeps", gt=1

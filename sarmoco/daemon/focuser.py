@@ -122,7 +122,7 @@ class Focuser:
         )
         ground_range = math.sqrt(max(geo.center_slant_range_m**2 - geo.height_m**2, 0.0))
         im = cfg.imaging
-        beam_rad = math.radians(im.azimuth_beamwidth_deg) * im.beam_margin
+        beam_rad = math.radians(im.azimuth_beamwidth_deg + 2.0 * im.squint_tolerance_deg)
         self.imager = TileImager(
             TileLayout(
                 height_m=geo.height_m,
