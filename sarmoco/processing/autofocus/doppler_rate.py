@@ -12,6 +12,7 @@ targets outside the subaperture does not matter. Rates are in Hz/s, times in s.
 from __future__ import annotations
 
 import numpy as np
+import scipy.fft
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
@@ -68,7 +69,8 @@ def gather_bands(sub: ComplexArray, bins: IntArray, half_band: int) -> ComplexAr
 
 
 def _dechirp(bands: ComplexArray, tc_s: FloatArray, rate: FloatArray) -> ComplexArray:
-    return bands * np.exp(-1j * np.pi * rate[:, None, None] * tc_s[None, None, :] ** 2)
+    chirp = np.exp(-1j * np.pi * rate[:, None, None] * tc_s[None, None, :] ** 2)
+    return np.asarray(bands * chirp.astype(bands.dtype))
 
 
 def compressed_magnitude(
@@ -132,11 +134,12 @@ def map_drift(
     quality = np.zeros(bands.shape[0])
     for _ in range(n_iter):
         d = _dechirp(bands, tc, rate_ref + delta)
-        a = np.abs(np.fft.fft(d[..., :half], n_fft, axis=-1)).sum(axis=1)
-        b = np.abs(np.fft.fft(d[..., half : 2 * half], n_fft, axis=-1)).sum(axis=1)
+        a = np.abs(scipy.fft.fft(d[..., :half], n_fft, axis=-1)).sum(axis=1)
+        b = np.abs(scipy.fft.fft(d[..., half : 2 * half], n_fft, axis=-1)).sum(axis=1)
         a -= a.mean(axis=-1, keepdims=True)
         b -= b.mean(axis=-1, keepdims=True)
-        xc = np.fft.ifft(np.fft.fft(b, axis=-1) * np.conj(np.fft.fft(a, axis=-1)), axis=-1).real
+        spec = scipy.fft.rfft(b, axis=-1) * np.conj(scipy.fft.rfft(a, axis=-1))
+        xc = np.asarray(scipy.fft.irfft(spec, n_fft, axis=-1), dtype=float)
         k = np.argmax(xc, axis=-1)
         rows = np.arange(xc.shape[0])
         y0, y1, y2 = xc[rows, k - 1], xc[rows, k], xc[rows, (k + 1) % n_fft]

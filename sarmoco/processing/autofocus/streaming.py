@@ -43,6 +43,7 @@ from sarmoco.processing.autofocus.separation import (
 from sarmoco.processing.autofocus.splice import (
     integrate_twice,
     phase_screen,
+    remove_phase,
     shift_range,
     splice,
     zero_line_start,
@@ -179,23 +180,43 @@ class Corrections:
 
     def apply(self, rc: ComplexArray, range_m: FloatArray) -> ComplexArray:
         """Shift the envelopes and remove the phase error: returns corrected (P, S) data."""
-        bin_m = float(range_m[1] - range_m[0])
-        shifted = shift_range(rc, self.los_m, bin_m)
-        return (shifted * np.exp(-1j * self.phase_rad(range_m))).astype(rc.dtype)
+        shifted = shift_range(rc, self.los_m, float(range_m[1] - range_m[0]))
+        return remove_phase(shifted, self.phase_cycles, np.asarray(range_m) - self.ref_range_m)
 
 
 def _seconds(t_ns: IntArray, t0_ns: int) -> FloatArray:
     return np.asarray(t_ns - t0_ns, dtype=float) * 1e-9
 
 
+@dataclass(frozen=True)
+class _Bands:
+    """The selected lines of one subaperture: bins (N,), bands (N, B, M) and the slant
+    range of every band bin (N * B,), m."""
+
+    bins: IntArray
+    bands: ComplexArray
+    band_range_m: FloatArray
+
+
+def _select(sub: ComplexArray, range_m: FloatArray, config: AutofocusConfig) -> _Bands:
+    """Select the lines of a subaperture (pulses x bins) and gather their bands."""
+    bins = select_lines(sub, config.n_lines, config.guard_bins)
+    idx = np.clip(
+        bins[:, None] + np.arange(-config.half_band, config.half_band + 1)[None, :],
+        0,
+        sub.shape[1] - 1,
+    )
+    return _Bands(bins, gather_bands(sub, bins, config.half_band), range_m[idx].ravel())
+
+
 def _line_rates(
-    sub: ComplexArray,
+    lines: _Bands,
     t_s: FloatArray,
     range_m: FloatArray,
     geometry: AutofocusGeometry,
     config: AutofocusConfig,
 ) -> LineRates:
-    """Select lines and measure their Doppler-rate errors on one subaperture.
+    """Measure the Doppler-rate errors of the selected lines of one subaperture.
 
     A line's weight is its peak-to-median power ratio minus one, an estimate of the signal
     to noise (and clutter) ratio of its dominant scatterer, to which the inverse variance of a
@@ -206,11 +227,10 @@ def _line_rates(
     peak stands less than ``config.min_peak_db`` over its median; if fewer than
     ``config.min_lines`` lines are left, every weight is zero (no correction).
     """
-    bins = select_lines(sub, config.n_lines, config.guard_bins)
+    bins, bands = lines.bins, lines.bands
     if bins.size == 0:
         empty = np.zeros(0)
         return LineRates(empty, empty, empty, empty, empty)
-    bands = gather_bands(sub, bins, config.half_band)
     ref = nominal_rate(range_m[bins], geometry.speed_mps, geometry.wavelength_m)
     if config.estimator == "map_drift":
         delta, quality = map_drift(bands, t_s, ref)
@@ -298,12 +318,35 @@ def autofocus_offline(
     return corr, engine.report
 
 
-@dataclass
-class _Carry:
-    """Integrator state (value, slope) at the first buffered pulse, once pinned."""
+class _Rows:
+    """Pulses (rows) appended at the end and dropped from the front; the kept rows are copied
+    only when the storage grows (to twice what is kept), not on every append."""
 
-    los: FloatArray
-    cycles: FloatArray  # (2, 3)
+    def __init__(self, n_cols: int) -> None:
+        self._buf: ComplexArray = np.zeros((0, n_cols), dtype=np.complex64)
+        self._start = 0
+        self._stop = 0
+
+    @property
+    def rows(self) -> ComplexArray:
+        """The kept rows (a view)."""
+        return self._buf[self._start : self._stop]
+
+    def __len__(self) -> int:
+        return self._stop - self._start
+
+    def append(self, rows: ComplexArray) -> None:
+        n = rows.shape[0]
+        if self._stop + n > self._buf.shape[0]:
+            kept = len(self)
+            grown = np.empty((max(2 * (kept + n), 256), self._buf.shape[1]), dtype=np.complex64)
+            grown[:kept] = self.rows
+            self._buf, self._start, self._stop = grown, 0, kept
+        self._buf[self._stop : self._stop + n] = rows
+        self._stop += n
+
+    def drop(self, n: int) -> None:
+        self._start += min(n, len(self))
 
 
 class SlidingSubapertureAutofocus:
@@ -330,6 +373,10 @@ class SlidingSubapertureAutofocus:
     then on the integrators carry on. The pin leaves out the run's first half subaperture,
     whose rates are extrapolated.
 
+    Cost: every pulse is shifted in range twice (for estimation, once its envelope is known,
+    and at release), lines are selected once per subaperture and step, and the phase passes
+    correct and measure only the selected bands.
+
     Parameters
     ----------
     geometry : AutofocusGeometry
@@ -346,17 +393,24 @@ class SlidingSubapertureAutofocus:
         self.config = config
         self.report = AutofocusReport()
         self._lookahead = math.ceil(config.subaperture_s / (2.0 * config.hop_s) - 1e-9)
+        self._bin_m = float(self.range_m[1] - self.range_m[0])
         self._t0_ns: int | None = None
         self._t = np.zeros(0)
         self._t_ns = np.zeros(0, dtype=np.int64)
-        self._data: ComplexArray = np.zeros((0, self.range_m.size), dtype=np.complex64)
-        self._carry: _Carry | None = None
+        self._data = _Rows(self.range_m.size)
+        # envelope-corrected pulses (the first rows of the buffer), and the integrators'
+        # start (value, slope) at the first buffered pulse once pinned: LOS displacement (2,)
+        # and phase (2, 3)
+        self._shifted = _Rows(self.range_m.size)
+        self._los0: FloatArray | None = None
+        self._cycles0: FloatArray | None = None
         self._centres: list[float] = []
         self._a_los: list[float] = []
         self._accel: list[tuple[float, float]] = []
         self._accel_res: list[float] = []
         self._env_lines: list[LineRates | None] = []
         self._kappa: list[list[FloatArray]] = [[] for _ in range(config.phase_passes)]
+        self._bands: dict[int, _Bands] = {}
         self._released_s = -np.inf
 
     @property
@@ -378,10 +432,6 @@ class SlidingSubapertureAutofocus:
     def _complete(self, j: int) -> bool:
         return self._t.size > 0 and self._t[-1] >= self._start(j) + self.config.subaperture_s - 1e-9
 
-    def _subaperture(self, j: int) -> tuple[FloatArray, ComplexArray, slice]:
-        m = _members(self._t, self._start(j), self.config)
-        return self._t[m], self._data[m], m
-
     def _spliced(self, values: list[FloatArray] | list[float], t_s: FloatArray) -> FloatArray:
         """Splice the first ``len(values)`` subaperture estimates onto ``t_s`` (only the
         estimates whose centres reach ``t_s`` and the three before them are used: the same
@@ -391,10 +441,17 @@ class SlidingSubapertureAutofocus:
         return splice(np.array(self._centres[k0 : len(values)]), np.array(values[k0:]), t_s)
 
     def _envelope_step(self, j: int) -> None:
-        t, sub, _ = self._subaperture(j)
+        m = _members(self._t, self._start(j), self.config)
         self._centres.append(self._start(j) + 0.5 * self.config.subaperture_s)
         if self.config.envelope_step:
-            lines = _line_rates(sub, t, self.range_m, self.geometry, self.config)
+            sub = self._data.rows[m]
+            lines = _line_rates(
+                _select(sub, self.range_m, self.config),
+                self._t[m],
+                self.range_m,
+                self.geometry,
+                self.config,
+            )
             (ay, az), res = _fit_accel(lines, self.geometry)
             self._env_lines.append(lines)
             self._accel.append((ay, az))
@@ -406,28 +463,53 @@ class SlidingSubapertureAutofocus:
             self._accel_res.append(float("nan"))
             self._a_los.append(0.0)
 
-    def _los(self) -> tuple[FloatArray, FloatArray]:
-        """LOS displacement (m) and its rate (m/s) of every buffered pulse.
-
-        Before the pin, zero mean and trend over the buffer (every pulse since the start).
-        """
+    def _los(self, start: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """LOS displacement (m) and its rate (m/s) of every buffered pulse from ``start``
+        (value, slope at the first buffered pulse)."""
         if not self.config.envelope_step or not self._centres:
             return np.zeros(self._t.size), np.zeros(self._t.size)
         a_t = self._spliced(self._a_los, self._t)
-        if self._carry is None:
-            v0, s0 = zero_line_start(self._t, a_t, self._pin_window(len(self._centres)))
-        else:
-            v0, s0 = self._carry.los[:1], self._carry.los[1:]
-        val, slope = integrate_twice(self._t, a_t, v0, s0)
+        val, slope = integrate_twice(self._t, a_t, start[:1], start[1:])
         return val[:, 0], slope[:, 0]
+
+    def _shift_known(self, flushing: bool) -> None:
+        """Extend the envelope-corrected buffer over the pulses whose LOS displacement is
+        final: up to the latest subaperture centre (every pulse when ``flushing``), once the
+        LOS displacement is pinned (zero mean and trend over the pin window of step-1
+        centres; the same window as the phase's, so released pulses need no second shift).
+        """
+        if not self.config.envelope_step:
+            self._los0 = np.zeros(2)
+            self._shifted = self._data
+            return
+        if self._los0 is None:
+            if not self._centres:
+                if flushing:
+                    self._los0 = np.zeros(2)
+                return
+            if not flushing and self._centres[-1] < self._pin_end() - 1e-9:
+                return
+            a_t = self._spliced(self._a_los, self._t)
+            v0, s0 = zero_line_start(self._t, a_t, self._pin_window(len(self._centres)))
+            self._los0 = np.array([float(v0[0]), float(s0[0])])
+        upto = self._t.size
+        if not flushing:
+            upto = int(np.searchsorted(self._t, self._centres[-1] + 1e-9))
+        done = len(self._shifted)
+        if upto > done:
+            los = self._los(self._los0)[0][done:upto]
+            self._shifted.append(shift_range(self._data.rows[done:upto], los, self._bin_m))
+
+    def _pin_end(self) -> float:
+        return self._centres[0] + self.config.pin_window_s
 
     def _cycles(self) -> tuple[FloatArray, FloatArray]:
         """Double integral of the final κ series (and its slope) on the buffered pulses."""
         final = self._kappa[-1]
-        if not final or self._carry is None:
+        if not final or self._cycles0 is None:
             return np.zeros((self._t.size, 3)), np.zeros((self._t.size, 3))
         k = self._spliced(final, self._t)
-        return integrate_twice(self._t, k, self._carry.cycles[0], self._carry.cycles[1])
+        return integrate_twice(self._t, k, self._cycles0[0], self._cycles0[1])
 
     def _ready(self, p: int, j: int, flushing: bool) -> bool:
         """Whether phase pass p of subaperture j can run (its inputs are interpolated)."""
@@ -435,33 +517,41 @@ class SlidingSubapertureAutofocus:
         feed = n_env if p == 0 else len(self._kappa[p - 1])
         if j >= feed:
             return False
+        if p == 0 and _members(self._t, self._start(j), self.config).stop > len(self._shifted):
+            return False
         return feed > j + self._lookahead or (flushing and feed == n_env)
 
     def _phase_pass(self, p: int, j: int) -> None:
         """Pass p of the phase step on subaperture j: rates measured on the envelope-corrected
-        subaperture after removing the phase of pass p - 1 (integrated locally: a constant
-        and a linear phase do not change a rate), κ added to that pass's."""
-        t, sub, m = self._subaperture(j)
-        if self.config.envelope_step:
-            sub = shift_range(sub, self._los()[0][m], float(self.range_m[1] - self.range_m[0]))
+        lines after removing the phase of pass p - 1 (integrated locally: a constant and a
+        linear phase do not change a rate), κ added to that pass's. The lines are selected
+        on the first pass (the phase does not change their energy)."""
+        m = _members(self._t, self._start(j), self.config)
+        t = self._t[m]
+        if p == 0:
+            self._bands[j] = _select(self._shifted.rows[m], self.range_m, self.config)
+        lines = self._bands[j]
         base = np.zeros(3)
-        if p > 0:
+        if p > 0 and lines.bins.size:
             prev = self._kappa[p - 1]
             base = prev[j]
             zero = np.zeros(3)
             cyc = integrate_twice(t, self._spliced(prev, t), zero, zero)[0]
-            sub = sub * np.exp(-1j * phase_screen(cyc, self.range_m - self.geometry.ref_range_m))
-        lines = _line_rates(sub, t, self.range_m, self.geometry, self.config)
-        step, kres = _fit_kappa(lines, self.geometry, self.config.range_order)
+            phase = phase_screen(cyc, lines.band_range_m - self.geometry.ref_range_m)
+            rot = np.exp(-1j * phase.T.reshape(lines.bands.shape)).astype(np.complex64)
+            lines = _Bands(lines.bins, lines.bands * rot, lines.band_range_m)
+        rates = _line_rates(lines, t, self.range_m, self.geometry, self.config)
+        step, kres = _fit_kappa(rates, self.geometry, self.config.range_order)
         kappa = base + step
         self._kappa[p].append(kappa)
         if p == len(self._kappa) - 1:
+            del self._bands[j]
             self.report.subapertures.append(
                 SubapertureReport(
                     j,
                     self._centres[j],
                     self._env_lines[j],
-                    lines,
+                    rates,
                     self._accel[j],
                     self._accel_res[j],
                     kappa,
@@ -485,12 +575,13 @@ class SlidingSubapertureAutofocus:
             raise ProcessingError("SlidingSubapertureAutofocus.push: pulse times go backwards")
         self._t = np.concatenate([self._t, t_new])
         self._t_ns = np.concatenate([self._t_ns, t_ns.astype(np.int64)])
-        self._data = np.concatenate([self._data, rc.astype(self._data.dtype)])
+        self._data.append(rc)
         self._estimate(flushing=False)
 
     def _estimate(self, flushing: bool) -> None:
         while self._complete(len(self._centres)):
             self._envelope_step(len(self._centres))
+        self._shift_known(flushing)
         progress = True
         while progress:
             progress = False
@@ -510,17 +601,20 @@ class SlidingSubapertureAutofocus:
             Their times, GPS ns, increasing and later than every pulse pushed before.
         """
         self.extend(rc, t_ns)
-        data, corr = self.corrections(flushing=False)
-        return corr.apply(data, self.range_m) if data.shape[0] else data, corr
+        return self._release(flushing=False)
 
     def flush(self) -> tuple[ComplexArray, Corrections]:
         """Release every remaining pulse (the last ones with extrapolated corrections)."""
-        data, corr = self.corrections(flushing=True)
-        return corr.apply(data, self.range_m) if data.shape[0] else data, corr
+        return self._release(flushing=True)
+
+    def _release(self, flushing: bool) -> tuple[ComplexArray, Corrections]:
+        shifted, corr = self.corrections(flushing)
+        return remove_phase(shifted, corr.phase_cycles, self.range_m - corr.ref_range_m), corr
 
     def corrections(self, flushing: bool) -> tuple[ComplexArray, Corrections]:
         """Take the pulses whose corrections are final (every one when ``flushing``) out of the
-        buffer; returns them uncorrected with their :class:`Corrections`."""
+        buffer; returns them with the envelope already corrected, and their
+        :class:`Corrections` (the phase is still to be removed)."""
         if flushing:
             self._estimate(flushing=True)
         final = self._kappa[-1]
@@ -529,30 +623,36 @@ class SlidingSubapertureAutofocus:
             upto = self._t.size
         elif final:
             centre = self._centres[len(final) - 1]
-            if (
-                self._carry is not None
-                or centre >= self._centres[0] + self.config.pin_window_s - 1e-9
-            ):
+            if self._cycles0 is not None or centre >= self._pin_end() - 1e-9:
                 upto = int(np.searchsorted(self._t, centre - 1e-9))
-        if self._carry is None and upto > 0:
-            self._pin()
+        if self._cycles0 is None and upto > 0:
+            self._cycles0 = np.zeros((2, 3))
+            if final:
+                window = self._pin_window(len(final))
+                self._cycles0 = np.vstack(
+                    zero_line_start(self._t, self._spliced(final, self._t), window)
+                )
         first = int(np.searchsorted(self._t, self._released_s, side="right"))
-        los, los_slope = self._los()
-        cyc, cyc_slope = self._cycles()
         sel = slice(first, upto)
+        los, los_slope = (
+            self._los(self._los0) if self._los0 is not None else (np.zeros(self._t.size),) * 2
+        )
+        cyc, cyc_slope = self._cycles()
         corr = Corrections(self._t_ns[sel].copy(), los[sel], cyc[sel], self.geometry.ref_range_m)
-        data = self._data[sel]
+        data = self._shifted.rows[sel]
         if upto > first:
             self._released_s = float(self._t[upto - 1])
         # Drop pulses that are released and not needed by a pending subaperture, carrying the
-        # integrator state to the new first pulse (its inputs are final there).
+        # integrator states to the new first pulse (their inputs are final there).
         need = int(np.searchsorted(self._t, self._start(len(final)) - 1e-9))
         cut = min(upto, need)
-        if self._carry is not None and 0 < cut < self._t.size:
-            self._carry = _Carry(
-                np.array([los[cut], los_slope[cut]]), np.vstack([cyc[cut], cyc_slope[cut]])
-            )
-            self._t, self._t_ns, self._data = self._t[cut:], self._t_ns[cut:], self._data[cut:]
+        if 0 < cut < self._t.size and self._cycles0 is not None and self._los0 is not None:
+            self._los0 = np.array([los[cut], los_slope[cut]])
+            self._cycles0 = np.vstack([cyc[cut], cyc_slope[cut]])
+            self._t, self._t_ns = self._t[cut:], self._t_ns[cut:]
+            self._data.drop(cut)
+            if self._shifted is not self._data:
+                self._shifted.drop(cut)
         return data, corr
 
     def _pin_window(self, n_known: int) -> slice:
@@ -563,19 +663,3 @@ class SlidingSubapertureAutofocus:
             return slice(0, self._t.size)
         i0 = int(np.searchsorted(self._t, self._centres[0] - 1e-9))
         return slice(i0, int(np.searchsorted(self._t, self._centres[n_known - 1] + 1e-9)))
-
-    def _pin(self) -> None:
-        """Fix the integrators' start so that the LOS displacement and the phase have zero mean
-        and zero trend between the first and the latest final subaperture centre (the pin
-        window; the buffer still starts at the first pulse)."""
-        zero = np.zeros(1)
-        los0 = (zero, zero)
-        window = self._pin_window(max(len(self._kappa[-1]), 1))
-        if self.config.envelope_step and self._centres:
-            los0 = zero_line_start(self._t, self._spliced(self._a_los, self._t), window)
-        cyc0 = (np.zeros(3), np.zeros(3))
-        if self._kappa[-1]:
-            cyc0 = zero_line_start(self._t, self._spliced(self._kappa[-1], self._t), window)
-        self._carry = _Carry(
-            np.array([float(los0[0][0]), float(los0[1][0])]), np.vstack([cyc0[0], cyc0[1]])
-        )
