@@ -285,10 +285,10 @@ def autofocus_offline(
     config: AutofocusConfig,
 ) -> tuple[Corrections, AutofocusReport]:
     """Two-step autofocus of a whole aperture (constant and linear terms pinned to zero mean
-    and zero trend over it).
+    and zero trend between the first and the last subaperture centre).
 
     The streaming engine fed the whole aperture at once with an unbounded pin window: the
-    estimates are the streaming ones by construction, and the pin covers every pulse.
+    estimates are the streaming ones by construction, and the pin window is the aperture's.
 
     Parameters
     ----------
