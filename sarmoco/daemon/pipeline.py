@@ -326,7 +326,9 @@ class Pipeline:
         focuser = self.focuser
         assert focuser is not None
         if focuser.autofocus is not None:
-            subs = focuser.autofocus.report.subapertures[self._autofocus_rows() :]
+            # recorded, then forgotten: the streaming report would grow by one entry a hop
+            subs = list(focuser.autofocus.report.subapertures)
+            focuser.autofocus.report.subapertures.clear()
             if subs:
                 self.recorder.append_rows(
                     "autofocus",
@@ -348,10 +350,6 @@ class Pipeline:
             self.recorder.add_image(tile.image(), tile.t0_ns, tile.t1_ns, metrics)
             self.summary.tiles += 1
             self.summary.tile_metrics.append(metrics)
-
-    def _autofocus_rows(self) -> int:
-        table = self.recorder.tables.get("autofocus")
-        return 0 if table is None else table.committed
 
     def _record_nav(self) -> None:
         """Write the queued INS samples and raw INS bytes (the bytes as one chunk whose

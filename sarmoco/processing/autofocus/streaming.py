@@ -21,7 +21,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Generic, Literal, TypeVar
 
 import numpy as np
 
@@ -349,6 +349,46 @@ class _Rows:
         self._start += min(n, len(self))
 
 
+T = TypeVar("T")
+
+
+class _History(Generic[T]):
+    """Per-subaperture values by absolute subaperture number j; the oldest can be forgotten
+    (a run of hours keeps only those the buffered pulses still need, not one per hop)."""
+
+    def __init__(self) -> None:
+        self.first = 0
+        """Number of the oldest value kept."""
+        self._items: list[T] = []
+
+    def __len__(self) -> int:
+        """Number of values ever appended (one past the newest j)."""
+        return self.first + len(self._items)
+
+    def __getitem__(self, j: int) -> T:
+        if j < 0:
+            return self._items[j]
+        if j < self.first:
+            raise ProcessingError(f"autofocus history: subaperture {j} was forgotten")
+        return self._items[j - self.first]
+
+    def append(self, value: T) -> None:
+        self._items.append(value)
+
+    def since(self, j0: int, j1: int | None = None) -> list[T]:
+        """Values j0 .. j1 - 1 (to the newest when j1 is None); j0 at least :attr:`first`."""
+        if j0 < self.first:
+            raise ProcessingError(f"autofocus history: subaperture {j0} was forgotten")
+        stop = None if j1 is None else j1 - self.first
+        return self._items[j0 - self.first : stop]
+
+    def forget_before(self, j: int) -> None:
+        """Drop the values of subapertures before j."""
+        n = max(0, min(j - self.first, len(self._items)))
+        del self._items[:n]
+        self.first += n
+
+
 class SlidingSubapertureAutofocus:
     """Streaming two-step autofocus with carried state.
 
@@ -404,12 +444,13 @@ class SlidingSubapertureAutofocus:
         self._shifted = _Rows(self.range_m.size)
         self._los0: FloatArray | None = None
         self._cycles0: FloatArray | None = None
-        self._centres: list[float] = []
-        self._a_los: list[float] = []
-        self._accel: list[tuple[float, float]] = []
-        self._accel_res: list[float] = []
-        self._env_lines: list[LineRates | None] = []
-        self._kappa: list[list[FloatArray]] = [[] for _ in range(config.phase_passes)]
+        self._centres: _History[float] = _History()
+        self._a_los: _History[float] = _History()
+        self._accel: _History[tuple[float, float]] = _History()
+        self._accel_res: _History[float] = _History()
+        self._env_lines: _History[LineRates | None] = _History()
+        self._kappa: list[_History[FloatArray]] = [_History() for _ in range(config.phase_passes)]
+        self._pin_end_s: float | None = None
         self._bands: dict[int, _Bands] = {}
         self._released_s = -np.inf
 
@@ -426,19 +467,47 @@ class SlidingSubapertureAutofocus:
         c = self.config
         return c.subaperture_s + c.pin_window_s + c.phase_passes * self._lookahead * c.hop_s
 
+    @property
+    def estimates_kept(self) -> int:
+        """Subaperture estimates held (bounded by the buffered pulses, not the run length)."""
+        return len(self._centres) - self._centres.first
+
     def _start(self, j: int) -> float:
         return j * self.config.hop_s
 
     def _complete(self, j: int) -> bool:
         return self._t.size > 0 and self._t[-1] >= self._start(j) + self.config.subaperture_s - 1e-9
 
-    def _spliced(self, values: list[FloatArray] | list[float], t_s: FloatArray) -> FloatArray:
+    def _spliced(
+        self, values: _History[FloatArray] | _History[float], t_s: FloatArray
+    ) -> FloatArray:
         """Splice the first ``len(values)`` subaperture estimates onto ``t_s`` (only the
         estimates whose centres reach ``t_s`` and the three before them are used: the same
         interpolation and end fits as the whole list)."""
-        first = int(np.searchsorted(self._centres, t_s[0])) if t_s.size else 0
-        k0 = max(0, min(first, len(values) - 1) - 3)
-        return splice(np.array(self._centres[k0 : len(values)]), np.array(values[k0:]), t_s)
+        k0 = max(self._centres.first, min(self._first_needed(t_s), len(values) - 1) - 3)
+        return splice(
+            np.array(self._centres.since(k0, len(values))), np.array(values.since(k0)), t_s
+        )
+
+    def _first_needed(self, t_s: FloatArray) -> int:
+        """Number of the first kept subaperture whose centre is at or after ``t_s[0]``."""
+        kept = np.array(self._centres.since(self._centres.first))
+        return self._centres.first + (int(np.searchsorted(kept, t_s[0])) if t_s.size else 0)
+
+    def _forget(self) -> None:
+        """Forget the estimates no buffered pulse needs any more: :meth:`_spliced` uses three
+        before the first centre at or after the first buffered pulse (four when a series ends
+        there); eight are kept."""
+        j = self._first_needed(self._t) - 8
+        histories: list[_History[Any]] = [
+            self._centres,
+            self._a_los,
+            self._accel,
+            self._accel_res,
+            self._env_lines,
+        ]
+        for h in [*histories, *self._kappa]:
+            h.forget_before(j)
 
     def _envelope_step(self, j: int) -> None:
         m = _members(self._t, self._start(j), self.config)
@@ -501,7 +570,9 @@ class SlidingSubapertureAutofocus:
             self._shifted.append(shift_range(self._data.rows[done:upto], los, self._bin_m))
 
     def _pin_end(self) -> float:
-        return self._centres[0] + self.config.pin_window_s
+        if self._pin_end_s is None:
+            self._pin_end_s = self._centres[0] + self.config.pin_window_s
+        return self._pin_end_s
 
     def _cycles(self) -> tuple[FloatArray, FloatArray]:
         """Double integral of the final κ series (and its slope) on the buffered pulses."""
@@ -653,6 +724,7 @@ class SlidingSubapertureAutofocus:
             self._data.drop(cut)
             if self._shifted is not self._data:
                 self._shifted.drop(cut)
+            self._forget()
         return data, corr
 
     def _pin_window(self, n_known: int) -> slice:

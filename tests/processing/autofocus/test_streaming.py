@@ -87,6 +87,28 @@ def test_streaming_matches_offline_up_to_a_line() -> None:
     assert np.std(d_ph) < 0.25  # rad, against ~150 rad of phase error
 
 
+def test_streaming_state_is_bounded_on_a_long_run() -> None:
+    """Over 30 s (296 subapertures) the estimates kept stay those the buffered pulses need
+    (about latency / hop + 8), and the report is what the caller has not yet taken."""
+    syn = _scene(30.0)
+    geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0)
+    cfg = AutofocusConfig(pin_window_s=0.5)
+    af = SlidingSubapertureAutofocus(geo, syn.range_m, cfg)
+    t_ns = np.round(syn.t_s * 1e9).astype(np.int64) + 10**18
+    bound = (af.startup_s + af.latency_s) / cfg.hop_s + 8
+    kept, reported = [], 0
+    for i in range(0, t_ns.size, 100):
+        af.push(syn.rc[i : i + 100], t_ns[i : i + 100])
+        kept.append(af.estimates_kept)
+        reported += len(af.report.subapertures)
+        af.report.subapertures.clear()
+    af.flush()
+    reported += len(af.report.subapertures)
+    span = float(syn.t_s[-1] - syn.t_s[0])
+    assert reported == int((span - cfg.subaperture_s) / cfg.hop_s + 1e-9) + 1
+    assert max(kept) <= bound < reported / 5
+
+
 def test_streaming_places_targets_where_the_navigation_is_right_on_average() -> None:
     """A linear phase is not observable from Doppler rates and moves targets along track.
     With motion of zero mean and trend over the pin window (the navigation right on average
