@@ -192,7 +192,7 @@ class ImagingConfig:
         "those squints before backprojection",
     )
     prefilter_oversampling: float = _key(
-        2.0, "Pulse rate after the pre-filter over the two-sided Doppler band it keeps", gt=1
+        1.25, "Pulse rate after the pre-filter over the two-sided Doppler band it keeps", gt=1
     )
 
 

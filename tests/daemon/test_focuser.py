@@ -2,7 +2,7 @@
 
 Raw thz-spotlight echoes (0.2 THz, 20 kHz PRF, ideal track, no noise, autofocus
 off) go through :class:`Focuser` in blocks as the pipeline sends them, once with
-``imaging.prefilter`` on (decimated 8 times) and once off. The targets
+``imaging.prefilter`` on (decimated 13 times) and once off. The targets
 must focus alike: PSLR and ISLR within 0.2 dB, IRW within 2 %, peak within 1 %.
 """
 
@@ -57,7 +57,7 @@ def _window(tiles: list[Tile], x: float, y: float) -> Image:
 def test_prefilter_keeps_point_targets(run: SimRun) -> None:
     fast, focuser = _focus(run, prefilter=True)
     slow, plain = _focus(run, prefilter=False)
-    assert focuser.prefilter is not None and focuser.prefilter.decimation >= 8
+    assert focuser.prefilter is not None and focuser.prefilter.decimation >= 13
     assert plain.prefilter is None
     assert [t.index for t in fast] == [t.index for t in slow]
     targets = run.targets_ned - run.apc_ned[0]  # ideal track: imaging frame = shifted NED

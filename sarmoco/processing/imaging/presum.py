@@ -43,26 +43,46 @@ _CHUNK = 512
 
 @numba.njit(parallel=True, nogil=True, cache=True, fastmath=True)
 def _fir_decimate(
-    x: npt.NDArray[np.float32],
+    hist: npt.NDArray[np.float32],
+    new: npt.NDArray[np.float32],
     taps: npt.NDArray[np.float32],
     first: int,
     step: int,
     out: npt.NDArray[np.float32],
 ) -> None:  # pragma: no cover - compiled
-    """``out[m] = sum_k taps[k] x[first + m step + k]`` (symmetric taps: a convolution)."""
+    """``out[m] = sum_k taps[k] x[first + m step + k]``, ``x`` the rows of ``hist`` then ``new``.
+
+    Symmetric taps, so this is the convolution. Each input row is read once per
+    column chunk and added to the (few) outputs whose window holds it, which stay
+    in cache; chunks of columns run in parallel.
+    """
     n_out, width = out.shape
+    n_taps = taps.shape[0]
+    n_hist = hist.shape[0]
     n_chunks = (width + _CHUNK - 1) // _CHUNK
+    last_row = first + (n_out - 1) * step + n_taps
     for c in numba.prange(n_chunks):
         b0 = c * _CHUNK
-        b1 = min(b0 + _CHUNK, width)
+        nb = min(b0 + _CHUNK, width) - b0
+        acc = np.zeros((n_out, _CHUNK), np.float32)
+        row = np.empty(_CHUNK, np.float32)  # a local copy: the loop below then vectorises
+        for r in range(first, last_row):
+            if r < n_hist:
+                for b in range(nb):
+                    row[b] = hist[r, b0 + b]
+            else:
+                for b in range(nb):
+                    row[b] = new[r - n_hist, b0 + b]
+            m_lo = max(0, (r - first - n_taps + step) // step)
+            m_hi = min(n_out - 1, (r - first) // step)
+            for m in range(m_lo, m_hi + 1):
+                h = taps[r - first - m * step]
+                a = acc[m]
+                for b in range(_CHUNK):
+                    a[b] += h * row[b]
         for m in range(n_out):
-            r0 = first + m * step
-            for b in range(b0, b1):
-                out[m, b] = 0.0
-            for kk in range(taps.shape[0]):
-                h = taps[kk]
-                for b in range(b0, b1):
-                    out[m, b] += h * x[r0 + kk, b]
+            for b in range(nb):
+                out[m, b0 + b] = acc[m, b]
 
 
 class AzimuthPrefilter:
@@ -84,7 +104,7 @@ class AzimuthPrefilter:
         self,
         prf_hz: float,
         band_hz: float,
-        oversampling: float = 2.0,
+        oversampling: float = 1.25,
         attenuation_db: float = ATTENUATION_DB,
     ) -> None:
         if not (prf_hz > 0 and band_hz > 0 and oversampling > 1 and attenuation_db > 0):
@@ -186,8 +206,11 @@ class AzimuthPrefilter:
         offset = np.cumsum(steps)  # slot of each pulse, 1 = the slot after the last one
         n_new = int(offset[-1])
         assert self._hist is not None
-        new = np.zeros((n_new, self._hist.shape[1]), np.complex64)
-        new[offset - 1] = rc
+        if n_new == rc.shape[0]:  # no pulse missing: the block is the slots
+            new = np.ascontiguousarray(rc, dtype=np.complex64)
+        else:
+            new = np.zeros((n_new, self._hist.shape[1]), np.complex64)
+            new[offset - 1] = rc
         known = np.concatenate([[0], offset]).astype(np.float64)
         dt_known = np.concatenate([[0], t_ns - self._last_t]).astype(np.float64)  # exact: small
         dt_new = np.interp(np.arange(1, n_new + 1), known, dt_known)
@@ -199,21 +222,27 @@ class AzimuthPrefilter:
         self, new: ComplexArray, t_new: IntArray, last_centre: int
     ) -> tuple[ComplexArray, IntArray]:
         """Append the slots ``new``; produce the outputs centred up to ``last_centre``."""
-        assert self._hist is not None
-        x = np.concatenate([self._hist, new])
+        hist = self._hist
+        assert hist is not None
         t_x = np.concatenate([self._hist_t, t_new])
-        first_slot = self._next_slot - self._hist.shape[0]  # slot of row 0 of x
+        first_slot = self._next_slot - hist.shape[0]  # slot of the first history row
         d = self.decimation
         n_out = max(0, (last_centre - self._next_out) // d + 1)
-        out = np.empty((n_out, x.shape[1]), np.complex64)
+        out = np.empty((n_out, hist.shape[1]), np.complex64)
         centres = self._next_out + d * np.arange(n_out)
         if n_out:
             first_row = self._next_out - self._half - first_slot
-            _fir_decimate(x.view(np.float32), self.taps, first_row, d, out.view(np.float32))
+            _fir_decimate(
+                hist.view(np.float32), new.view(np.float32), self.taps, first_row, d,
+                out.view(np.float32),
+            )  # fmt: skip
         self._next_out += d * n_out
         self._next_slot += new.shape[0]
-        n_hist = self.taps.size - 1
-        self._hist = x[x.shape[0] - n_hist :].copy()
+        n_hist = hist.shape[0]
+        if new.shape[0] >= n_hist:
+            self._hist = new[new.shape[0] - n_hist :].copy()
+        else:
+            self._hist = np.concatenate([hist[new.shape[0] :], new])
         self._hist_t = t_x[t_x.shape[0] - n_hist :].copy()
         return out, t_x[centres - first_slot]
 
