@@ -553,14 +553,15 @@ class SlidingSubapertureAutofocus:
             return
         if self._los0 is None:
             if not self._centres:
-                if flushing:
-                    self._los0 = np.zeros(2)
-                return
-            if not flushing and self._centres[-1] < self._pin_end() - 1e-9:
-                return
-            a_t = self._spliced(self._a_los, self._t)
-            v0, s0 = zero_line_start(self._t, a_t, self._pin_window(len(self._centres)))
-            self._los0 = np.array([float(v0[0]), float(s0[0])])
+                if not flushing:
+                    return
+                self._los0 = np.zeros(2)  # shorter than a subaperture: no estimate, no shift
+            else:
+                if not flushing and self._centres[-1] < self._pin_end() - 1e-9:
+                    return
+                a_t = self._spliced(self._a_los, self._t)
+                v0, s0 = zero_line_start(self._t, a_t, self._pin_window(len(self._centres)))
+                self._los0 = np.array([float(v0[0]), float(s0[0])])
         upto = self._t.size
         if not flushing:
             upto = int(np.searchsorted(self._t, self._centres[-1] + 1e-9))

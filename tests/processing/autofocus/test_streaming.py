@@ -87,6 +87,20 @@ def test_streaming_matches_offline_up_to_a_line() -> None:
     assert np.std(d_ph) < 0.25  # rad, against ~150 rad of phase error
 
 
+def test_run_shorter_than_a_subaperture_is_released_uncorrected() -> None:
+    """A run too short for one estimate is flushed whole, unchanged (no correction)."""
+    syn = _scene(0.2)
+    geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0)
+    af = SlidingSubapertureAutofocus(geo, syn.range_m, AutofocusConfig())
+    t_ns = np.round(syn.t_s * 1e9).astype(np.int64) + 10**18
+    released, _ = af.push(syn.rc, t_ns)
+    assert released.shape[0] == 0
+    out, corr = af.flush()
+    np.testing.assert_array_equal(corr.t_ns, t_ns)
+    np.testing.assert_allclose(out, syn.rc, atol=1e-6 * np.abs(syn.rc).max())
+    assert not np.any(corr.los_m) and not np.any(corr.phase_cycles)
+
+
 def test_streaming_state_is_bounded_on_a_long_run() -> None:
     """Over 30 s (296 subapertures) the estimates kept stay those the buffered pulses need
     (about latency / hop + 8), and the report is what the caller has not yet taken."""
