@@ -154,6 +154,13 @@ class AutofocusConfig:
     range_order: Literal[0, 1, 2] = _key(
         2, "Order of the range model of the phase step (2: the paper's second-order model)"
     )
+    pin_window_s: float = _key(
+        2.0,
+        "Span of subaperture centres over which the unobservable constant and linear "
+        "corrections are pinned to zero mean and trend (first pulses wait this long)",
+        unit="s",
+        gt=0,
+    )
 
 
 @dataclass(frozen=True)

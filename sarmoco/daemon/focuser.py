@@ -115,6 +115,7 @@ class Focuser:
                     estimator="map_drift" if af.estimator == "map-drift" else "contrast",
                     envelope_step=af.envelope_step,
                     range_order=af.range_order,
+                    pin_window_s=af.pin_window_s,
                 ),
             )
             if af.enabled
