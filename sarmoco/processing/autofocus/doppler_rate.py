@@ -147,13 +147,17 @@ def map_drift(
         frac = np.where(den < 0, 0.5 * (y0 - y2) / np.where(den < 0, den, -1.0), 0.0)
         shift = (k + n_fft // 2) % n_fft - n_fft // 2 + frac
         delta = delta + shift / (n_fft * dt) / separation
-        norm = np.sqrt(np.sum(a**2, axis=-1) * np.sum(b**2, axis=-1))
+        # float64 sums: squares of full-scale single-precision data overflow float32
+        norm = np.sqrt(np.sum(np.square(a, dtype=np.float64), axis=-1)) * np.sqrt(
+            np.sum(np.square(b, dtype=np.float64), axis=-1)
+        )
         quality = np.clip(y1 / np.where(norm > 0, norm, 1.0), 0.0, 1.0)
     return delta, quality
 
 
 def _contrast(bands: ComplexArray, tc: FloatArray, rate: FloatArray, n_fft: int) -> FloatArray:
-    power = (np.abs(np.fft.fft(_dechirp(bands, tc, rate), n_fft, axis=-1)) ** 2).sum(axis=1)
+    spectrum = np.abs(np.fft.fft(_dechirp(bands, tc, rate), n_fft, axis=-1))
+    power = np.square(spectrum, dtype=np.float64).sum(axis=1)  # I² overflows float32
     return np.asarray(np.mean(power**2, axis=-1) / np.mean(power, axis=-1) ** 2, dtype=float)
 
 

@@ -42,6 +42,27 @@ def test_rate_sign_and_size(accelerated: S.Synthetic, method: str) -> None:
     assert np.all(quality > 0.3)
 
 
+@pytest.mark.parametrize("method", ["map_drift", "contrast"])
+def test_rates_do_not_depend_on_the_data_scale(accelerated: S.Synthetic, method: str) -> None:
+    """Full-scale radar data (int16 echoes range-compressed over thousands of samples reach
+    1e8 per bin) give the same rates and qualities as unit-scale data, in single precision
+    (a product of two sums of squares overflowed float32 there: quality 0, no correction)."""
+    syn = accelerated
+    bins = dr.select_lines(syn.rc, 5, 10)
+    ref = dr.nominal_rate(syn.range_m[bins], S.SPEED_MPS, S.WAVELENGTH_M)
+    results = []
+    for scale in (1.0, 1e8):
+        bands = (dr.gather_bands(syn.rc, bins, 1) * scale).astype(np.complex64)
+        if method == "map_drift":
+            results.append(dr.map_drift(bands, syn.t_s, ref))
+        else:
+            results.append(dr.contrast_optimisation(bands, syn.t_s, ref, 150.0))
+    (d1, q1), (d2, q2) = results
+    np.testing.assert_allclose(d2, d1, atol=1e-3)
+    np.testing.assert_allclose(q2, q1, atol=1e-4)
+    assert np.all(q2 > 0.3)
+
+
 def test_separation_recovers_accelerations(accelerated: S.Synthetic) -> None:
     syn = accelerated
     bins = dr.select_lines(syn.rc, 5, 10)
