@@ -154,6 +154,13 @@ class AutofocusConfig:
     range_order: Literal[0, 1, 2] = _key(
         2, "Order of the range model of the phase step (2: the paper's second-order model)"
     )
+    phase_passes: int = _key(
+        3,
+        "Passes of the phase step, each on the output of the one before; the release latency "
+        "is subaperture_s/2 + (phase_passes * ceil(subaperture_s / (2 hop_s)) + 1) * hop_s "
+        "(0.9 s by default, 0.5 s = subaperture_s + hop_s with one pass)",
+        ge=1,
+    )
     pin_window_s: float = _key(
         2.0,
         "Span of subaperture centres over which the unobservable constant and linear "

@@ -116,6 +116,7 @@ class Focuser:
                     envelope_step=af.envelope_step,
                     range_order=af.range_order,
                     pin_window_s=af.pin_window_s,
+                    phase_passes=af.phase_passes,
                 ),
             )
             if af.enabled

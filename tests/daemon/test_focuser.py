@@ -72,3 +72,18 @@ def test_prefilter_keeps_point_targets(run: SimRun) -> None:
             assert abs(f.islr_db - s.islr_db) <= 0.2, msg
             assert abs(f.irw_m / s.irw_m - 1.0) <= 0.02, msg
         assert abs(ma.axis0.pslr_db + 13.26) <= 0.3  # focused in azimuth, not just alike
+
+
+@pytest.mark.parametrize(("passes", "latency_s"), [(1, 0.5), (3, 0.9)])
+def test_autofocus_keys_reach_the_streaming_autofocus(
+    run: SimRun, passes: int, latency_s: float
+) -> None:
+    """autofocus.phase_passes sets the release latency (one pass: subaperture + hop)."""
+    cfg = scenario_config(
+        run.scenario,
+        autofocus={"subaperture_s": 0.4, "hop_s": 0.1, "phase_passes": passes, "pin_window_s": 1.5},
+    )
+    af = Focuser(cfg, int(run.t_ns[0]), run.vel_ned[0]).autofocus
+    assert af is not None
+    assert af.config.pin_window_s == 1.5
+    assert af.latency_s == pytest.approx(latency_s)
