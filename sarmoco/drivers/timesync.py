@@ -18,6 +18,12 @@ import numpy as np
 
 from sarmoco.errors import ClockError
 
+MAX_SKEW = 2e-4
+"""Largest rate difference a clock fit believes, dimensionless (200 ppm). The crystal
+oscillators of autopilots and INS are within about ±50 ppm; a larger fitted skew is the
+noise of a few jittered pairs over a short window (a host under load delaying TIMESYNC
+replies gave 2300 ppm over 1.5 s: 3.4 ms of error per 1.5 s in every INS time stamp)."""
+
 
 class CounterUnwrapper:
     """Extends an ``bits``-wide wrapping counter to an unbounded one.
@@ -71,6 +77,9 @@ class LinearClockFit:
         Pairs needed before :meth:`map` answers (:attr:`ready`); ``min_pairs``
         or more makes every answer use the skew, at the cost of waiting for
         that many pairs after start and after each reset.
+    max_skew : float
+        A fitted skew beyond ±``max_skew`` is clipped to it and the offset refitted with
+        the clipped skew (see :data:`MAX_SKEW`).
     """
 
     def __init__(
@@ -79,7 +88,9 @@ class LinearClockFit:
         outlier_ns: int = 2_000_000,
         min_pairs: int = 3,
         ready_pairs: int = 1,
+        max_skew: float = MAX_SKEW,
     ) -> None:
+        self._max_skew = max_skew
         self._dev: deque[int] = deque(maxlen=window)
         self._ref: deque[int] = deque(maxlen=window)
         self._outlier_ns = outlier_ns
@@ -135,6 +146,9 @@ class LinearClockFit:
         x = np.array(self._dev, dtype=np.float64) - d0
         y = np.array(self._ref, dtype=np.float64) - r0 - x
         skew, intercept = np.polyfit(x, y, 1)
+        if abs(skew) > self._max_skew:
+            skew = float(np.clip(skew, -self._max_skew, self._max_skew))
+            intercept = float(np.mean(y - skew * x))
         self._coef = (d0, r0 + round(intercept), float(skew))
         self.residual_ns = float(np.sqrt(np.mean((y - (intercept + skew * x)) ** 2)))
 
