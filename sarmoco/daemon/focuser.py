@@ -25,10 +25,16 @@ from sarmoco.processing.autofocus import (
     Corrections,
     SlidingSubapertureAutofocus,
 )
-from sarmoco.processing.geometry import ReferenceTrack
+from sarmoco.processing.geometry import ReferenceTrack, vector_to_imaging
 from sarmoco.processing.imaging.presum import AzimuthPrefilter
 from sarmoco.processing.imaging.tiles import Tile, TileImager, TileLayout
-from sarmoco.processing.mocomp import InsMotionCompensator, LosGeometry, MocompSolution
+from sarmoco.processing.mocomp import (
+    InsMotionCompensator,
+    LosGeometry,
+    LosState,
+    MocompSolution,
+    integrate_los,
+)
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray, RadarParams
 
 
@@ -98,6 +104,12 @@ class Focuser:
             envelope_fraction=cfg.mocomp.envelope_fraction,
         )
         self.mocomp = InsMotionCompensator(self.track, los, np.array(cfg.ins.lever_arm_m))
+        self._along: LosState | None = (
+            LosState(last_vel_yz=np.zeros(1), disp_yz_m=np.zeros(1))
+            if cfg.mocomp.along_track
+            else None
+        )
+        self._last_tau_ns: int | None = None
         af = cfg.autofocus
         self.autofocus = (
             SlidingSubapertureAutofocus(
@@ -163,6 +175,7 @@ class Focuser:
         rc = rangecomp.compress(self.radar, raw, self.window)
         rc, motion = self.mocomp.compensate(rc, t_ns, vel_ned, quat)
         out = FocusOutput(motion=motion)
+        t_ns = self._along_track_time(t_ns, vel_ned)
         if self.autofocus is None:
             out.tiles = self._image(rc, t_ns)
             return out
@@ -182,6 +195,30 @@ class Focuser:
             out.tiles += self._backproject(*self.prefilter.flush())
         out.tiles += self.imager.close()
         return out
+
+    def _along_track_time(self, t_ns: IntArray, vel_ned: FloatArray) -> IntArray:
+        """Slow time of each pulse from its INS along-track position: t0 + x / v0, GPS ns.
+
+        Autofocus and backprojection assume the reference track's uniform speed v0 (nominal
+        Doppler rate 2 v0² / (λ R), APC at v0 t along track). An along-track speed that
+        differs from v0 (a start-up speed estimate off by 0.2 %, gusts of 0.1 m/s rms) is
+        then a Doppler-rate error no LOS term explains and an along-track position error
+        of centimetres: both defocus. Giving every pulse the time at which the reference
+        track passes its actual along-track position (x from the trapezoid-integrated INS
+        along-track velocity) removes both; the LOS compensation uses the true times.
+        Unchanged times when ``mocomp.along_track`` is false.
+        """
+        if self._along is None or t_ns.size == 0:
+            return t_ns
+        v_along = vector_to_imaging(vel_ned, self.track)[:, :1]
+        x, self._along = integrate_los(t_ns, v_along, self._along)
+        tau = self.track.t0_ns + np.round(x[:, 0] / self.track.v0_mps * 1e9).astype(np.int64)
+        # strictly increasing (a pulse never passes the one before), at least 1 ns apart
+        steps = np.arange(tau.size, dtype=np.int64)
+        floor = self._last_tau_ns + 1 if self._last_tau_ns is not None else tau[0]
+        tau = np.maximum.accumulate(np.maximum(tau, floor) - steps) + steps
+        self._last_tau_ns = int(tau[-1])
+        return tau
 
     def _image(self, rc: ComplexArray, t_ns: IntArray) -> list[Tile]:
         if self.prefilter is not None:

@@ -87,3 +87,40 @@ def test_autofocus_keys_reach_the_streaming_autofocus(
     assert af is not None
     assert af.config.pin_window_s == 1.5
     assert af.latency_s == pytest.approx(latency_s)
+
+
+@pytest.fixture(scope="module")
+def gusty() -> SimRun:
+    """ku-vehicle ×0.1 with turbulence (0.1 m/s rms along-track gusts), ideal INS."""
+    scn = load_preset("ku-vehicle", 0.1)
+    return simulate(scn, MotionSpec(kind="turbulence", seed=1), "ideal")
+
+
+def _target_pslr(run: SimRun, along_track: bool) -> list[float]:
+    cfg = scenario_config(
+        run.scenario, autofocus={"enabled": False}, mocomp={"along_track": along_track}
+    )
+    focuser = Focuser(cfg, int(run.t_ns[0]), run.vel_ned[:256].mean(axis=0))
+    tiles: list[Tile] = []
+    for a in range(0, run.t_ns.size, cfg.imaging.block_pulses):
+        b = slice(a, a + cfg.imaging.block_pulses)
+        tiles += focuser.push(run.echo[b], run.t_ns[b], run.vel_ned[b], run.traj.quat[b]).tiles
+    tiles += focuser.finish().tiles
+    track = focuser.track
+    out = []
+    for tgt in run.targets_ned:
+        d = tgt - run.apc_ned[0]
+        m = point_target_metrics(_window(tiles, float(d @ track.x_hat), float(d @ track.y_hat)))
+        out.append(m.axis0.pslr_db)
+    return out
+
+
+def test_along_track_position_focuses_without_autofocus(gusty: SimRun) -> None:
+    """With ideal navigation and no autofocus, placing pulses at their INS along-track
+    position focuses every target (measured -12.84 to -12.94 dB; at uniform speed v0, whose
+    start-up estimate is 0.2 % off here, and with 2-4 cm of along-track wander: -9.27 to
+    -9.43 dB)."""
+    uniform = _target_pslr(gusty, along_track=False)
+    along = _target_pslr(gusty, along_track=True)
+    assert max(along) <= -12.5
+    assert max(along) < max(uniform) - 2.0
