@@ -99,6 +99,9 @@ class AutofocusConfig:
         Lines whose azimuth-compressed peak stands less than this above the line's median
         power get zero weight (noise-only lines: the peak of ~M exponential samples is about
         8 dB over their median, so 15 dB rejects them with a margin), dB.
+    max_below_strongest_db : float
+        Lines whose compressed peak is more than this below the strongest line's get zero
+        weight, dB.
     min_lines : int
         A subaperture with fewer usable lines makes no correction (rate error 0) rather than
         a fit through noise.
@@ -128,6 +131,7 @@ class AutofocusConfig:
     range_order: int = 2
     min_quality: float = 0.3
     min_peak_db: float = 15.0
+    max_below_strongest_db: float = 20.0
     min_lines: int = 2
     rate_span_hz_per_s: float = 150.0
     phase_passes: int = 3
@@ -240,7 +244,11 @@ def _line_rates(
     mag = compressed_magnitude(bands, t_s, ref + delta, n_fft)
     power = mag**2
     peak_db = 10.0 * np.log10(power.max(axis=1) / np.maximum(np.median(power, axis=1), 1e-30))
-    good = (quality >= config.min_quality) & (peak_db >= config.min_peak_db)
+    peak = power.max(axis=1)
+    # a line far weaker than the strongest is a range sidelobe of a bright target (the
+    # target walks through the sidelobes' nulls as it migrates in range) or clutter
+    strong = peak >= peak.max() * 10.0 ** (-config.max_below_strongest_db / 10.0)
+    good = (quality >= config.min_quality) & (peak_db >= config.min_peak_db) & strong
     if np.count_nonzero(good) < config.min_lines:
         good[:] = False
     weight = np.where(good, 10.0 ** (peak_db / 10.0) - 1.0, 0.0)

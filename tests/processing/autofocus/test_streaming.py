@@ -217,3 +217,23 @@ def test_few_targets_in_noise_do_not_lose_focus() -> None:
         s.phase_lines is not None and s.phase_lines.n_used <= 3 for s in af.report.subapertures
     )
     assert np.all(np.array(after) <= np.array(before) + 0.05)
+
+
+def test_range_sidelobe_lines_of_a_sparse_scene_get_no_weight() -> None:
+    """Noise-free, three targets: every line but the three targets' is a range sidelobe
+    (-25 dB or less at the 6-bin guard) or empty; their rates swing as the targets migrate
+    through the sidelobes' nulls. Only the target lines may carry weight, and the image must
+    not lose focus (on the daemon's ku-vehicle x0.1 scene this rule cut the scatter of the
+    per-subaperture rate estimates from 0.6 to 0.14 Hz/s)."""
+    dur = 2.0
+    t = np.arange(round(dur * S.PRF_HZ)) / S.PRF_HZ - dur / 2
+    d, a = S.sine_motion(t, (0.0006, 0.0003), (0.4, 0.7))
+    tg = [S.ground_target(0.0, r) for r in (950.0, 1000.0, 1050.0)]
+    syn = S.make(dur, tg, d, a, range_span_m=(930.0, 1070.0), snr_db=None)
+    focused, af = _stream(syn, AutofocusConfig())
+    assert all(
+        s.phase_lines is not None and s.phase_lines.n_used <= 3 for s in af.report.subapertures
+    )
+    before = _azimuth_pslr(syn, syn.rc)
+    after = _azimuth_pslr(syn, focused)
+    assert np.all(np.array(after) <= np.array(before) + 0.05)
