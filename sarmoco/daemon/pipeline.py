@@ -264,7 +264,10 @@ class Pipeline:
             t, ids, raw, pos, vel, quat, usable = (
                 a[first:] for a in (t, ids, raw, pos, vel, quat, usable)
             )
-            self.focuser = Focuser(self.cfg, int(t[0]), vel[usable].mean(axis=0))
+            # the first block_pulses usable pulses, however the blocks were cut (live and
+            # replay cut them differently: the reference track must not depend on it)
+            start_vel = vel[usable][: self.cfg.imaging.block_pulses].mean(axis=0)
+            self.focuser = Focuser(self.cfg, int(t[0]), start_vel)
             track = self.focuser.track
             self.recorder.set_attribute(
                 "reference_track",
