@@ -223,6 +223,9 @@ class RecorderConfig:
 
     directory: str = _key("/var/lib/sarmoco", "Directory that receives one store per run")
     raw_echoes: bool = _key(True, "Record the raw echoes")
+    raw_ins: bool = _key(
+        True, "Record the INS bytes as received (ins_raw / ins_bytes; MAVLink, SBG, SBG CAN)"
+    )
     chunk_pulses: int = _key(256, "Pulses per chunk of the echo arrays", gt=0)
     fsync_interval_s: float = _key(1.0, "Interval between fsyncs of committed data", unit="s", gt=0)
 

@@ -67,7 +67,7 @@ def record_ins_format(recorder: Recorder, ins: Source) -> None:
     ``candump`` (SBG CAN: a ``candump -L`` log); written to a file with the suffix
     ``.tlog``, ``.sbg`` or ``.log`` it is an INS log the daemon reads again.
     """
-    if ins.raw_format:
+    if ins.keeping_raw:
         recorder.set_attribute("ins_raw", {"format": ins.raw_format})
 
 
@@ -179,7 +179,7 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
     path = store or new_store_path(cfg.recorder.directory, "run")
     recorder = open_recorder(cfg, path)
     radar = open_radar(cfg)
-    ins = open_ins(cfg, keep_raw=True)
+    ins = open_ins(cfg, keep_raw=cfg.recorder.raw_ins)
     pipe = Pipeline(cfg, recorder, counters)
     record_ins_format(recorder, ins)
     counters.add_source("radar", radar.decoder.counters.snapshot)
@@ -216,7 +216,7 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
         ),
         threading.Thread(
             target=_keep_reading,
-            args=("ins", lambda: open_ins(cfg, keep_raw=True), ins, read_ins, st),
+            args=("ins", lambda: open_ins(cfg, keep_raw=cfg.recorder.raw_ins), ins, read_ins, st),
             name="ins", daemon=True,
         ),
     ]  # fmt: skip
@@ -286,7 +286,7 @@ def replay_files(
     CPU allows. The aligner's clock is the newest pulse time.
     """
     radar = open_radar(cfg, str(radar_file))
-    ins = open_ins(cfg, str(nav_file), keep_raw=True)
+    ins = open_ins(cfg, str(nav_file), keep_raw=cfg.recorder.raw_ins)
     total = max(radar_file.stat().st_size, 1)
     lead_ns = round(cfg.ins.max_gap_s * 1e9)
     with open_recorder(cfg, out) as recorder:

@@ -50,6 +50,11 @@ class Source(Closing):
         self._raw = bytearray()
         return True
 
+    @property
+    def keeping_raw(self) -> bool:
+        """Whether :meth:`keep_raw` took effect (received bytes are kept as :attr:`raw_format`)."""
+        return self._raw is not None
+
     def take_raw(self) -> bytes:
         """What was received since the last call (``b""`` unless :meth:`keep_raw` was called).
 

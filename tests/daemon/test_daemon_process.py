@@ -637,6 +637,26 @@ def test_ins_bytes_are_recorded_as_received(sim: SimFiles, tmp_path: Path, proto
     assert rx.size > 0 and (rx > 0).all() and (np.diff(rx) >= 0).all()
 
 
+def test_ins_bytes_not_recorded_when_switched_off(sim: SimFiles, tmp_path: Path) -> None:
+    """recorder.raw_ins = false: INS samples recorded, no INS bytes, no ``ins_raw`` format."""
+    port = free_port(socket.SOCK_STREAM)
+    config = daemon_config(
+        sim, tmp_path / "noraw.toml",
+        ins={"protocol": "mavlink", "link": str(sim.dir / NAV_FILES["mavlink"])},
+        status={"http_port": port}, recorder={"raw_ins": False},
+    )  # fmt: skip
+    d = Daemon(config, tmp_path / "noraw.zarr")
+    try:
+        d.started()
+        wait_finished(port)
+        assert d.stop() == 0, d.log.read_text()
+    finally:
+        d.kill_if_running()
+    store = open_store(d.store)
+    assert store.committed("nav") > 100
+    assert "ins_raw" not in store.attrs and store.ins_bytes() == b""
+
+
 def decode_all(cfg: Config, path: Path) -> list[Sample]:
     """Every sample the configured INS driver decodes from a log file."""
     out: list[Sample] = []
