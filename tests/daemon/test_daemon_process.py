@@ -228,6 +228,19 @@ def wait_finished(port: int) -> dict[str, Any]:
         time.sleep(0.1)
 
 
+def run_files_to_end(config: Path, store: Path, port: int) -> tuple[RunStore, dict[str, Any]]:
+    """Run the daemon on file links until both are read to their end, stop it (exit 0);
+    returns its store and the last /status document."""
+    d = Daemon(config, store)
+    try:
+        d.started()
+        status = wait_finished(port)
+        assert d.stop() == 0, d.log.read_text()
+    finally:
+        d.kill_if_running()
+    return open_store(store), status
+
+
 def check_committed(store: RunStore, sim: SimFiles) -> int:
     """Every committed pulse and INS row equals the files'; returns the committed pulses."""
     n = check_pulses(store, sim)
@@ -587,15 +600,8 @@ def test_a_file_longer_than_the_ring_is_read_at_the_processing_pace(tmp_path: Pa
     table["status"] = {"http_port": free_port(socket.SOCK_STREAM)}
     table["autofocus"] = {"enabled": False}  # the pace of focusing does not matter here
     config = write_config(tmp_path / "long.toml", table)
-    d = Daemon(config, tmp_path / "long.zarr")
-    try:
-        d.started()
-        status = wait_finished(table["status"]["http_port"])
-        assert d.stop() == 0, d.log.read_text()
-    finally:
-        d.kill_if_running()
+    store, status = run_files_to_end(config, tmp_path / "long.zarr", table["status"]["http_port"])
     assert status["counters"]["pipeline_pulses_dropped_ring"] == 0
-    store = open_store(d.store)
     assert store.committed("pulses") == n_pulses
     t_ns, echo = decode_radar(config, tmp_path / "radar.vrt", n_pulses)
     got = store.read("pulses", ["t_ns", "echo", "flags"])
@@ -615,14 +621,7 @@ def test_ins_bytes_are_recorded_as_received(sim: SimFiles, tmp_path: Path, proto
         sim, tmp_path / "raw.toml",
         ins={"protocol": protocol, "link": str(log)}, status={"http_port": port},
     )  # fmt: skip
-    d = Daemon(config, tmp_path / "raw.zarr")
-    try:
-        d.started()
-        wait_finished(port)
-        assert d.stop() == 0, d.log.read_text()
-    finally:
-        d.kill_if_running()
-    store = open_store(d.store)
+    store, _ = run_files_to_end(config, tmp_path / "raw.zarr", port)
     fmt = {"mavlink": "tlog", "sbg": "sbgecom", "sbg-can": "candump"}[protocol]
     assert store.attrs["ins_raw"] == {"format": fmt}
     raw = store.ins_bytes()
@@ -645,14 +644,7 @@ def test_ins_bytes_not_recorded_when_switched_off(sim: SimFiles, tmp_path: Path)
         ins={"protocol": "mavlink", "link": str(sim.dir / NAV_FILES["mavlink"])},
         status={"http_port": port}, recorder={"raw_ins": False},
     )  # fmt: skip
-    d = Daemon(config, tmp_path / "noraw.zarr")
-    try:
-        d.started()
-        wait_finished(port)
-        assert d.stop() == 0, d.log.read_text()
-    finally:
-        d.kill_if_running()
-    store = open_store(d.store)
+    store, _ = run_files_to_end(config, tmp_path / "noraw.zarr", port)
     assert store.committed("nav") > 100
     assert "ins_raw" not in store.attrs and store.ins_bytes() == b""
 
