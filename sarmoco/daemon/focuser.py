@@ -78,7 +78,7 @@ class Focuser:
     Parameters
     ----------
     cfg : Config
-        Daemon configuration (radar, geometry, mocomp, autofocus, imaging, INS lever arm).
+        Daemon configuration (radar, geometry, mocomp, autofocus, imaging).
     t0_ns : int
         GPS time of the first pulse: the reference track starts there, ns.
     velocity_ned : ndarray, shape (3,)
@@ -103,7 +103,7 @@ class Focuser:
             order=cfg.mocomp.order,
             envelope_fraction=cfg.mocomp.envelope_fraction,
         )
-        self.mocomp = InsMotionCompensator(self.track, los, np.array(cfg.ins.lever_arm_m))
+        self.mocomp = InsMotionCompensator(self.track, los)
         self._along: LosState | None = (
             LosState(last_vel_yz=np.zeros(1), disp_yz_m=np.zeros(1))
             if cfg.mocomp.along_track
@@ -156,9 +156,7 @@ class Focuser:
             else None
         )
 
-    def push(
-        self, raw: ComplexArray, t_ns: IntArray, vel_ned: FloatArray, quat: FloatArray
-    ) -> FocusOutput:
+    def push(self, raw: ComplexArray, t_ns: IntArray, vel_ned: FloatArray) -> FocusOutput:
         """Process one block of aligned raw pulses.
 
         Parameters
@@ -168,12 +166,11 @@ class Focuser:
         t_ns : ndarray of int64, shape (P,)
             Pulse times, GPS ns, increasing across calls.
         vel_ned : ndarray, shape (P, 3)
-            INS velocity interpolated to the pulses, NED, m/s.
-        quat : ndarray, shape (P, 4)
-            Attitude at the pulses (body to NED, scalar first).
+            Antenna phase centre velocity at the pulses (the aligner adds the lever
+            arm's rate to the IMU velocity), NED, m/s.
         """
         rc = rangecomp.compress(self.radar, raw, self.window)
-        rc, motion = self.mocomp.compensate(rc, t_ns, vel_ned, quat)
+        rc, motion = self.mocomp.compensate(rc, t_ns, vel_ned)
         out = FocusOutput(motion=motion)
         t_ns = self._along_track_time(t_ns, vel_ned)
         if self.autofocus is None:

@@ -285,7 +285,7 @@ class Pipeline:
         if usable.any():
             k = int(np.flatnonzero(usable)[-1])
             self._last_nav = (int(t[k]), vel[k], quat[k])
-        out = self.focuser.push(raw, t, vel, quat)
+        out = self.focuser.push(raw, t, vel)
         assert out.motion is not None
         m = out.motion
         self.recorder.append_motion(ids, t, pos, vel, quat, m.d_los_m, m.phase_rad, m.range_shift_m)

@@ -36,7 +36,6 @@ import scipy.fft
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.geometry import (
     ReferenceTrack,
-    lever_arm_ned,
     look_angle,
     vector_to_imaging,
 )
@@ -346,14 +345,11 @@ class LosState:
         Imaging-frame (v_y, v_z) at that pulse, m/s.
     disp_yz_m : ndarray, shape (2,)
         Running (ΔY, ΔZ) at that pulse, m.
-    lever_ref_m : ndarray, shape (3,) or None
-        Rotated lever arm at the first pulse, imaging frame, m (None without a lever arm).
     """
 
     last_t_ns: int | None = None
     last_vel_yz: FloatArray = field(default_factory=lambda: np.zeros(2))
     disp_yz_m: FloatArray = field(default_factory=lambda: np.zeros(2))
-    lever_ref_m: FloatArray | None = None
 
 
 def integrate_los(
@@ -373,7 +369,7 @@ def integrate_los(
     Returns
     -------
     disp : ndarray of float64, shape (P, 2)
-        (ΔY, ΔZ) at each pulse, m (without lever arm).
+        (ΔY, ΔZ) at each pulse, m (of whatever point ``vel_yz`` is the velocity of).
     state : LosState
         State after the last pulse.
     """
@@ -392,7 +388,6 @@ def integrate_los(
         last_t_ns=int(t[-1]),
         last_vel_yz=np.array(vel_yz[-1], dtype=np.float64),
         disp_yz_m=disp[-1].copy(),
-        lever_ref_m=state.lever_ref_m,
     )
     return disp, new
 
@@ -402,8 +397,14 @@ class InsMotionCompensator:
 
     Feeding an aperture block by block gives the same output as one call on
     the whole aperture (to float tolerance), because the only coupling between
-    pulses is the running (ΔY, ΔZ) sum, the last pulse's time and velocity,
-    and the first pulse's lever arm, all held in :attr:`state`.
+    pulses is the running (ΔY, ΔZ) sum and the last pulse's time and velocity,
+    all held in :attr:`state`.
+
+    The velocities given are those of the antenna phase centre (APC). An
+    IMU-to-APC lever arm is not handled here: whoever turns INS samples into
+    per-pulse navigation adds the rotated arm's rate to the IMU velocity once
+    (the daemon's aligner), so that integrating the APC velocity gives the APC
+    displacement, ``R(q_k) l - R(q_1) l`` included.
 
     Parameters
     ----------
@@ -411,9 +412,6 @@ class InsMotionCompensator:
         Reference track (rotation NED → imaging frame).
     geometry : LosGeometry
         Radar and scene constants.
-    lever_arm_body_m : ndarray, shape (3,), optional
-        APC minus IMU in the body frame, m; then ``quat`` must be given to
-        :meth:`compensate` and the APC displacement includes R(q_k) l - R(q_1) l.
     state : LosState, optional
         Resume from a saved state.
     """
@@ -422,19 +420,13 @@ class InsMotionCompensator:
         self,
         track: ReferenceTrack,
         geometry: LosGeometry,
-        lever_arm_body_m: FloatArray | None = None,
         state: LosState | None = None,
     ) -> None:
         self.track = track
         self.geometry = geometry
-        self.lever_arm_body_m = (
-            None if lever_arm_body_m is None else np.asarray(lever_arm_body_m, dtype=np.float64)
-        )
         self.state = LosState() if state is None else state
 
-    def displacement(
-        self, t_ns: IntArray, vel_ned: FloatArray, quat: FloatArray | None = None
-    ) -> FloatArray:
+    def displacement(self, t_ns: IntArray, vel_ned: FloatArray) -> FloatArray:
         """(ΔY, ΔZ) of the APC at each pulse and advance the state, (P, 2), m.
 
         Parameters
@@ -442,28 +434,14 @@ class InsMotionCompensator:
         t_ns : ndarray of int64, shape (P,)
             Pulse times, GPS ns.
         vel_ned : ndarray of float64, shape (P, 3)
-            INS velocity interpolated to the pulses, NED, m/s.
-        quat : ndarray of float64, shape (P, 4), optional
-            Attitude at the pulses (needed with a lever arm).
+            APC velocity interpolated to the pulses, NED, m/s.
         """
         vel_img = vector_to_imaging(vel_ned, self.track)
-        disp, state = integrate_los(t_ns, vel_img[:, 1:3], self.state)
-        if self.lever_arm_body_m is not None and t_ns.shape[0]:
-            if quat is None:
-                raise ProcessingError("InsMotionCompensator: a lever arm needs the attitude")
-            lever = vector_to_imaging(lever_arm_ned(quat, self.lever_arm_body_m), self.track)
-            ref = lever[0] if state.lever_ref_m is None else state.lever_ref_m
-            disp = disp + (lever - ref)[:, 1:3]
-            state = LosState(state.last_t_ns, state.last_vel_yz, state.disp_yz_m, ref)
-        self.state = state
+        disp, self.state = integrate_los(t_ns, vel_img[:, 1:3], self.state)
         return disp
 
     def compensate(
-        self,
-        echo: ComplexArray,
-        t_ns: IntArray,
-        vel_ned: FloatArray,
-        quat: FloatArray | None = None,
+        self, echo: ComplexArray, t_ns: IntArray, vel_ned: FloatArray
     ) -> tuple[ComplexArray, MocompSolution]:
         """Compensate one block of range-compressed pulses and advance the state.
 
@@ -471,7 +449,7 @@ class InsMotionCompensator:
         ----------
         echo : ndarray of complex, shape (P, S)
             Range-compressed pulses.
-        t_ns, vel_ned, quat
+        t_ns, vel_ned
             As in :meth:`displacement`.
 
         Returns
@@ -479,7 +457,7 @@ class InsMotionCompensator:
         out : ndarray of complex64, shape (P, S)
         solution : MocompSolution
         """
-        disp = self.displacement(np.asarray(t_ns, dtype=np.int64), vel_ned, quat)
+        disp = self.displacement(np.asarray(t_ns, dtype=np.int64), vel_ned)
         return correct_los(echo, np.asarray(t_ns, dtype=np.int64), disp, self.geometry)
 
 
@@ -489,9 +467,6 @@ def compensate_aperture(
     vel_ned: FloatArray,
     track: ReferenceTrack,
     geometry: LosGeometry,
-    quat: FloatArray | None = None,
-    lever_arm_body_m: FloatArray | None = None,
 ) -> tuple[ComplexArray, MocompSolution]:
     """One-call INS-only compensation of a whole aperture (see :class:`InsMotionCompensator`)."""
-    comp = InsMotionCompensator(track, geometry, lever_arm_body_m)
-    return comp.compensate(echo, t_ns, vel_ned, quat)
+    return InsMotionCompensator(track, geometry).compensate(echo, t_ns, vel_ned)

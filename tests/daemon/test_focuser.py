@@ -39,7 +39,7 @@ def _focus(run: SimRun, prefilter: bool) -> tuple[list[Tile], Focuser]:
     tiles: list[Tile] = []
     for a in range(0, run.t_ns.size, cfg.imaging.block_pulses):
         b = slice(a, a + cfg.imaging.block_pulses)
-        tiles += focuser.push(run.echo[b], run.t_ns[b], run.vel_ned[b], run.traj.quat[b]).tiles
+        tiles += focuser.push(run.echo[b], run.t_ns[b], run.vel_ned[b]).tiles
     return tiles + focuser.finish().tiles, focuser
 
 
@@ -104,7 +104,7 @@ def _target_pslr(run: SimRun, along_track: bool) -> list[float]:
     tiles: list[Tile] = []
     for a in range(0, run.t_ns.size, cfg.imaging.block_pulses):
         b = slice(a, a + cfg.imaging.block_pulses)
-        tiles += focuser.push(run.echo[b], run.t_ns[b], run.vel_ned[b], run.traj.quat[b]).tiles
+        tiles += focuser.push(run.echo[b], run.t_ns[b], run.vel_ned[b]).tiles
     tiles += focuser.finish().tiles
     track = focuser.track
     out = []

@@ -129,7 +129,6 @@ def test_block_by_block_equals_whole_aperture(order: int) -> None:
     vel = np.stack(
         [60 + 0.3 * np.sin(9 * t), 0.8 * np.sin(23 * t) + 3.0, 0.5 * np.cos(17 * t) + 2.0], axis=1
     )
-    quat = np.stack([np.cos(0.05 * t), 0.02 * np.sin(31 * t), 0.01 * t, 0.03 * np.cos(7 * t)], 1)
     echo = (rng.normal(size=(p, n)) + 1j * rng.normal(size=(p, n))).astype(np.complex64)
     geom = LosGeometry.build(
         RADAR,
@@ -141,13 +140,12 @@ def test_block_by_block_equals_whole_aperture(order: int) -> None:
         t_center_ns=int(t_ns[p // 2]),
         envelope_fraction=0.3,
     )
-    lever = np.array([0.4, -0.2, 0.3])
-    whole, sol = compensate_aperture(echo, t_ns, vel, NORTH, geom, quat, lever)
+    whole, sol = compensate_aperture(echo, t_ns, vel, NORTH, geom)
     assert np.count_nonzero(sol.range_shift_m) > p // 4  # the envelope step is exercised
-    comp = InsMotionCompensator(NORTH, geom, lever)
+    comp = InsMotionCompensator(NORTH, geom)
     edges = [0, 1, 2, 50, 51, 333, 500, 699, p]
     parts = [
-        comp.compensate(echo[a:b], t_ns[a:b], vel[a:b], quat[a:b])
+        comp.compensate(echo[a:b], t_ns[a:b], vel[a:b])
         for a, b in itertools.pairwise(edges)
     ]
     blocks = np.concatenate([o for o, _ in parts])
@@ -156,13 +154,11 @@ def test_block_by_block_equals_whole_aperture(order: int) -> None:
         got = np.concatenate([getattr(s, name) for _, s in parts])
         np.testing.assert_allclose(got, getattr(sol, name), rtol=1e-12, atol=1e-12)
     # a new compensator resumed from a saved state carries on identically
-    first = InsMotionCompensator(NORTH, geom, lever)
-    first.compensate(echo[:400], t_ns[:400], vel[:400], quat[:400])
-    resumed = InsMotionCompensator(NORTH, geom, lever, state=first.state)
-    rest, _ = resumed.compensate(echo[400:], t_ns[400:], vel[400:], quat[400:])
+    first = InsMotionCompensator(NORTH, geom)
+    first.compensate(echo[:400], t_ns[:400], vel[:400])
+    resumed = InsMotionCompensator(NORTH, geom, state=first.state)
+    rest, _ = resumed.compensate(echo[400:], t_ns[400:], vel[400:])
     np.testing.assert_allclose(rest, whole[400:], rtol=0, atol=1e-5 * np.abs(whole).max())
-    with pytest.raises(ProcessingError):
-        InsMotionCompensator(NORTH, geom, lever).compensate(echo, t_ns, vel)  # no attitude
 
 
 def test_geometry_rejects_bad_inputs() -> None:
@@ -244,17 +240,3 @@ def test_ins_only_compensation_focuses_the_thz_target(
     assert tac[ins1].axis0.pslr_db < tac["raw"].axis0.pslr_db - 5.0
     assert tac[ins1].axis1.pslr_db < tac["GPS position"].axis1.pslr_db - 1.0
 
-
-def test_lever_arm_moves_the_apc_with_the_attitude() -> None:
-    """At zero INS velocity the APC displacement is R(q_k) l - R(q_1) l (roll about the nose)."""
-    p = 5
-    t_ns = 10**15 + np.arange(p, dtype=np.int64) * 50_000
-    roll = np.linspace(0.0, 0.2, p)
-    quat = np.stack([np.cos(roll / 2), np.sin(roll / 2), np.zeros(p), np.zeros(p)], axis=1)
-    lever = np.array([0.0, 0.0, 0.5])  # APC 0.5 m below the IMU
-    geom = LosGeometry.build(RADAR, _axis(), DEPTH_M, SCENE_R_M, 60.0)
-    comp = InsMotionCompensator(NORTH, geom, lever)
-    disp = comp.displacement(t_ns, np.zeros((p, 3)), quat)
-    # rolling right wing down by φ swings a point below the IMU toward -y (west, away from scene)
-    expect = np.stack([-0.5 * np.sin(roll), 0.5 * np.cos(roll) - 0.5], axis=1)
-    np.testing.assert_allclose(disp, expect, atol=1e-12)
