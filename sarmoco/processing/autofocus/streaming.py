@@ -687,6 +687,15 @@ class SlidingSubapertureAutofocus:
         """Release every remaining pulse (the last ones with extrapolated corrections)."""
         return self._release(flushing=True)
 
+    def take_report(self) -> AutofocusReport:
+        """Hand over the estimates made since the last call and start a new report.
+
+        The engine then holds none (a report kept for the whole run would grow by one
+        subaperture a hop): whoever records them takes them.
+        """
+        report, self.report = self.report, AutofocusReport()
+        return report
+
     def _release(self, flushing: bool) -> tuple[ComplexArray, Corrections]:
         shifted, corr = self.corrections(flushing)
         return remove_phase(shifted, corr.phase_cycles, self.range_m - corr.ref_range_m), corr
