@@ -144,10 +144,7 @@ def test_block_by_block_equals_whole_aperture(order: int) -> None:
     assert np.count_nonzero(sol.range_shift_m) > p // 4  # the envelope step is exercised
     comp = InsMotionCompensator(NORTH, geom)
     edges = [0, 1, 2, 50, 51, 333, 500, 699, p]
-    parts = [
-        comp.compensate(echo[a:b], t_ns[a:b], vel[a:b])
-        for a, b in itertools.pairwise(edges)
-    ]
+    parts = [comp.compensate(echo[a:b], t_ns[a:b], vel[a:b]) for a, b in itertools.pairwise(edges)]
     blocks = np.concatenate([o for o, _ in parts])
     np.testing.assert_allclose(blocks, whole, rtol=0, atol=1e-5 * np.abs(whole).max())
     for name in ("d_los_m", "phase_rad", "range_shift_m"):
@@ -225,6 +222,12 @@ def test_ins_only_compensation_focuses_the_thz_target(
     t2, cases = thz_cases
     ins1, ins2 = "INS D_los (1st order)", "INS D_los + range-variant"
     ideal = {m: t2.focus(cases["ideal"], m, 0).metrics for m in ("truth", "raw", ins1, ins2)}
+    # The paper's Table 2 bar (-12.43 dB, its INS-only range cut) is met by our uncompensated
+    # range cut too (README: -13.29 dB; the sway changes little over the 0.23 s aperture), so
+    # the bar is put on the azimuth cut, where the compensation acts: the INS-only image of
+    # exact velocities reaches it, the uncompensated image of the same echoes does not.
+    bar = t2.PAPER_TABLE2["INS-only"][0]
+    assert ideal[ins1].axis0.pslr_db <= bar < ideal["raw"].axis0.pslr_db
     assert ideal["raw"].axis0.pslr_db > -6.0  # the motion defocuses azimuth
     for m in (ins1, ins2):  # with exact velocities the method reaches the sinc limit
         assert ideal[m].axis0.pslr_db <= -13.26 + 0.3
@@ -236,7 +239,7 @@ def test_ins_only_compensation_focuses_the_thz_target(
         f" azimuth PSLR {tac[ins1].axis0.pslr_db:.2f} dB (raw {tac['raw'].axis0.pslr_db:.2f});"
         f" GPS position range PSLR {tac['GPS position'].axis1.pslr_db:.2f} dB"
     )
-    assert tac[ins1].axis1.pslr_db <= -12.43  # the paper's Table 2 value (range cut)
+    # tactical INS (2 mm/s white velocity noise per sample): measured -9.83 dB against raw
+    # -2.27 dB; the remaining random-walk phase is the autofocus' to remove (README)
     assert tac[ins1].axis0.pslr_db < tac["raw"].axis0.pslr_db - 5.0
     assert tac[ins1].axis1.pslr_db < tac["GPS position"].axis1.pslr_db - 1.0
-
