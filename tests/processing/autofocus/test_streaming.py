@@ -200,10 +200,18 @@ def _azimuth_pslr(syn: S.Synthetic, rc: np.ndarray) -> list[float]:
     return out
 
 
+def _lines_used(af: SlidingSubapertureAutofocus) -> set[int]:
+    """The numbers of lines the phase step weighted, over every subaperture of the run."""
+    subs = af.report.subapertures
+    assert subs and all(s.phase_lines is not None for s in subs)
+    return {s.phase_lines.n_used for s in subs if s.phase_lines is not None}
+
+
 def test_few_targets_in_noise_do_not_lose_focus() -> None:
     """Three targets, the other lines only noise (5 dB under each compressed target per pulse),
-    a small residual motion: the default streaming autofocus (16 lines asked for) must use only
-    the target lines and leave every target at least as well focused as it came in."""
+    a small residual motion (0.8 rad peak to peak at 1000 m): the default streaming autofocus
+    (16 lines asked for) must use the three target lines and no other, leave no target worse
+    focused than it came in, and sharpen them on average."""
     dur = 2.0
     t = np.arange(round(dur * S.PRF_HZ)) / S.PRF_HZ - dur / 2
     d, a = S.sine_motion(t, (0.0006, 0.0003), (0.4, 0.7))
@@ -213,17 +221,18 @@ def test_few_targets_in_noise_do_not_lose_focus() -> None:
     before = _azimuth_pslr(syn, syn.rc)
     after = _azimuth_pslr(syn, focused)
     print("azimuth PSLR before", np.round(before, 2), "after", np.round(after, 2))
-    assert all(
-        s.phase_lines is not None and s.phase_lines.n_used <= 3 for s in af.report.subapertures
-    )
+    assert _lines_used(af) == {3}
     assert np.all(np.array(after) <= np.array(before) + 0.05)
+    # measured: -10.18 / -9.61 / -9.03 dB before, -10.40 / -11.44 / -11.25 dB after (the noise
+    # limits the sidelobes); the mean gain is 1.42 dB
+    assert np.mean(before) - np.mean(after) >= 1.0
 
 
 def test_range_sidelobe_lines_of_a_sparse_scene_get_no_weight() -> None:
     """Noise-free, three targets: every line but the three targets' is a range sidelobe
     (-25 dB or less at the 6-bin guard) or empty; their rates swing as the targets migrate
     through the sidelobes' nulls. Only the target lines may carry weight, and the image must
-    not lose focus (on the daemon's ku-vehicle x0.1 scene this rule cut the scatter of the
+    reach the sinc limit (on the daemon's ku-vehicle x0.1 scene this rule cut the scatter of the
     per-subaperture rate estimates from 0.6 to 0.14 Hz/s)."""
     dur = 2.0
     t = np.arange(round(dur * S.PRF_HZ)) / S.PRF_HZ - dur / 2
@@ -231,9 +240,9 @@ def test_range_sidelobe_lines_of_a_sparse_scene_get_no_weight() -> None:
     tg = [S.ground_target(0.0, r) for r in (950.0, 1000.0, 1050.0)]
     syn = S.make(dur, tg, d, a, range_span_m=(930.0, 1070.0), snr_db=None)
     focused, af = _stream(syn, AutofocusConfig())
-    assert all(
-        s.phase_lines is not None and s.phase_lines.n_used <= 3 for s in af.report.subapertures
-    )
+    assert _lines_used(af) == {3}
     before = _azimuth_pslr(syn, syn.rc)
     after = _azimuth_pslr(syn, focused)
-    assert np.all(np.array(after) <= np.array(before) + 0.05)
+    # measured: -10.6 dB before, -13.28 dB after: noise-free, the sinc limit is reached
+    assert np.all(np.array(before) > -11.0)
+    assert np.all(np.array(after) <= -13.26 + 0.3)
