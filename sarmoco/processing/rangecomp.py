@@ -1,11 +1,14 @@
 """Range compression: matched filter (pulsed LFM) and dechirp FFT with residual video phase removal.
 
-The waveform conventions are those of :mod:`sarmoco.sim.echo` (a centred up-chirp
-``exp(j pi K (tau - T_p/2)**2)``, ``K = B / T_p``). After :func:`compress`, a point target at
-slant range R peaks at ``range_axis_m(radar) == R`` (between bins when R is) and the peak
-carries the phase ``exp(-j 4 pi R / lambda)`` (METHODS §1). Output bins are in increasing
-slant range for both receive chains. Pulses are independent, so any block of pulses can be
-compressed on its own.
+The waveform conventions are those of :mod:`sarmoco.sim.echo` (a centred chirp
+``exp(j pi K_s (tau - T_p/2)**2)`` with the signed rate ``K_s = +B / T_p`` for an up-chirp and
+``-B / T_p`` for a down-chirp, ``radar.chirp_direction``). A receiver that delivers the
+conjugate of that baseband (``radar.iq_conjugate``, spectral inversion) has its samples
+conjugated first. After :func:`compress`, a point target at slant range R peaks at
+``range_axis_m(radar) == R`` (between bins when R is) and the peak carries the phase
+``exp(-j 4 pi R / lambda)`` (METHODS §1). Output bins are in increasing slant range for both
+receive chains and both chirp directions. Pulses are independent, so any block of pulses can
+be compressed on its own.
 
 Matched filter: correlation with the reference chirp by FFT (length >= S + L - 1, no wrap);
 output bin i is the lag ``gate + i / f_s``; bins beyond ``S - L`` hold echoes cut by the end of
@@ -13,11 +16,14 @@ the receive window. A window weights the reference spectrum over the band ``|f| 
 
 Dechirp: a centred DFT of each pulse (sample time ``u_n = (n - N/2) / f_s`` about the reference
 chirp's centre) evaluated at beat frequencies ``f_i = (i - N/2) f_s / N`` maps bin i to the delay
-offset ``f_i / K``; multiplying by ``exp(-j pi f_i**2 / K)`` removes the residual video phase and
-deskews every tone to the same time support, which leaves a flat phase across each peak; the
-constant ``exp(-j 4 pi R_ref / lambda)`` restores the absolute phase. With a window the deskewed
-signal is taken back to time, weighted over the common tone support ``|u| < T_p/2`` and
-transformed again.
+offset ``f_i / K``. An up-chirp's beat tone ``exp(-j 2 pi K Delta u)`` takes the DFT kernel
+``exp(+j 2 pi f_i u_n)``, a down-chirp's ``exp(+j 2 pi K Delta u)`` the kernel
+``exp(-j 2 pi f_i u_n)`` (the first kernel applied to the pulse reversed in time), so bin i is
+the delay ``f_i / K`` for both. Multiplying by ``exp(-j pi f_i**2 / K_s)`` removes the
+residual video phase and deskews every tone to the same time support, which leaves a flat
+phase across each peak; the constant ``exp(-j 4 pi R_ref / lambda)`` restores the absolute
+phase. With a window the deskewed signal is taken back to time, weighted over the common tone
+support ``|u| < T_p/2`` and transformed again.
 """
 
 from __future__ import annotations
@@ -43,9 +49,10 @@ def range_axis_m(radar: RadarParams) -> FloatArray:
 
 
 def reference_chirp(radar: RadarParams) -> ComplexArray:
-    """Sampled transmit chirp ``exp(j pi K (m/f_s - T_p/2)**2)``, ``0 <= m/f_s < T_p``."""
+    """Sampled transmit chirp ``exp(j pi K_s (m/f_s - T_p/2)**2)``, ``0 <= m/f_s < T_p``."""
     t = np.arange(int(np.ceil(radar.pulse_width_s * radar.sample_rate_hz))) / radar.sample_rate_hz
-    return np.exp(1j * np.pi * radar.chirp_rate_hz_per_s * (t - radar.pulse_width_s / 2.0) ** 2)
+    k_s = radar.signed_chirp_rate_hz_per_s
+    return np.exp(1j * np.pi * k_s * (t - radar.pulse_width_s / 2.0) ** 2)
 
 
 def _window_values(window: Window, m: int) -> FloatArray:
@@ -94,12 +101,17 @@ def _dechirp(radar: RadarParams, echo: ComplexArray, window: Window) -> ComplexA
     n = echo.shape[1]
     if n % 2:
         raise ProcessingError(f"rangecomp: dechirp needs an even n_samples, got {n}")
-    k = radar.chirp_rate_hz_per_s
+    k_s = radar.signed_chirp_rate_hz_per_s
     beat_hz = (np.arange(n) - n // 2) * radar.sample_rate_hz / n
     r_ref = C_MPS * radar.range_gate_delay_s / 2.0
-    rvp = np.exp(-1j * np.pi * beat_hz**2 / k - 4j * np.pi * r_ref / radar.wavelength_m)
-    # the centred DFT's sign and the RVP factor in one complex64 pass over the data
-    spec = scipy.fft.fftshift(scipy.fft.ifft(echo, axis=1, norm="forward"), axes=1)
+    rvp = np.exp(-1j * np.pi * beat_hz**2 / k_s - 4j * np.pi * r_ref / radar.wavelength_m)
+    # unnormalised DFT with the kernel exp(+j..) (up-chirp) or exp(-j..) (down-chirp); the
+    # centred DFT's sign and the RVP factor in one complex64 pass over the data
+    if radar.chirp_direction == "up":
+        spec = scipy.fft.ifft(echo, axis=1, norm="forward")
+    else:
+        spec = scipy.fft.fft(echo, axis=1)
+    spec = scipy.fft.fftshift(spec, axes=1)
     spec *= (_alternating_sign(n) * rvp).astype(np.complex64)
     if window is not None:
         u = (np.arange(n) - n // 2) / radar.sample_rate_hz
@@ -116,9 +128,10 @@ def compress(radar: RadarParams, echo: ComplexArray, window: Window = None) -> C
     Parameters
     ----------
     radar : RadarParams
-        The receive chain that produced ``echo``.
+        The waveform and receive chain that produced ``echo`` (receive mode, chirp
+        direction, I/Q conjugation).
     echo : ndarray of complex, shape (P, S)
-        Raw samples, S = ``radar.n_samples``.
+        Raw samples as the receiver delivers them, S = ``radar.n_samples``.
     window : str or tuple, optional
         Range weighting (``"hann"``, ``"taylor"``, ``("kaiser", 6.0)``...); None: unweighted.
 
@@ -133,6 +146,8 @@ def compress(radar: RadarParams, echo: ComplexArray, window: Window = None) -> C
             f"rangecomp.compress: echo shape {np.shape(echo)} is not (P, {radar.n_samples})"
         )
     x = x.astype(np.complex64, copy=False)
+    if radar.iq_conjugate:
+        x = np.conj(x)
     if radar.receive == "matched":
         return _matched(radar, x, window)
     return _dechirp(radar, x, window)

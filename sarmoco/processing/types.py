@@ -34,7 +34,7 @@ class RadarParams:
     carrier_hz : float
         Centre (RF reference) frequency, Hz.
     bandwidth_hz : float
-        Transmitted chirp bandwidth, Hz (positive: up-chirp).
+        Transmitted chirp bandwidth, Hz (> 0 for either chirp direction).
     pulse_width_s : float
         Chirp duration, s.
     sample_rate_hz : float
@@ -52,6 +52,13 @@ class RadarParams:
         ``matched``: baseband chirp echoes, compressed with a matched filter.
         ``dechirp``: FMCW / stretch processing, the receiver outputs beat
         signals, compressed with an FFT.
+    chirp_direction : {"up", "down"}
+        Sign of the transmitted chirp's frequency sweep: "up" (frequency rising,
+        chirp rate +B/T_p) or "down" (falling, -B/T_p).
+    iq_conjugate : bool
+        The receiver delivers the complex conjugate of the baseband signal
+        (spectral inversion: I/Q swapped or Q negated, e.g. a low-side local
+        oscillator); the range compression conjugates the samples first.
     """
 
     carrier_hz: float
@@ -62,6 +69,8 @@ class RadarParams:
     n_samples: int
     range_gate_delay_s: float
     receive: Literal["matched", "dechirp"] = "matched"
+    chirp_direction: Literal["up", "down"] = "up"
+    iq_conjugate: bool = False
 
     def __post_init__(self) -> None:
         for name in ("carrier_hz", "bandwidth_hz", "pulse_width_s", "sample_rate_hz", "prf_hz"):
@@ -73,6 +82,14 @@ class RadarParams:
             raise ProcessingError(
                 f"RadarParams.receive: {self.receive!r} is not one of 'matched', 'dechirp'"
             )
+        if self.chirp_direction not in ("up", "down"):
+            raise ProcessingError(
+                f"RadarParams.chirp_direction: {self.chirp_direction!r} is not one of 'up', 'down'"
+            )
+        if not isinstance(self.iq_conjugate, bool):
+            raise ProcessingError(
+                f"RadarParams.iq_conjugate: {self.iq_conjugate!r} is not true or false"
+            )
 
     @property
     def wavelength_m(self) -> float:
@@ -81,8 +98,14 @@ class RadarParams:
 
     @property
     def chirp_rate_hz_per_s(self) -> float:
-        """Chirp rate K = B / T_p, Hz/s."""
+        """Magnitude of the chirp rate, K = B / T_p, Hz/s."""
         return self.bandwidth_hz / self.pulse_width_s
+
+    @property
+    def signed_chirp_rate_hz_per_s(self) -> float:
+        """Chirp rate with the sweep's sign, K_s = +K (up) or -K (down), Hz/s."""
+        k = self.chirp_rate_hz_per_s
+        return k if self.chirp_direction == "up" else -k
 
     @property
     def range_resolution_m(self) -> float:

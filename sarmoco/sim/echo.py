@@ -5,18 +5,22 @@ Every sample is evaluated in closed form from the exact stop-and-hop range
 targets and the samples each echo occupies runs in a numba kernel.
 
 Waveform (fast time ``tau`` from the pulse's transmit time stamp): the transmitted chirp is
-``exp(j 2 pi f_c tau + j pi K (tau - T_p/2)**2)`` for ``0 <= tau < T_p``, ``K = B / T_p``
+``exp(j 2 pi f_c tau + j pi K_s (tau - T_p/2)**2)`` for ``0 <= tau < T_p``, with the signed
+chirp rate ``K_s = +B / T_p`` (``radar.chirp_direction`` "up") or ``-B / T_p`` ("down")
 (centred on the carrier). With the two-way delay ``tau_d = 2 R / c``:
 
 - ``matched``: the demodulated echo sampled at ``tau_n = gate + n / f_s`` is
-  ``a exp(j pi K (tau_n - tau_d - T_p/2)**2) exp(-j 4 pi R / lambda)`` while
+  ``a exp(j pi K_s (tau_n - tau_d - T_p/2)**2) exp(-j 4 pi R / lambda)`` while
   ``0 <= tau_n - tau_d < T_p``, else 0.
 - ``dechirp``: the echo is mixed with the conjugate of a long reference chirp delayed by
   ``tau_ref = gate``; with ``Delta = tau_d - tau_ref`` and ``u_n = (n - N/2) / f_s`` (sample
   time relative to ``tau_ref + T_p/2``) the beat signal is
-  ``a exp(-j 2 pi f_c Delta) exp(-j 2 pi K Delta u_n) exp(j pi K Delta**2)`` while
+  ``a exp(-j 2 pi f_c Delta) exp(-j 2 pi K_s Delta u_n) exp(j pi K_s Delta**2)`` while
   ``Delta - T_p/2 <= u_n < Delta + T_p/2``, else 0 (the last factor is the residual video
   phase).
+
+A receiver with ``radar.iq_conjugate`` (spectral inversion) delivers the complex conjugate of
+these samples (noise included).
 
 :func:`sarmoco.processing.rangecomp.compress` inverts both so that a target at range R peaks
 at R with phase ``exp(-j 4 pi R / lambda)``.
@@ -119,7 +123,8 @@ def synthesize(
     Parameters
     ----------
     radar : RadarParams
-        Waveform and receive chain (``matched`` or ``dechirp``).
+        Waveform and receive chain (``matched`` or ``dechirp``, chirp direction, I/Q
+        conjugation).
     t_ns : ndarray of int64, shape (P,)
         Transmit time of each pulse, GPS ns (the echo depends on time only through ``apc_ned``).
     apc_ned : ndarray of float64, shape (P, 3)
@@ -155,12 +160,15 @@ def synthesize(
     ranges = slant_ranges(apc, tgt)
     echo = np.zeros((n_p, radar.n_samples), dtype=np.complex64)
     args = (radar.range_gate_delay_s, radar.sample_rate_hz, radar.pulse_width_s)
+    k_s = radar.signed_chirp_rate_hz_per_s
     if radar.receive == "matched":
-        _matched_kernel(echo, ranges, weights, *args, radar.chirp_rate_hz_per_s, radar.wavelength_m)
+        _matched_kernel(echo, ranges, weights, *args, k_s, radar.wavelength_m)
     else:
-        _dechirp_kernel(echo, ranges, weights, *args, radar.chirp_rate_hz_per_s, radar.carrier_hz)
+        _dechirp_kernel(echo, ranges, weights, *args, k_s, radar.carrier_hz)
     if snr_db is not None:
         sigma = noise_sigma(snr_db) / math.sqrt(2.0)
         noise = rng.standard_normal((n_p, radar.n_samples, 2), dtype=np.float32) * np.float32(sigma)
         echo += noise.view(np.complex64)[..., 0]
+    if radar.iq_conjugate:
+        np.conjugate(echo, out=echo)
     return echo

@@ -316,7 +316,8 @@ def load_preset(name: str, scale: float = 1.0, **overrides: Any) -> Scenario:
     scale : float
         0 < scale <= 1: shrinks swath, pulse width (samples) and PRF, keeping the resolutions.
     **overrides
-        Any :class:`RadarParams` field (e.g. ``prf_hz``, ``receive``, ``n_samples``) or
+        Any :class:`RadarParams` field (e.g. ``prf_hz``, ``receive``, ``n_samples``,
+        ``chirp_direction``, ``iq_conjugate``) or
         :class:`Scenario` field (e.g. ``snr_db``, ``targets``, ``aperture_s``, ``mode``),
         applied after scaling; derived values (range gate, samples, aperture) follow them
         unless given themselves.
@@ -350,6 +351,8 @@ def load_preset(name: str, scale: float = 1.0, **overrides: Any) -> Scenario:
         "pulse_width_s": float(radar_raw["pulse_width_s"]) * scale,
         "sample_rate_hz": float(radar_raw["sample_rate_hz"]),
         "receive": radar_raw["receive"],
+        "chirp_direction": radar_raw.get("chirp_direction", "up"),
+        "iq_conjugate": radar_raw.get("iq_conjugate", False),
     }
     wavelength = C_MPS / p["carrier_hz"]
     p["integration_angle_rad"] = _integration_angle(raw, wavelength)
@@ -391,6 +394,8 @@ def load_preset(name: str, scale: float = 1.0, **overrides: Any) -> Scenario:
         n_samples=n_samples,
         range_gate_delay_s=gate,
         receive=p["receive"],
+        chirp_direction=p["chirp_direction"],
+        iq_conjugate=p["iq_conjugate"],
     )
     if p["mode"] not in ("stripmap", "spotlight"):
         raise ConfigError(f"scenario.mode: {p['mode']!r} is not 'stripmap' or 'spotlight'")
