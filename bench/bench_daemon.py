@@ -48,10 +48,10 @@ from typing import Any
 
 import numpy as np
 
+from sarmoco.app.demo import free_udp_port, read_json_line
+from sarmoco.app.simconfig import config_table, write_config
 from sarmoco.daemon.config import load_config
-from sarmoco.daemon.demo import free_udp_port, read_json_line
 from sarmoco.daemon.runner import replay_files
-from sarmoco.daemon.simconfig import config_table, write_config
 from sarmoco.daemon.store import open_store
 from sarmoco.sim.pacing import host_gps_ns
 from sarmoco.sim.scenario import load_preset
@@ -129,7 +129,7 @@ def replay_rate(work: Path, preset: str, scale: float) -> ReplayResult:
     cfg = load_config(cfg_path)
     t0 = time.perf_counter()
     subprocess.run(
-        [sys.executable, "-c", "import sarmoco.daemon.cli, sarmoco.daemon.runner"], check=True
+        [sys.executable, "-c", "import sarmoco.app.cli, sarmoco.daemon.runner"], check=True
     )
     startup = time.perf_counter() - t0
     out = files / f"replay-{time.time_ns()}.zarr"

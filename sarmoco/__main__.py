@@ -4,6 +4,6 @@ from __future__ import annotations
 
 import sys
 
-from sarmoco.daemon.cli import main
+from sarmoco.app.cli import main
 
 sys.exit(main())

@@ -25,8 +25,10 @@ def _imports(path: Path) -> set[str]:
 @pytest.mark.parametrize(
     ("layer", "forbidden"),
     [
-        ("processing", ("sarmoco.daemon", "sarmoco.drivers", "sarmoco.sim")),
-        ("drivers", ("sarmoco.processing",)),
+        ("processing", ("sarmoco.daemon", "sarmoco.drivers", "sarmoco.sim", "sarmoco.app")),
+        ("drivers", ("sarmoco.processing", "sarmoco.daemon", "sarmoco.sim", "sarmoco.app")),
+        ("daemon", ("sarmoco.sim", "sarmoco.app")),
+        ("sim", ("sarmoco.daemon", "sarmoco.app")),
     ],
 )
 def test_layering(layer: str, forbidden: tuple[str, ...]) -> None:
@@ -37,6 +39,23 @@ def test_layering(layer: str, forbidden: tuple[str, ...]) -> None:
         if name.startswith(forbidden)
     ]
     assert not bad, bad
+
+
+def test_daemon_process_never_loads_the_simulator() -> None:
+    """Every daemon module and the command line for ``sarmoco run`` leave ``sarmoco.sim`` out."""
+    code = (
+        "import pkgutil, sys, importlib\n"
+        "import sarmoco.daemon\n"
+        "for m in pkgutil.iter_modules(sarmoco.daemon.__path__, 'sarmoco.daemon.'):\n"
+        "    importlib.import_module(m.name)\n"
+        "from sarmoco.app.cli import build_parser\n"
+        "build_parser().parse_args(['run', '--config', 'sarmoco.toml'])\n"
+        "sim = ('sarmoco.sim', 'sarmoco.app.sim', 'sarmoco.app.demo')\n"
+        "print(sorted(m for m in sys.modules if m.startswith(sim)))\n"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "[]", res.stdout
 
 
 def test_ruff_clean(repo_root: Path) -> None:

@@ -48,11 +48,11 @@ import xarray as xr
 import zarr
 from pymavlink import mavutil
 
+from sarmoco.app.simconfig import write_config
 from sarmoco.daemon.config import Config, load_config
 from sarmoco.daemon.flags import NAV_UNUSABLE, PulseFlag
 from sarmoco.daemon.links import open_ins, vita_decoder
 from sarmoco.daemon.runner import replay_store
-from sarmoco.daemon.simconfig import write_config
 from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.drivers.radar import RadarFileSource
 from sarmoco.drivers.samples import AttitudeSample, Sample, VelocitySample

@@ -20,8 +20,8 @@ from typing import Any
 import numpy as np
 import pytest
 
+from sarmoco.app.demo import run_loopback
 from sarmoco.daemon.config import load_config
-from sarmoco.daemon.demo import run_loopback
 from sarmoco.daemon.report import write_report
 from sarmoco.daemon.runner import replay_store
 from sarmoco.daemon.store import open_store

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.focuser import Focuser
-from sarmoco.daemon.simconfig import scenario_config
 from sarmoco.processing.imaging.tiles import Tile
 from sarmoco.processing.metrics import point_target_metrics
 from sarmoco.processing.types import Image

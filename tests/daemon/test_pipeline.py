@@ -17,18 +17,18 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sarmoco.app.simconfig import (
+    MIN_SUBAPERTURE_PULSES,
+    autofocus_table,
+    scenario_config,
+    synthetic_aperture_s,
+)
 from sarmoco.daemon.config import Config, parse_config
 from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.links import open_radar
 from sarmoco.daemon.pipeline import Pipeline, tile_metrics
 from sarmoco.daemon.report import strip, write_report
 from sarmoco.daemon.runner import open_recorder
-from sarmoco.daemon.simconfig import (
-    MIN_SUBAPERTURE_PULSES,
-    autofocus_table,
-    scenario_config,
-    synthetic_aperture_s,
-)
 from sarmoco.daemon.status import Counters
 from sarmoco.daemon.store import open_store
 from sarmoco.drivers.radar import RadarUdpSource

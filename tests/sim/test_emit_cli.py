@@ -14,7 +14,7 @@ import can
 import numpy as np
 import pytest
 
-from sarmoco.daemon.demo import free_udp_port
+from sarmoco.app.demo import free_udp_port
 from sarmoco.drivers.can_source import CanSource
 from sarmoco.drivers.mavlink import MavlinkSource
 from sarmoco.drivers.radar import RadarSource, RadarTcpSource, RadarUdpSource

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sarmoco.daemon.demo import free_udp_port
+from sarmoco.app.demo import free_udp_port
 from sarmoco.drivers.mavlink import DEFAULT_RATES_HZ as DAEMON_RATES
 from sarmoco.drivers.mavlink import MavlinkSource
 from sarmoco.drivers.samples import AttitudeSample, Sample, VelocitySample

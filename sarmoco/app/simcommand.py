@@ -69,14 +69,9 @@ from sarmoco.sim.scenario import PRESETS, load_preset
 from sarmoco.sim.trajectory import MotionSpec
 
 
-def add_parser(subparsers: Any) -> None:
-    """Add the ``sim`` subcommand to the CLI's subparsers."""
-    p = subparsers.add_parser(
-        "sim",
-        help="simulated radar and INS: write files (--out) or serve live links (--serve)",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``sarmoco sim`` to its parser (with this module's text as help)."""
+    p.description = __doc__
     p.add_argument("--preset", required=True, choices=PRESETS, help="scenario preset")
     p.add_argument("--scale", type=float, default=1.0, help="scenario scale in (0, 1] (default 1)")
     p.add_argument("--seed", type=int, default=0, help="seed of noise, INS errors and faults")
@@ -113,7 +108,6 @@ def add_parser(subparsers: Any) -> None:
     )
     p.add_argument("--truth", type=Path, help="live: also write the truth record here")
     p.add_argument("--leap-s", type=int, default=GPS_LEAP_SECONDS_DEFAULT, help="GPS - UTC, s")
-    p.set_defaults(func=run_command)
 
 
 def _motion(text: str, seed: int) -> MotionSpec:

@@ -1,17 +1,54 @@
-"""The ``sarmoco`` command line."""
+"""The ``sarmoco`` command line.
+
+Each verb imports what it needs when it runs: ``sarmoco run`` (the daemon process)
+never loads the simulator, whose modules are imported by ``sim`` and ``demo`` only.
+"""
 
 from __future__ import annotations
 
 import argparse
 import shutil
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 from sarmoco import __version__
 from sarmoco.daemon.config import keys_markdown, load_config
 from sarmoco.errors import ConfigError, SarmocoError
-from sarmoco.sim import command as sim_command
+
+
+class VerbParser(argparse.ArgumentParser):
+    """A subcommand parser that can add its arguments on first use.
+
+    ``add_arguments`` runs just before the verb's command line is parsed (or its
+    ``--help`` printed), so the imports it needs happen only for that verb.
+
+    Parameters
+    ----------
+    add_arguments : callable, optional
+        Adds the verb's arguments to this parser.
+    **kwargs
+        Passed to :class:`argparse.ArgumentParser`.
+    """
+
+    def __init__(
+        self,
+        *,
+        add_arguments: Callable[[argparse.ArgumentParser], None] | None = None,
+        **kwargs: Any,
+    ) -> None:
+        super().__init__(**kwargs)
+        self._add_arguments = add_arguments
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        """Add the deferred arguments (once), then parse as usual."""
+        if self._add_arguments is not None:
+            add, self._add_arguments = self._add_arguments, None
+            add(self)
+        return super().parse_known_args(args, namespace)
 
 
 def _cmd_config_check(args: argparse.Namespace) -> int:
@@ -65,10 +102,18 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_sim_arguments(parser: argparse.ArgumentParser) -> None:
+    from sarmoco.app.simcommand import add_arguments
+
+    add_arguments(parser)
+
+
 def _cmd_sim(args: argparse.Namespace) -> int:
-    status = sim_command.run_command(args)
+    from sarmoco.app.simcommand import run_command
+
+    status = run_command(args)
     if status == 0 and args.out is not None:
-        from sarmoco.daemon.simconfig import config_table, write_config
+        from sarmoco.app.simconfig import config_table, write_config
         from sarmoco.sim.outfiles import NAV_FILES, RADAR_FILE
         from sarmoco.sim.scenario import load_preset
 
@@ -84,7 +129,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
 
 
 def _cmd_demo(args: argparse.Namespace) -> int:
-    from sarmoco.daemon.demo import run_loopback
+    from sarmoco.app.demo import run_loopback
 
     out = Path(args.out)
     if (out / "truth.json").exists():  # an earlier demo's output: replace it
@@ -102,7 +147,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="Acquisition and focusing daemon for UAV and vehicle-borne SAR.",
     )
     parser.add_argument("--version", action="version", version=f"sarmoco {__version__}")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    sub = parser.add_subparsers(
+        dest="command", required=True, metavar="COMMAND", parser_class=VerbParser
+    )
 
     cfg = sub.add_parser("config", help="check a configuration file or list every key")
     cfg_sub = cfg.add_subparsers(dest="config_command", required=True, metavar="ACTION")
@@ -135,12 +182,15 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--out", help="output folder (default: STORE with suffix .report)")
     report.set_defaults(func=_cmd_report)
 
-    sim_command.add_parser(sub)
-    sub.choices["sim"].set_defaults(func=_cmd_sim)
-    sub.choices["sim"].epilog = (
-        "With --out, DIR/sarmoco.toml is a daemon configuration for the scenario "
-        "(radar.vrt + nav.tlog; change ins.protocol/link for ins.sbg or the CAN log ins.log)."
+    sim = sub.add_parser(
+        "sim",
+        help="simulated radar and INS: write files (--out) or serve live links (--serve)",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog="With --out, DIR/sarmoco.toml is a daemon configuration for the scenario "
+        "(radar.vrt + nav.tlog; change ins.protocol/link for ins.sbg or the CAN log ins.log).",
+        add_arguments=_add_sim_arguments,
     )
+    sim.set_defaults(func=_cmd_sim)
 
     demo = sub.add_parser(
         "demo", help="simulated hardware + daemon on loopback, then the report (the main job)"

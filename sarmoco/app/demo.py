@@ -17,8 +17,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from sarmoco.app.simconfig import config_table, write_config
 from sarmoco.daemon.report import write_report
-from sarmoco.daemon.simconfig import config_table, write_config
 from sarmoco.errors import SarmocoError
 from sarmoco.sim.scenario import load_preset
 

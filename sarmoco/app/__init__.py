@@ -1,0 +1,5 @@
+"""Applications above the daemon and the simulator: the command line, the demo, ``sarmoco sim``.
+
+The layer joins ``sarmoco.daemon`` (the process) and ``sarmoco.sim`` (simulated
+hardware); neither of them imports it, and the daemon never imports the simulator.
+"""
