@@ -137,8 +137,8 @@ class SbgEmitter(SbgDevice):
         super().__init__(link, feed, **options)
         self.geodetic = None if feed.pos_ned is None else ned_to_geodetic(feed.pos_ned)
         g = feed.grade
-        self.vel_std = vec3(np.full(3, max(g.vel_noise_mps, MIN_STD)))
-        self.att_std = vec3(np.full(3, max(g.att_noise_rad, MIN_STD)))
+        self.vel_std = vec3(np.full(3, max(g.vel_std_mps, MIN_STD)))
+        self.att_std = vec3(np.full(3, max(g.att_std_rad, MIN_STD)))
         self.pos_std = vec3(np.full(3, max(g.pos_noise_m, MIN_STD)))
         self.status = SOLUTION_NAV_POSITION | codec.SOL_ATTITUDE_VALID | codec.SOL_HEADING_VALID
         self.status |= codec.SOL_VELOCITY_VALID
