@@ -21,20 +21,22 @@ import math
 import queue
 import threading
 import time
-from dataclasses import dataclass, field
-from typing import Any, TypeVar
+from dataclasses import dataclass, field, fields, replace
+from typing import Any, Protocol, TypeVar
 
 import numpy as np
+import numpy.typing as npt
 
+from sarmoco.daemon import schema
 from sarmoco.daemon.aligner import AlignedBlock, Aligner
 from sarmoco.daemon.config import Config
 from sarmoco.daemon.echoring import Block, EchoRing, SampleFormat, sample_dtype, sample_shape
 from sarmoco.daemon.flags import FLAG_DTYPE, NAV_UNUSABLE, PulseFlag
 from sarmoco.daemon.focuser import Focuser, FocusOutput
-from sarmoco.daemon.navbuffer import NavBuffer, PushResult
-from sarmoco.daemon.recorder import NAV_KIND_ATTITUDE, NAV_KIND_VELOCITY, Recorder
+from sarmoco.daemon.navbuffer import NavBuffer
+from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.status import Counters
-from sarmoco.drivers.radar import UDP_BATCH_PACKETS, RadarSource
+from sarmoco.drivers.radar import UDP_BATCH_PACKETS
 from sarmoco.drivers.samples import AttitudeSample, EchoPacket, Sample, VelocitySample
 from sarmoco.processing.metrics import image_contrast, image_entropy
 from sarmoco.processing.navinterp import BoolArray
@@ -51,6 +53,15 @@ READ_BLOCK_PULSES = UDP_BATCH_PACKETS
 """Ring slots reserved per radar read: room for one batch of the UDP driver (batched
 receive and decode, and its short gathering pause, need at least
 :data:`~sarmoco.drivers.vita49.BATCH_MIN_PACKETS` rows)."""
+
+
+class PulseSource(Protocol):
+    """What :meth:`Pipeline.read_radar` reads from: a radar link or file
+    (:class:`~sarmoco.drivers.radar.RadarSource`), or a recording's pulses (a replay,
+    :class:`~sarmoco.daemon.store.StorePulses`)."""
+
+    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = ...) -> list[EchoPacket]:
+        """Write the pulses available within ``timeout_s`` into ``out[0], out[1], ...``."""
 
 
 def ring_format(cfg: Config) -> SampleFormat:
@@ -79,6 +90,51 @@ class RunSummary:
             "tiles": self.tiles,
             "tile_metrics": self.tile_metrics,
         }
+
+
+@dataclass(frozen=True)
+class _Pulses:
+    """Aligned pulses gathered for one focusing step (rows in time order).
+
+    Attributes
+    ----------
+    t_ns, pulse_id : ndarray of int64, shape (P,)
+        Transmit time (GPS ns) and running number.
+    usable : ndarray of bool, shape (P,)
+        The pulse has navigation (no :data:`~sarmoco.daemon.flags.NAV_UNUSABLE` flag).
+    raw : ndarray of complex64, shape (P, S)
+        Raw echoes.
+    pos_ned, vel_ned : ndarray, shape (P, 3)
+        Antenna position (m, relative) and velocity (m/s) at the pulses, NED.
+    quat : ndarray, shape (P, 4)
+        Attitude at the pulses (body to NED, scalar first).
+    """
+
+    t_ns: IntArray
+    pulse_id: IntArray
+    usable: BoolArray
+    raw: ComplexArray
+    pos_ned: FloatArray
+    vel_ned: FloatArray
+    quat: FloatArray
+
+    @classmethod
+    def join(cls, blocks: list[AlignedBlock]) -> _Pulses:
+        """The pulses of ``blocks``, one after the other."""
+        flags = np.concatenate([b.echoes.flags for b in blocks])
+        return cls(
+            t_ns=np.concatenate([b.echoes.t_ns for b in blocks]),
+            pulse_id=np.concatenate([b.echoes.pulse_id for b in blocks]),
+            usable=(flags & NAV_UNUSABLE) == 0,
+            raw=np.concatenate([b.echoes.complex_samples() for b in blocks]),
+            pos_ned=np.concatenate([b.nav.pos_ned for b in blocks]),
+            vel_ned=np.concatenate([b.nav.vel_ned for b in blocks]),
+            quat=np.concatenate([b.nav.quat for b in blocks]),
+        )
+
+    def since(self, first: int) -> _Pulses:
+        """The pulses from row ``first`` on."""
+        return _Pulses(*(getattr(self, f.name)[first:] for f in fields(self)))
 
 
 class Pipeline:
@@ -112,9 +168,7 @@ class Pipeline:
         self.focuser: Focuser | None = None
         self.summary = RunSummary()
         counters.add_source("pipeline", self.totals)
-        self._nav_rows: queue.SimpleQueue[tuple[Sample, int | None, PushResult]] = (
-            queue.SimpleQueue()
-        )
+        self._nav_rows: queue.SimpleQueue[schema.NavRow] = queue.SimpleQueue()
         self._ins_raw: queue.SimpleQueue[tuple[bytes, int | None]] = queue.SimpleQueue()
         self._ins_recorded_mono = -math.inf
         self._id_lock = threading.Lock()
@@ -134,9 +188,11 @@ class Pipeline:
     # -- readers --------------------------------------------------------------------------
 
     def read_radar(
-        self, source: RadarSource, timeout_s: float, max_pulses: int | None = None
+        self, source: PulseSource, timeout_s: float, max_pulses: int | None = None
     ) -> int:
         """Decode the pulses ``source`` has within ``timeout_s`` into the ring; returns the count.
+
+        The one way pulses enter a run: live links, log files and replays of a store alike.
 
         Pulses are read a block of ring slots at a time (:data:`READ_BLOCK_PULSES`), so
         the driver's batched receive and decode serve many pulses per call. When the
@@ -245,61 +301,52 @@ class Pipeline:
             self._focus_pending()
 
     def _focus_pending(self) -> None:
+        """Focus the pulses accepted so far and record their motion and products."""
         if not self._pending:
             return
         blocks, self._pending, self._pending_n = self._pending, [], 0
-        t = np.concatenate([b.echoes.t_ns for b in blocks])
-        ids = np.concatenate([b.echoes.pulse_id for b in blocks])
-        flags = np.concatenate([b.echoes.flags for b in blocks])
-        raw = np.concatenate([b.echoes.complex_samples() for b in blocks])
-        pos = np.concatenate([b.nav.pos_ned for b in blocks])
-        vel = np.concatenate([b.nav.vel_ned for b in blocks])
-        quat = np.concatenate([b.nav.quat for b in blocks])
-        usable = (flags & NAV_UNUSABLE) == 0
-        self.summary.pulses_nav_flagged += int(np.count_nonzero(~usable))
+        p = _Pulses.join(blocks)
+        self.summary.pulses_nav_flagged += int(np.count_nonzero(~p.usable))
         if self.focuser is None:
-            if not usable.any():
+            started = self._start_focusing(p)
+            if started is None:
                 return  # no navigation yet: the aperture has not begun
-            first = int(np.argmax(usable))
-            t, ids, raw, pos, vel, quat, usable = (
-                a[first:] for a in (t, ids, raw, pos, vel, quat, usable)
-            )
-            # the first block_pulses usable pulses, however the blocks were cut (live and
-            # replay cut them differently: the reference track must not depend on it)
-            start_vel = vel[usable][: self.cfg.imaging.block_pulses].mean(axis=0)
-            self.focuser = Focuser(self.cfg, int(t[0]), start_vel)
-            track = self.focuser.track
-            self.recorder.set_attribute(
-                "reference_track",
-                {
-                    "t0_ns": track.t0_ns,
-                    "x_hat_ned": track.x_hat.tolist(),
-                    "y_hat_ned": track.y_hat.tolist(),
-                    "v0_mps": track.v0_mps,
-                    "origin": "APC at t0_ns (INS-only: no absolute position)",
-                },
-            )
-            self._last_nav = (int(t[0]), vel[0], quat[0])
-        if not usable.all():
-            raw, vel, quat = self._blank_unusable(t, raw, vel, quat, usable)
-        if usable.any():
-            k = int(np.flatnonzero(usable)[-1])
-            self._last_nav = (int(t[k]), vel[k], quat[k])
-        out = self.focuser.push(raw, t, vel)
+            p = started
+        assert self.focuser is not None
+        if not p.usable.all():
+            p = self._blank_unusable(p)
+        if p.usable.any():
+            k = int(np.flatnonzero(p.usable)[-1])
+            self._last_nav = (int(p.t_ns[k]), p.vel_ned[k], p.quat[k])
+        out = self.focuser.push(p.raw, p.t_ns, p.vel_ned)
         assert out.motion is not None
         m = out.motion
-        self.recorder.append_motion(ids, t, pos, vel, quat, m.d_los_m, m.phase_rad, m.range_shift_m)
-        self.summary.pulses_processed += int(np.count_nonzero(usable))
+        self.recorder.append_motion(
+            p.pulse_id, p.t_ns, p.pos_ned, p.vel_ned, p.quat, m.d_los_m, m.phase_rad,
+            m.range_shift_m,
+        )  # fmt: skip
+        self.summary.pulses_processed += int(np.count_nonzero(p.usable))
         self._record(out)
 
-    def _blank_unusable(
-        self,
-        t: IntArray,
-        raw: ComplexArray,
-        vel: FloatArray,
-        quat: FloatArray,
-        usable: BoolArray,
-    ) -> tuple[ComplexArray, FloatArray, FloatArray]:
+    def _start_focusing(self, p: _Pulses) -> _Pulses | None:
+        """Start the focuser at the first pulse with navigation; the pulses from there on.
+
+        The reference track's velocity is the mean of the first ``imaging.block_pulses``
+        usable pulses, however the blocks were cut (live and replay cut them differently:
+        the reference track must not depend on it). None while no pulse has navigation.
+        """
+        if not p.usable.any():
+            return None
+        p = p.since(int(np.argmax(p.usable)))
+        start_vel = p.vel_ned[p.usable][: self.cfg.imaging.block_pulses].mean(axis=0)
+        self.focuser = Focuser(self.cfg, int(p.t_ns[0]), start_vel)
+        self.recorder.set_attribute(
+            schema.REFERENCE_TRACK_ATTR, schema.encode_reference_track(self.focuser.track)
+        )
+        self._last_nav = (int(p.t_ns[0]), p.vel_ned[0], p.quat[0])
+        return p
+
+    def _blank_unusable(self, p: _Pulses) -> _Pulses:
         """Zero the echoes of pulses without navigation and give them placeholder motion.
 
         The pulses keep their place in time, so the autofocus and the image see a
@@ -310,41 +357,25 @@ class Pipeline:
         never reaches the image because those echoes are zero. The pulses stay
         flagged in the store.
         """
-        raw = raw.copy()
+        usable = p.usable
+        raw = p.raw.copy()
         raw[~usable] = 0
-        known_t = t[usable].astype(np.float64)
-        known_v, known_q = vel[usable], quat[usable]
+        known_t = p.t_ns[usable].astype(np.float64)
+        known_v, known_q = p.vel_ned[usable], p.quat[usable]
         last_t, last_v, last_q = self._last_nav
-        if known_t.size == 0 or t[0] < known_t[0]:
+        if known_t.size == 0 or p.t_ns[0] < known_t[0]:
             known_t = np.concatenate([[float(last_t)], known_t])
             known_v = np.concatenate([last_v[None, :], known_v])
             known_q = np.concatenate([last_q[None, :], known_q])
-        tf = t.astype(np.float64)
+        tf = p.t_ns.astype(np.float64)
         vel = np.column_stack([np.interp(tf, known_t, known_v[:, k]) for k in range(3)])
         nearest = np.clip(np.searchsorted(known_t, tf), 0, known_t.size - 1)
-        quat = np.where(usable[:, None], quat, known_q[nearest])
-        return raw, vel, quat
+        quat = np.where(usable[:, None], p.quat, known_q[nearest])
+        return replace(p, raw=raw, vel_ned=vel, quat=quat)
 
     def _record(self, out: FocusOutput) -> None:
-        focuser = self.focuser
-        assert focuser is not None
-        if focuser.autofocus is not None:
-            # recorded, then forgotten: the streaming report would grow by one entry a hop
-            subs = list(focuser.autofocus.report.subapertures)
-            focuser.autofocus.report.subapertures.clear()
-            if subs:
-                self.recorder.append_rows(
-                    "autofocus",
-                    {
-                        "t_center_s": [s.t_center_s for s in subs],
-                        "a_y_mps2": [s.accel_yz_mps2[0] for s in subs],
-                        "a_z_mps2": [s.accel_yz_mps2[1] for s in subs],
-                        "accel_residual_hz_per_s": [s.accel_residual_hz_per_s for s in subs],
-                        "kappa": np.array([s.kappa for s in subs], dtype=np.float64),
-                        "kappa_residual_hz_per_s": [s.kappa_residual_hz_per_s for s in subs],
-                    },
-                    row_dim="subaperture",
-                )
+        """Record the autofocus estimates made so far and the tiles of ``out``."""
+        self._record_autofocus()
         for tile in out.tiles:
             metrics = tile_metrics(tile.data) | {
                 "pulses": float(tile.n_pulses),
@@ -353,6 +384,15 @@ class Pipeline:
             self.recorder.add_image(tile.image(), tile.t0_ns, tile.t1_ns, metrics)
             self.summary.tiles += 1
             self.summary.tile_metrics.append(metrics)
+
+    def _record_autofocus(self) -> None:
+        """Take the autofocus engine's new subaperture estimates into the store."""
+        engine = self.focuser.autofocus if self.focuser is not None else None
+        if engine is None:
+            return
+        subs = engine.take_report().subapertures
+        if subs:
+            self.recorder.append_rows(schema.AUTOFOCUS, schema.encode_autofocus(subs))
 
     def _record_nav(self) -> None:
         """Write the queued INS samples and raw INS bytes (the bytes as one chunk whose
@@ -364,27 +404,9 @@ class Pipeline:
             data = b"".join(c for c, _ in chunks)
             self.recorder.append_ins_bytes(data, -1 if rx_ns is None else rx_ns)
         rows = _drain(self._nav_rows)
-        if not rows:
-            return
-        nan3 = (math.nan,) * 3
-        t, kind, vel, pos, quat, result, rx = [], [], [], [], [], [], []
-        for s, rx_ns, res in rows:
-            t.append(s.t_gps_ns)
-            rx.append(-1 if rx_ns is None else rx_ns)
-            result.append(int(res))
-            if isinstance(s, VelocitySample):
-                kind.append(NAV_KIND_VELOCITY)
-                vel.append(s.vel_ned_mps)
-                pos.append(s.pos_ned_m if s.pos_ned_m is not None else nan3)
-                quat.append((math.nan,) * 4)
-            else:
-                assert isinstance(s, AttitudeSample)
-                kind.append(NAV_KIND_ATTITUDE)
-                vel.append(nan3)
-                pos.append(nan3)
-                quat.append(s.quat_wxyz)
-        self.recorder.append_nav(t, kind, vel, pos, quat, result, rx)
-        self.summary.nav_samples += len(rows)
+        if rows:
+            self.recorder.append_nav(**schema.encode_nav(rows))
+            self.summary.nav_samples += len(rows)
 
     def totals(self) -> dict[str, float]:
         """Monotonic counts of the run (served as Prometheus counters ``pipeline_*``)."""

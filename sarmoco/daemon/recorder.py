@@ -1,28 +1,7 @@
 """The run recorder: one zarr v3 store per run, readable after a crash.
 
-Layout (every group is a *table*: arrays that share their first dimension,
-plus a ``committed`` attribute counting the rows that are complete)::
-
-    <run>.zarr/                 attrs: sarmoco_store (layout version), created_utc,
-                                       config, versions, metrics, complete
-      pulses/   echo (pulse, sample[, iq])    raw echoes, int16 I/Q or complex64 (optional)
-                t_ns, pulse_id (pulse) int64  transmit time GPS ns, running number
-                channel (pulse) int32, flags (pulse) uint32 (PulseFlag bits)
-      nav/      t_ns, rx_ns (nav) int64       INS samples as received (rx_ns: host
-                kind (nav) uint8              receive clock, -1 unknown);
-                vel_ned (nav, ned) m/s,       kind 0 velocity, 1 attitude, 2 both;
-                pos_ned (nav, ned) m,         fields a sample lacks are NaN;
-                quat (nav, quat),             result: PushResult of the nav buffer
-                result (nav) int8
-      ins_raw/  rx_ns, offset, length (raw_chunk) int64: raw INS bytes as read,
-      ins_bytes/ byte (byte) uint8              so a log can be decoded again
-      motion/   pulse_id, t_ns (motion) int64; pos_ned, vel_ned (motion, ned);
-                quat (motion, quat); d_los_m, phase_rad, range_shift_m (motion)
-      <name>/   free tables (autofocus estimates per subaperture, metrics over
-                time): columns given by the first append
-      images/   attrs committed = tiles complete; tile_000000/ ... each with
-                data (axis0, axis1) complex64, axis0_m (axis0), axis1_m (axis1),
-                attrs frame, t0_ns, t1_ns, metrics
+The layout (tables, columns, attributes) is declared in :mod:`sarmoco.daemon.schema`;
+this module writes it.
 
 Crash safety: the zarr local store writes every chunk and metadata file to a
 temporary name and renames it into place, so a file is either old or new,
@@ -46,7 +25,7 @@ import os
 import platform
 import threading
 import time
-from collections.abc import Collection, Coroutine, Mapping
+from collections.abc import Coroutine, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -58,19 +37,11 @@ from zarr.core.sync import sync as zarr_sync
 from zarr.storage import LocalStore
 
 from sarmoco.closing import Closing
-from sarmoco.daemon.echoring import SampleFormat, sample_dtype, sample_shape
-from sarmoco.daemon.flags import FLAG_DTYPE
+from sarmoco.daemon import schema
+from sarmoco.daemon.echoring import SampleFormat
+from sarmoco.daemon.schema import COMMITTED_ATTR, TableSpec
 from sarmoco.errors import RecorderError
 from sarmoco.processing.types import Image
-
-STORE_LAYOUT_VERSION = 1
-"""Value of the root attribute ``sarmoco_store``; bumped when the layout changes."""
-
-COMMITTED_ATTR = "committed"
-"""Group attribute holding the number of complete rows (tiles for ``images``)."""
-
-NAV_KIND_VELOCITY, NAV_KIND_ATTITUDE, NAV_KIND_BOTH = 0, 1, 2
-"""Values of ``nav/kind``."""
 
 _VERSION_PACKAGES = ("sarmoco", "numpy", "scipy", "zarr", "xarray", "pymavlink", "python-can")
 
@@ -139,47 +110,31 @@ class Table:
 
     Parameters
     ----------
-    group : zarr.Group
-        The table's group (created by the caller).
-    row_dim : str
-        Name of the first dimension (e.g. ``"pulse"``).
-    columns : mapping of str to (dtype, trailing shape, trailing dimension names)
-        The arrays.
+    root : zarr.Group
+        The store's root; the table's group is created there.
+    spec : TableSpec
+        The table's name, row dimension and columns.
     chunk_rows : int
-        Rows per chunk.
-    grow_rows : int
-        Rows added to every array when it is full (a multiple of ``chunk_rows``
-        keeps metadata writes rare).
-    uncompressed : collection of str
-        Columns stored without compression (raw echoes: noise does not
-        compress, and the CPU is needed for focusing).
+        Rows per chunk (unless the spec fixes it).
     """
 
-    def __init__(
-        self,
-        group: zarr.Group,
-        row_dim: str,
-        columns: Mapping[str, tuple[npt.DTypeLike, tuple[int, ...], tuple[str, ...]]],
-        chunk_rows: int,
-        grow_rows: int,
-        uncompressed: Collection[str] = (),
-    ) -> None:
-        self.group = group
-        self.grow_rows = grow_rows
+    def __init__(self, root: zarr.Group, spec: TableSpec, chunk_rows: int) -> None:
+        rows = spec.chunk_rows or chunk_rows
+        self.group = root.create_group(spec.name)
+        self.grow_rows = rows * 16  # a multiple of the chunk keeps metadata writes rare
         self.committed = 0
         self.arrays: dict[str, zarr.Array] = {}
-        for name, (dtype, trailing, dims) in columns.items():
-            dt = np.dtype(dtype)
-            self.arrays[name] = group.create_array(
+        for name, col in spec.columns.items():
+            self.arrays[name] = self.group.create_array(
                 name,
-                shape=(0, *trailing),
-                chunks=(chunk_rows, *trailing),
-                dtype=dt,
-                dimension_names=(row_dim, *dims),
-                fill_value=np.nan if dt.kind == "f" else 0,
-                compressors=None if name in uncompressed else "auto",
+                shape=(0, *col.shape),
+                chunks=(rows, *col.shape),
+                dtype=col.dtype,
+                dimension_names=(spec.row_dim, *col.dims),
+                fill_value=np.nan if col.dtype.kind == "f" else 0,
+                compressors=None if name in spec.uncompressed else "auto",
             )
-        group.update_attributes({COMMITTED_ATTR: 0})
+        self.group.update_attributes({COMMITTED_ATTR: 0})
 
     def append(self, **columns: npt.ArrayLike) -> int:
         """Write rows to every column, then advance ``committed``; returns the new count.
@@ -268,93 +223,38 @@ class Recorder(Closing):
         except OSError as exc:
             raise RecorderError(f"recorder: cannot create {self.path}: {exc}") from exc
         self.fsync_interval_s = fsync_interval_s
-        self._chunk_rows = chunk_rows
         self._last_sync = time.monotonic()
+        self._chunk = {True: chunk_pulses, False: chunk_rows}
+        """Rows per chunk of per-pulse tables and of the others."""
         self.n_samples = n_samples
         self.sample_format: SampleFormat = sample_format
+        self.raw_echoes = raw_echoes
+        self.tables: dict[str, Table] = {}
+        """Every table created so far, by name."""
         self.root.update_attributes(
             {
-                "sarmoco_store": STORE_LAYOUT_VERSION,
+                schema.LAYOUT_ATTR: schema.STORE_LAYOUT_VERSION,
                 "created_utc": datetime.datetime.now(datetime.UTC).isoformat(),
                 "config": json.loads(json.dumps(dict(config or {}), default=str)),
                 "versions": software_versions(),
-                "complete": False,
+                schema.COMPLETE_ATTR: False,
             }
         )
-        echo_trailing = sample_shape(n_samples, sample_format)
-        echo_dims = ("sample",) if sample_format == "complex64" else ("sample", "iq")
-        pulse_cols: dict[str, tuple[npt.DTypeLike, tuple[int, ...], tuple[str, ...]]] = {
-            "t_ns": (np.int64, (), ()),
-            "pulse_id": (np.int64, (), ()),
-            "channel": (np.int32, (), ()),
-            "flags": (FLAG_DTYPE, (), ()),
-        }
-        if raw_echoes:
-            pulse_cols["echo"] = (sample_dtype(sample_format), echo_trailing, echo_dims)
-        self.raw_echoes = raw_echoes
-        self.pulses = Table(
-            self.root.create_group("pulses"),
-            "pulse",
-            pulse_cols,
-            chunk_pulses,
-            chunk_pulses * 16,
-            uncompressed=("echo",),
-        )
-        self.nav = self._table(
-            "nav",
-            "nav",
-            {
-                "t_ns": (np.int64, (), ()),
-                "rx_ns": (np.int64, (), ()),
-                "kind": (np.uint8, (), ()),
-                "vel_ned": (np.float64, (3,), ("ned",)),
-                "pos_ned": (np.float64, (3,), ("ned",)),
-                "quat": (np.float64, (4,), ("quat",)),
-                "result": (np.int8, (), ()),
-            },
-        )
-        self.ins_raw = self._table(
-            "ins_raw",
-            "raw_chunk",
-            {
-                "rx_ns": (np.int64, (), ()),
-                "offset": (np.int64, (), ()),
-                "length": (np.int64, (), ()),
-            },
-        )
-        self.ins_bytes = self._table("ins_bytes", "byte", {"byte": (np.uint8, (), ())}, 1 << 16)
-        self.motion = Table(
-            self.root.create_group("motion"),
-            "motion",
-            {
-                "pulse_id": (np.int64, (), ()),
-                "t_ns": (np.int64, (), ()),
-                "pos_ned": (np.float64, (3,), ("ned",)),
-                "vel_ned": (np.float64, (3,), ("ned",)),
-                "quat": (np.float64, (4,), ("quat",)),
-                "d_los_m": (np.float64, (), ()),
-                "phase_rad": (np.float64, (), ()),
-                "range_shift_m": (np.float64, (), ()),
-            },
-            chunk_pulses,
-            chunk_pulses * 16,
-        )
-        self.tables: dict[str, Table] = {}
-        self._images = self.root.create_group("images")
+        self.pulses = self._create(schema.pulses_table(n_samples, sample_format, raw_echoes))
+        self.nav = self._create(schema.NAV)
+        self.ins_raw = self._create(schema.INS_RAW)
+        self.ins_bytes = self._create(schema.INS_BYTES)
+        self.motion = self._create(schema.MOTION)
+        self._images = self.root.create_group(schema.IMAGES_GROUP)
         self._images.update_attributes({COMMITTED_ATTR: 0})
         self.n_images = 0
         self._closed = False
         self.sync()
 
-    def _table(
-        self,
-        name: str,
-        row_dim: str,
-        columns: Mapping[str, tuple[npt.DTypeLike, tuple[int, ...], tuple[str, ...]]],
-        chunk_rows: int | None = None,
-    ) -> Table:
-        rows = chunk_rows or self._chunk_rows
-        return Table(self.root.create_group(name), row_dim, columns, rows, rows * 16)
+    def _create(self, spec: TableSpec) -> Table:
+        table = Table(self.root, spec, self._chunk[spec.per_pulse])
+        self.tables[spec.name] = table
+        return table
 
     def append_pulses(
         self,
@@ -442,34 +342,23 @@ class Recorder(Closing):
         )
         self._maybe_sync()
 
-    def append_rows(
-        self, table: str, columns: Mapping[str, npt.ArrayLike], row_dim: str | None = None
-    ) -> None:
-        """Record rows of a free table (autofocus estimates, metrics over time).
-
-        The first call creates the table from the columns given (dtype and
-        trailing shape of each; trailing dimensions named ``<column>_<k>``);
-        later calls must give the same columns.
+    def append_rows(self, spec: TableSpec, columns: Mapping[str, npt.ArrayLike]) -> None:
+        """Record rows of a table that appears with its first row (``autofocus``).
 
         Parameters
         ----------
-        table : str
-            Group name, e.g. ``"autofocus"``; not one of the fixed tables.
+        spec : TableSpec
+            The table, e.g. :data:`~sarmoco.daemon.schema.AUTOFOCUS`; created by the
+            first call.
         columns : mapping of str to array_like
-            Arrays with the same number of rows.
-        row_dim : str, optional
-            Name of the row dimension (default: the table name).
+            Every column of ``spec``, with the same number of rows.
         """
-        if table not in self.tables:
-            if table in self.root:
-                raise RecorderError(f"append_rows: {table!r} is a fixed part of the store")
-            specs = {}
-            for name, value in columns.items():
-                arr = np.asarray(value)
-                dims = tuple(f"{name}_{k}" for k in range(1, arr.ndim))
-                specs[name] = (arr.dtype, arr.shape[1:], dims)
-            self.tables[table] = self._table(table, row_dim or table, specs)
-        self.tables[table].append(**columns)
+        table = self.tables.get(spec.name)
+        if table is None:
+            if spec.name in self.root:
+                raise RecorderError(f"append_rows: {spec.name!r} is a fixed part of the store")
+            table = self._create(spec)
+        table.append(**columns)
         self._maybe_sync()
 
     def add_image(
@@ -491,7 +380,7 @@ class Recorder(Closing):
             Quality numbers of the tile (PSLR dB, entropy...), stored as attributes.
         """
         index = self.n_images
-        group = self._images.create_group(f"tile_{index:06d}")
+        group = self._images.create_group(schema.tile_name(index))
         data = np.asarray(image.data, dtype=np.complex64)
         n0, n1 = data.shape
         for name, value, dims, chunks in (
@@ -537,10 +426,8 @@ class Recorder(Closing):
         """Trim the arrays to their committed rows, mark the store complete, fsync."""
         if self._closed:
             return
-        tables = [self.pulses, self.nav, self.ins_raw, self.ins_bytes, self.motion]
-        tables += self.tables.values()
-        for table in tables:
+        for table in self.tables.values():
             table.trim()
-        self.root.update_attributes({"complete": True})
+        self.root.update_attributes({schema.COMPLETE_ATTR: True})
         self.sync()
         self._closed = True

@@ -13,18 +13,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
 
-import numpy as np
-
 from sarmoco.daemon.config import Config, config_to_dict
 from sarmoco.daemon.links import open_ins, open_radar
-from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.daemon.pipeline import Pipeline, RunSummary, ring_format
-from sarmoco.daemon.recorder import NAV_KIND_ATTITUDE, NAV_KIND_VELOCITY, Recorder
+from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.sdnotify import Notifier
 from sarmoco.daemon.status import Counters, Health, StatusServer
-from sarmoco.daemon.store import open_store
+from sarmoco.daemon.store import StoreNav, StorePulses, open_store
 from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource
-from sarmoco.drivers.samples import AttitudeSample, Sample, Validity, VelocitySample
+from sarmoco.drivers.samples import Sample
 from sarmoco.drivers.source import Source
 from sarmoco.errors import ConfigError, SarmocoError
 
@@ -279,15 +276,51 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
 def replay_files(
     cfg: Config, radar_file: Path, nav_file: Path, out: Path, progress: bool = True
 ) -> RunSummary:
-    """Replay a ``.vrt`` radar file and an INS log through the pipeline on a virtual clock.
-
-    INS samples are read ahead of the radar until they cover the newest pulse plus the
-    longest bridged gap, so the aligner sees what it would have seen live, as fast as the
-    CPU allows. The aligner's clock is the newest pulse time.
-    """
-    radar = open_radar(cfg, str(radar_file))
-    ins = open_ins(cfg, str(nav_file), keep_raw=cfg.recorder.raw_ins)
+    """Replay a ``.vrt`` radar file and an INS log through the pipeline on a virtual clock
+    (see :func:`_replay`)."""
     total = max(radar_file.stat().st_size, 1)
+    with (
+        open_radar(cfg, str(radar_file)) as radar,
+        open_ins(cfg, str(nav_file), keep_raw=cfg.recorder.raw_ins) as ins,
+    ):
+        done = (lambda: radar.decoder.counters.bytes / total) if progress else None
+        return _replay(cfg, radar, ins, out, done)
+
+
+def replay_store(cfg: Config, recording: Path, out: Path, progress: bool = True) -> RunSummary:
+    """Replay a recorded store (raw echoes and INS samples as received) through the pipeline.
+
+    The pulses are read into the pipeline as a radar file is, and the INS samples the
+    live run accepted are offered again in time order (:class:`StorePulses`,
+    :class:`StoreNav`), both through :func:`_replay`. The recording's raw INS bytes are
+    carried over (unless ``recorder.raw_ins`` is off).
+    """
+    src = open_store(recording)
+    with StorePulses(src) as radar, StoreNav(src) as ins:
+        if cfg.recorder.raw_ins:
+            ins.keep_raw()
+        return _replay(cfg, radar, ins, out, (lambda: radar.fraction) if progress else None)
+
+
+def _replay(
+    cfg: Config,
+    radar: RadarSource | StorePulses,
+    ins: Source,
+    out: Path,
+    done: Callable[[], float] | None,
+) -> RunSummary:
+    """Run recorded pulses and INS samples through a new pipeline on a virtual clock.
+
+    The radar is read a block (``imaging.block_pulses``) at a time; INS samples are read
+    ahead until they cover the newest pulse plus the longest bridged gap, so the aligner
+    sees what it would have seen live, as fast as the CPU allows. The aligner's clock
+    is the newest pulse time.
+
+    Parameters
+    ----------
+    done : callable or None
+        Share of the input read so far, for a progress bar on stderr (None: no bar).
+    """
     lead_ns = round(cfg.ins.max_gap_s * 1e9)
     with open_recorder(cfg, out) as recorder:
         pipe = Pipeline(cfg, recorder, Counters())
@@ -304,73 +337,12 @@ def replay_files(
             pipe.add_nav(ahead[:due], None)
             del ahead[:due]
             pipe.process(now)
-            if progress:
-                _progress(radar.decoder.counters.bytes / total)
+            if done is not None:
+                _progress(done())
         summary = pipe.finish()
-    radar.close()
-    ins.close()
-    if progress:
+    if done is not None:
         _progress(1.0, end=True)
     return summary
-
-
-def replay_store(cfg: Config, recording: Path, out: Path, progress: bool = True) -> RunSummary:
-    """Replay a recorded store (raw echoes and INS samples as received) through the pipeline.
-
-    The INS samples the live run accepted are offered again in time order, ahead of the
-    pulses by the longest bridged gap; the pulses go through the same ring, aligner,
-    focuser and recorder on a virtual clock. The recording's raw INS bytes are copied.
-    """
-    src = open_store(recording)
-    n_pulses = src.committed("pulses")
-    nav = src.read("nav", ["t_ns", "kind", "vel_ned", "pos_ned", "quat", "result"])
-    keep = nav["result"] == int(PushResult.ACCEPTED)
-    nav = {k: v[keep] for k, v in nav.items()}
-    order = np.argsort(nav["t_ns"], kind="stable")
-    lead_ns = round(cfg.ins.max_gap_s * 1e9)
-    k_nav = 0
-    step = cfg.imaging.block_pulses
-    with open_recorder(cfg, out) as recorder:
-        pipe = Pipeline(cfg, recorder, Counters())
-        if "ins_raw" in src.attrs:  # the recording's INS bytes, carried over as one chunk
-            recorder.set_attribute("ins_raw", src.attrs["ins_raw"])
-            pipe.add_ins_raw(src.ins_bytes(), None)
-        for start in range(0, n_pulses, step):
-            p = src.read("pulses", ["t_ns", "pulse_id", "channel", "flags", "echo"],
-                         start, min(start + step, n_pulses))  # fmt: skip
-            for i in range(p["t_ns"].shape[0]):
-                slot = pipe.ring.reserve()
-                if slot is None:
-                    pipe.process(int(p["t_ns"][i - 1]))
-                    slot = pipe.ring.reserve()
-                assert slot is not None
-                slot.samples[...] = p["echo"][i]
-                pipe.ring.commit(slot, int(p["t_ns"][i]), int(p["pulse_id"][i]),
-                                 int(p["channel"][i]))  # fmt: skip
-            now = int(p["t_ns"][-1])
-            stop = int(np.searchsorted(nav["t_ns"][order], now + lead_ns, side="right"))
-            pipe.add_nav([_nav_sample(nav, int(j)) for j in order[k_nav:stop]], None)
-            k_nav = stop
-            pipe.process(now)
-            if progress:
-                _progress(min(start + step, n_pulses) / max(n_pulses, 1))
-        summary = pipe.finish()
-    if progress:
-        _progress(1.0, end=True)
-    return summary
-
-
-def _nav_sample(nav: dict[str, np.ndarray], j: int) -> VelocitySample | AttitudeSample:
-    t = int(nav["t_ns"][j])
-    if int(nav["kind"][j]) == NAV_KIND_ATTITUDE:
-        q = nav["quat"][j]
-        return AttitudeSample(t, (float(q[0]), float(q[1]), float(q[2]), float(q[3])),
-                              Validity.ATTITUDE | Validity.HEADING, "store.nav", t)  # fmt: skip
-    assert int(nav["kind"][j]) == NAV_KIND_VELOCITY
-    v, p = nav["vel_ned"][j], nav["pos_ned"][j]
-    pos = None if np.isnan(p).any() else (float(p[0]), float(p[1]), float(p[2]))
-    return VelocitySample(t, (float(v[0]), float(v[1]), float(v[2])), Validity.VELOCITY,
-                          "store.nav", t, pos)  # fmt: skip
 
 
 def _progress(fraction: float, end: bool = False) -> None:

@@ -1,4 +1,4 @@
-"""Reading a run store back: committed rows only, as numpy or xarray.
+"""Reading a run store back: committed rows only, as numpy or xarray, or as sources.
 
 A store written by :class:`~sarmoco.daemon.recorder.Recorder` may come from a
 run that crashed: arrays may be longer than their data, and rows past a
@@ -6,7 +6,8 @@ table's ``committed`` attribute may hold anything. Everything here reads below
 ``committed`` and nothing else. ``xarray.open_zarr(path, group=...)`` also
 works on a store (zarr v3 dimension names); on a store that is not
 ``complete``, slice each table to its ``committed`` rows yourself, or use
-:meth:`RunStore.dataset`.
+:meth:`RunStore.dataset`. :class:`StorePulses` and :class:`StoreNav` serve a
+recording as a radar and a navigation source, for a replay.
 """
 
 from __future__ import annotations
@@ -21,7 +22,12 @@ import xarray as xr
 import zarr
 from zarr.core.metadata import ArrayV3Metadata
 
-from sarmoco.daemon.recorder import COMMITTED_ATTR
+from sarmoco.closing import Closing
+from sarmoco.daemon import schema
+from sarmoco.daemon.navbuffer import PushResult
+from sarmoco.daemon.schema import COMMITTED_ATTR
+from sarmoco.drivers.samples import EchoPacket, Sample
+from sarmoco.drivers.source import Source
 from sarmoco.errors import RecorderError
 from sarmoco.processing.types import Image
 
@@ -53,8 +59,10 @@ class RunStore:
             self.root = zarr.open_group(str(self.path), mode="r", zarr_format=3)
         except (OSError, ValueError, KeyError) as exc:  # zarr reports a missing store so
             raise RecorderError(f"{self.path}: not a readable zarr v3 store: {exc}") from exc
-        if "sarmoco_store" not in self.root.attrs:
-            raise RecorderError(f"{self.path}: not a sarmoco store (no sarmoco_store attribute)")
+        if schema.LAYOUT_ATTR not in self.root.attrs:
+            raise RecorderError(
+                f"{self.path}: not a sarmoco store (no {schema.LAYOUT_ATTR} attribute)"
+            )
 
     @property
     def attrs(self) -> dict[str, Any]:
@@ -66,7 +74,7 @@ class RunStore:
         return sorted(
             name
             for name, node in self.root.groups()
-            if name != "images" and COMMITTED_ATTR in node.attrs
+            if name != schema.IMAGES_GROUP and COMMITTED_ATTR in node.attrs
         )
 
     def _group(self, table: str) -> zarr.Group:
@@ -129,13 +137,13 @@ class RunStore:
     @property
     def n_images(self) -> int:
         """Image tiles that are complete."""
-        return self.committed("images")
+        return self.committed(schema.IMAGES_GROUP)
 
     def image(self, index: int) -> tuple[Image, dict[str, Any]]:
         """Tile ``index`` and its attributes (``t0_ns``, ``t1_ns``, ``metrics``)."""
         if not 0 <= index < self.n_images:
             raise RecorderError(f"{self.path}: image {index} not committed ({self.n_images} are)")
-        group = self._group(f"images/tile_{index:06d}")
+        group = self._group(f"{schema.IMAGES_GROUP}/{schema.tile_name(index)}")
         attrs = dict(group.attrs)
         image = Image(
             data=np.asarray(_array(group, "data")[...]),
@@ -148,14 +156,119 @@ class RunStore:
     def ins_bytes(self, index: int | None = None) -> bytes:
         """Raw INS bytes: chunk ``index`` as read, or all committed bytes in order."""
         if index is None:
-            return self.read("ins_bytes")["byte"].tobytes()
-        row = self.read("ins_raw", start=index, stop=index + 1)
+            return self.read(schema.INS_BYTES.name)["byte"].tobytes()
+        row = self.read(schema.INS_RAW.name, start=index, stop=index + 1)
         if row["offset"].shape[0] == 0:
             raise RecorderError(f"{self.path}: raw INS chunk {index} not committed")
         off, length = int(row["offset"][0]), int(row["length"][0])
-        return self.read("ins_bytes", start=off, stop=off + length)["byte"].tobytes()
+        return self.read(schema.INS_BYTES.name, start=off, stop=off + length)["byte"].tobytes()
 
 
 def open_store(path: str | Path) -> RunStore:
     """Open a run store read-only (see :class:`RunStore`)."""
     return RunStore(path)
+
+
+class StorePulses(Closing):
+    """A store's recorded pulses as a radar source, for a replay through the radar path.
+
+    It serves :meth:`read_into` as :class:`~sarmoco.drivers.radar.RadarSource` does, so
+    a replay reads pulses into the pipeline through the same call as a live run.
+
+    Parameters
+    ----------
+    store : RunStore
+        A recording with raw echoes.
+
+    Raises
+    ------
+    RecorderError
+        The recording has no raw echoes (``recorder.raw_echoes`` was off).
+    """
+
+    def __init__(self, store: RunStore) -> None:
+        if "echo" not in store._group("pulses"):
+            raise RecorderError(f"{store.path}: no raw echoes recorded (recorder.raw_echoes)")
+        self._store = store
+        self._next = 0
+        self.total = store.committed("pulses")
+        """Pulses recorded."""
+        self.eof = self.total == 0
+
+    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.0) -> list[EchoPacket]:
+        """Copy the next recorded echoes into ``out[0], out[1], ...``; their packet metadata.
+
+        Parameters
+        ----------
+        out : ndarray
+            Rows of the recording's echo shape and type.
+        timeout_s : float
+            Ignored (the store never waits).
+
+        Raises
+        ------
+        RecorderError
+            ``out`` rows are not of the recording's echo shape and type.
+        """
+        stop = min(self._next + out.shape[0], self.total)
+        rows = self._store.read("pulses", ["t_ns", "channel", "flags", "echo"], self._next, stop)
+        echo = rows["echo"]
+        if echo.shape[1:] != out.shape[1:] or echo.dtype != out.dtype:
+            raise RecorderError(
+                f"{self._store.path}: recorded echoes {echo.dtype}{echo.shape[1:]} do not fit "
+                f"rows of {out.dtype}{out.shape[1:]} (radar.n_samples, radar.sample_format)"
+            )
+        out[: echo.shape[0]] = echo
+        self._next = stop
+        self.eof = stop >= self.total
+        return schema.decode_pulses(rows, echo.shape[1])
+
+    @property
+    def fraction(self) -> float:
+        """Share of the recorded pulses read so far."""
+        return self._next / max(self.total, 1)
+
+    def close(self) -> None:
+        """Nothing to release (the store is read per call)."""
+
+
+class StoreNav(Source):
+    """The INS samples a run accepted, in time order, as a navigation source (a replay).
+
+    Samples the live run's nav buffer rejected (duplicates, stale, clock steps) are left
+    out: the replay offers what the live aligner used. When :meth:`keep_raw` is called
+    the recording's raw INS bytes come out of :meth:`take_raw` after the first poll, in
+    the recording's format.
+
+    Parameters
+    ----------
+    store : RunStore
+        The recording.
+    chunk : int
+        Samples per :meth:`poll`.
+    """
+
+    def __init__(self, store: RunStore, chunk: int = 256) -> None:
+        super().__init__()
+        cols = store.read(schema.NAV.name, ["t_ns", "kind", "vel_ned", "pos_ned", "quat", "result"])
+        keep = np.flatnonzero(cols["result"] == int(PushResult.ACCEPTED))
+        keep = keep[np.argsort(cols["t_ns"][keep], kind="stable")]
+        self._samples = schema.decode_nav({k: v[keep] for k, v in cols.items()})
+        self._next = 0
+        self._chunk = chunk
+        self._raw_store: RunStore | None = store
+        self.raw_format = str(store.attrs.get(schema.INS_RAW_ATTR, {}).get("format", ""))
+        self.eof = not self._samples
+
+    def poll(self, timeout_s: float = 0.0) -> list[Sample]:
+        """The next ``chunk`` samples (``timeout_s`` is ignored)."""
+        if self._raw_store is not None:
+            self._keep(self._raw_store.ins_bytes())
+            self._raw_store = None
+        batch = self._samples[self._next : self._next + self._chunk]
+        self._next += len(batch)
+        self.eof = self._next >= len(self._samples)
+        return list(batch)
+
+    def close(self) -> None:
+        """Nothing to release."""

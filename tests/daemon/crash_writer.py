@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from sarmoco.daemon.recorder import Recorder
+from sarmoco.daemon.schema import AUTOFOCUS
 from sarmoco.processing.types import Image
 
 N_SAMPLES = 64
@@ -74,8 +75,16 @@ def raw_chunk(k: int) -> bytes:
 
 
 def autofocus_rows(ids: npt.NDArray[np.int64]) -> dict[str, npt.NDArray[np.generic]]:
-    """Autofocus estimate columns of subapertures ``ids``."""
-    return {"t_center_ns": ids * 500_000_000, "doppler_rate_hz_s": ids * 0.25}
+    """Autofocus estimate columns of subapertures ``ids`` (every column of the table)."""
+    x = ids.astype(np.float64)
+    return {
+        "t_center_s": x * 0.5,
+        "a_y_mps2": x * 0.01,
+        "a_z_mps2": -x * 0.02,
+        "accel_residual_hz_per_s": x * 0.1,
+        "kappa": np.stack([x * 0.25, x * 1e-3, x * 1e-6], axis=-1),
+        "kappa_residual_hz_per_s": x * 0.05,
+    }
 
 
 def image_of(k: int) -> Image:
@@ -120,7 +129,7 @@ def main(path: str, seed: int) -> None:
         nav += 4
         rec.append_ins_bytes(raw_chunk(chunks), rx_ns=chunks)
         chunks += 1
-        rec.append_rows("autofocus", autofocus_rows(np.array([subaps], dtype=np.int64)))
+        rec.append_rows(AUTOFOCUS, autofocus_rows(np.array([subaps], dtype=np.int64)))
         subaps += 1
         if round_k % IMAGE_EVERY == 0:
             k = round_k // IMAGE_EVERY

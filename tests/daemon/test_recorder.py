@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import subprocess
@@ -14,6 +15,7 @@ import pytest
 import xarray as xr
 
 from sarmoco.daemon.recorder import Recorder
+from sarmoco.daemon.schema import AUTOFOCUS
 from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.errors import RecorderError
 from sarmoco.processing.types import Image
@@ -107,7 +109,7 @@ def test_clean_close_trims_and_xarray_reads_it_directly(tmp_path: Path) -> None:
             rec.append_pulses(
                 rows["t_ns"], rows["pulse_id"], rows["channel"], rows["flags"], rows["echo"]
             )
-        rec.append_rows("autofocus", cw.autofocus_rows(np.arange(3, dtype=np.int64)))
+        rec.append_rows(AUTOFOCUS, cw.autofocus_rows(np.arange(3, dtype=np.int64)))
         rec.add_image(cw.image_of(0), 0, 1, {"entropy": 0.0})
         rec.set_metrics({"pslr_db": -13.1})
     store = open_store(path)
@@ -147,7 +149,7 @@ def test_complex64_echoes_motion_nav_and_raw_bytes(tmp_path: Path) -> None:
     with pytest.raises(RecorderError):
         rec.append_pulses([1], [2], [0], [0], None)
     with pytest.raises(RecorderError):
-        rec.append_rows("pulses", {"x": [1]})
+        rec.append_rows(dataclasses.replace(AUTOFOCUS, name="pulses"), {"x": [1]})
     with pytest.raises(RecorderError):
         Recorder(tmp_path / "c.zarr", 8)
     with pytest.raises(RecorderError):

@@ -1,0 +1,341 @@
+"""The run store's schema: every table, column, dtype and attribute, and their codecs.
+
+This module is the one owner of the store layout. The recorder
+(:mod:`sarmoco.daemon.recorder`) creates what is declared here, the pipeline
+encodes its rows with the encoders here, and the reader
+(:mod:`sarmoco.daemon.store`) and the replay decode them with the decoders
+beside them. A change of the layout is a change of this file (and of
+:data:`STORE_LAYOUT_VERSION`).
+
+Layout (every group but ``images`` is a *table*: arrays that share their first
+dimension, plus a ``committed`` attribute counting the rows that are complete)::
+
+    <run>.zarr/   attrs: sarmoco_store (layout version), created_utc, config, versions,
+                         metrics, complete, reference_track, ins_raw (format of ins_bytes)
+      pulses/     t_ns, pulse_id (pulse) int64    transmit time GPS ns, running number
+                  channel (pulse) int32, flags (pulse) uint32 (PulseFlag bits)
+                  echo (pulse, sample[, iq])      raw echoes, int16 I/Q or complex64 (optional)
+      nav/        t_ns, rx_ns (nav) int64         INS samples as received (rx_ns: host
+                  kind (nav) uint8                receive clock, -1 unknown); kind
+                  vel_ned (nav, ned) m/s          NAV_KIND_VELOCITY or NAV_KIND_ATTITUDE;
+                  pos_ned (nav, ned) m            fields a sample lacks are NaN;
+                  quat (nav, quat) wxyz           result: PushResult of the nav buffer
+                  result (nav) int8
+      ins_raw/    rx_ns, offset, length (raw_chunk) int64: raw INS bytes as read,
+      ins_bytes/  byte (byte) uint8                so a log can be decoded again
+      motion/     pulse_id, t_ns (motion) int64; pos_ned m, vel_ned m/s (motion, ned);
+                  quat (motion, quat); d_los_m m, phase_rad rad, range_shift_m m (motion)
+      autofocus/  one row per subaperture estimate (:data:`AUTOFOCUS_COLUMNS`)
+      images/     attrs committed = tiles complete; tile_000000/ ... each with
+                  data (axis0, axis1) complex64, axis0_m (axis0), axis1_m (axis1),
+                  attrs frame, t0_ns, t1_ns, metrics
+
+Names: times are integers in ns with the unit in the name (``t_ns``, ``rx_ns``);
+scalar physical columns carry their unit (``d_los_m``, ``a_y_mps2``); NED vectors
+(``vel_ned``, ``pos_ned``) and quaternions are SI (m, m/s; body to NED, scalar
+first) as everywhere in the processing arrays, the unit stated here and in the
+docstrings.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from sarmoco.daemon.echoring import SampleFormat, sample_dtype, sample_shape
+from sarmoco.daemon.flags import FLAG_DTYPE, PulseFlag
+from sarmoco.daemon.navbuffer import PushResult
+from sarmoco.drivers.samples import AttitudeSample, EchoPacket, Validity, VelocitySample
+from sarmoco.errors import RecorderError
+from sarmoco.processing.autofocus.report import SubapertureReport
+from sarmoco.processing.geometry import ReferenceTrack
+
+STORE_LAYOUT_VERSION = 1
+"""Value of the root attribute :data:`LAYOUT_ATTR`; bumped when the layout changes."""
+LAYOUT_ATTR = "sarmoco_store"
+"""Root attribute that marks a sarmoco store (its value: the layout version)."""
+COMPLETE_ATTR = "complete"
+"""Root attribute: false while the run is written, true after a clean close."""
+COMMITTED_ATTR = "committed"
+"""Group attribute holding the number of complete rows (tiles for ``images``)."""
+REFERENCE_TRACK_ATTR = "reference_track"
+"""Root attribute: the run's reference track (:func:`encode_reference_track`)."""
+INS_RAW_ATTR = "ins_raw"
+"""Root attribute ``{"format": ...}`` naming the format of ``ins_bytes`` when kept."""
+
+NAV_KIND_VELOCITY, NAV_KIND_ATTITUDE = 0, 1
+"""Values of ``nav/kind``: a :class:`VelocitySample` or an :class:`AttitudeSample` row."""
+
+NavSample = VelocitySample | AttitudeSample
+"""The INS samples the ``nav`` table holds."""
+NavRow = tuple[NavSample, int | None, PushResult]
+"""A sample as the pipeline queues it: sample, host receive clock (ns, None unknown), result."""
+
+
+@dataclass(frozen=True)
+class Column:
+    """One array of a table.
+
+    Attributes
+    ----------
+    dtype : numpy dtype
+        Element type.
+    shape : tuple of int
+        Trailing shape of a row (``()`` for a scalar column).
+    dims : tuple of str
+        Names of the trailing dimensions (one per entry of ``shape``).
+    """
+
+    dtype: np.dtype[Any]
+    shape: tuple[int, ...] = ()
+    dims: tuple[str, ...] = ()
+
+
+def _col(dtype: npt.DTypeLike, shape: tuple[int, ...] = (), dims: tuple[str, ...] = ()) -> Column:
+    return Column(np.dtype(dtype), shape, dims)
+
+
+@dataclass(frozen=True)
+class TableSpec:
+    """A table of the store: a group whose arrays share their first (row) dimension.
+
+    Attributes
+    ----------
+    name : str
+        Group name.
+    row_dim : str
+        Name of the first dimension.
+    columns : mapping of str to Column
+        The arrays.
+    per_pulse : bool
+        Rows are pulses (chunked like the pulses) rather than other records.
+    chunk_rows : int or None
+        Rows per chunk when fixed by the layout (None: the recorder's setting).
+    uncompressed : tuple of str
+        Columns stored without compression (raw echoes: noise does not compress, and
+        the CPU is needed for focusing).
+    """
+
+    name: str
+    row_dim: str
+    columns: Mapping[str, Column]
+    per_pulse: bool = False
+    chunk_rows: int | None = None
+    uncompressed: tuple[str, ...] = ()
+
+
+def pulses_table(n_samples: int, sample_format: SampleFormat, raw_echoes: bool) -> TableSpec:
+    """The ``pulses`` table for echoes of ``n_samples`` complex samples in ``sample_format``."""
+    columns = {
+        "t_ns": _col(np.int64),
+        "pulse_id": _col(np.int64),
+        "channel": _col(np.int32),
+        "flags": _col(FLAG_DTYPE),
+    }
+    if raw_echoes:
+        dims = ("sample",) if sample_format == "complex64" else ("sample", "iq")
+        shape = sample_shape(n_samples, sample_format)
+        columns["echo"] = _col(sample_dtype(sample_format), shape, dims)
+    return TableSpec("pulses", "pulse", columns, per_pulse=True, uncompressed=("echo",))
+
+
+NAV = TableSpec(
+    "nav",
+    "nav",
+    {
+        "t_ns": _col(np.int64),
+        "rx_ns": _col(np.int64),
+        "kind": _col(np.uint8),
+        "vel_ned": _col(np.float64, (3,), ("ned",)),
+        "pos_ned": _col(np.float64, (3,), ("ned",)),
+        "quat": _col(np.float64, (4,), ("quat",)),
+        "result": _col(np.int8),
+    },
+)
+INS_RAW = TableSpec(
+    "ins_raw",
+    "raw_chunk",
+    {"rx_ns": _col(np.int64), "offset": _col(np.int64), "length": _col(np.int64)},
+)
+INS_BYTES = TableSpec("ins_bytes", "byte", {"byte": _col(np.uint8)}, chunk_rows=1 << 16)
+MOTION = TableSpec(
+    "motion",
+    "motion",
+    {
+        "pulse_id": _col(np.int64),
+        "t_ns": _col(np.int64),
+        "pos_ned": _col(np.float64, (3,), ("ned",)),
+        "vel_ned": _col(np.float64, (3,), ("ned",)),
+        "quat": _col(np.float64, (4,), ("quat",)),
+        "d_los_m": _col(np.float64),
+        "phase_rad": _col(np.float64),
+        "range_shift_m": _col(np.float64),
+    },
+    per_pulse=True,
+)
+
+AUTOFOCUS_COLUMNS: Mapping[str, tuple[Column, Callable[[SubapertureReport], Any]]] = {
+    "t_center_s": (_col(np.float64), lambda s: s.t_center_s),
+    "a_y_mps2": (_col(np.float64), lambda s: s.accel_yz_mps2[0]),
+    "a_z_mps2": (_col(np.float64), lambda s: s.accel_yz_mps2[1]),
+    "accel_residual_hz_per_s": (_col(np.float64), lambda s: s.accel_residual_hz_per_s),
+    "kappa": (_col(np.float64, (3,), ("kappa_order",)), lambda s: s.kappa),
+    "kappa_residual_hz_per_s": (_col(np.float64), lambda s: s.kappa_residual_hz_per_s),
+}
+"""Columns of the ``autofocus`` table, each with the field of a
+:class:`~sarmoco.processing.autofocus.report.SubapertureReport` it records: centre time
+(s on the autofocus time axis), cross-track accelerations a_y, a_z (m/s²) and the
+residual of their fit (Hz/s), the rate model κ0, κ1, κ2 (Hz/s, Hz/s/m, Hz/s/m²) and
+its residual (Hz/s). A new column is one entry here."""
+AUTOFOCUS = TableSpec(
+    "autofocus", "subaperture", {name: col for name, (col, _) in AUTOFOCUS_COLUMNS.items()}
+)
+
+FIXED_TABLES = ("pulses", NAV.name, INS_RAW.name, INS_BYTES.name, MOTION.name)
+"""Tables every store has from its creation (the others appear with their first row)."""
+
+IMAGES_GROUP = "images"
+"""Group of the image tiles (not a table: one sub-group per tile)."""
+
+
+def tile_name(index: int) -> str:
+    """Group name of image tile ``index`` inside :data:`IMAGES_GROUP`."""
+    return f"tile_{index:06d}"
+
+
+# -- codecs ---------------------------------------------------------------------------------
+
+
+def encode_nav(rows: Sequence[NavRow]) -> dict[str, npt.NDArray[Any]]:
+    """Columns of the ``nav`` table for INS samples as the pipeline received them.
+
+    Parameters
+    ----------
+    rows : sequence of (sample, rx_ns, result)
+        Velocity or attitude sample, host receive clock (ns; None: unknown, stored as
+        -1) and what the nav buffer did with it.
+
+    Returns
+    -------
+    dict of str to ndarray
+        Every column of :data:`NAV`; the fields a sample lacks are NaN.
+    """
+    n = len(rows)
+    cols: dict[str, npt.NDArray[Any]] = {
+        "t_ns": np.fromiter((s.t_gps_ns for s, _, _ in rows), np.int64, n),
+        "rx_ns": np.fromiter((-1 if rx is None else rx for _, rx, _ in rows), np.int64, n),
+        "kind": np.empty(n, np.uint8),
+        "vel_ned": np.full((n, 3), math.nan),
+        "pos_ned": np.full((n, 3), math.nan),
+        "quat": np.full((n, 4), math.nan),
+        "result": np.fromiter((int(res) for _, _, res in rows), np.int8, n),
+    }
+    for i, (s, _, _) in enumerate(rows):
+        if isinstance(s, VelocitySample):
+            cols["kind"][i] = NAV_KIND_VELOCITY
+            cols["vel_ned"][i] = s.vel_ned_mps
+            if s.pos_ned_m is not None:
+                cols["pos_ned"][i] = s.pos_ned_m
+        else:
+            cols["kind"][i] = NAV_KIND_ATTITUDE
+            cols["quat"][i] = s.quat_wxyz
+    return cols
+
+
+def decode_nav(cols: Mapping[str, npt.NDArray[Any]], source: str = "store.nav") -> list[NavSample]:
+    """INS samples back from rows of the ``nav`` table (:func:`encode_nav` inverted).
+
+    Parameters
+    ----------
+    cols : mapping of str to ndarray
+        Columns ``t_ns``, ``kind``, ``vel_ned``, ``pos_ned``, ``quat`` of some rows.
+    source : str
+        ``source`` of the samples made.
+
+    Returns
+    -------
+    list of VelocitySample or AttitudeSample
+        In row order. The store keeps no validity bits or device time: a velocity is
+        ``VELOCITY`` (and ``POSITION`` with a position), an attitude
+        ``ATTITUDE | HEADING``, and the device time is the GPS time.
+
+    Raises
+    ------
+    RecorderError
+        A row's ``kind`` is not one of the ``NAV_KIND_*`` values.
+    """
+    out: list[NavSample] = []
+    for t, kind, v, p, q in zip(
+        cols["t_ns"].tolist(),
+        cols["kind"].tolist(),
+        cols["vel_ned"].tolist(),
+        cols["pos_ned"].tolist(),
+        cols["quat"].tolist(),
+        strict=True,
+    ):
+        if kind == NAV_KIND_ATTITUDE:
+            valid = Validity.ATTITUDE | Validity.HEADING
+            out.append(AttitudeSample(t, (q[0], q[1], q[2], q[3]), valid, source, t))
+        elif kind == NAV_KIND_VELOCITY:
+            pos = None if any(map(math.isnan, p)) else (p[0], p[1], p[2])
+            valid = Validity.VELOCITY | (Validity.POSITION if pos else Validity.NONE)
+            out.append(VelocitySample(t, (v[0], v[1], v[2]), valid, source, t, pos))
+        else:
+            raise RecorderError(f"nav/kind: {kind} is not a sample kind (0 velocity, 1 attitude)")
+    return out
+
+
+def decode_pulses(cols: Mapping[str, npt.NDArray[Any]], n_samples: int) -> list[EchoPacket]:
+    """The radar packet metadata of recorded pulses (for a replay through the radar path).
+
+    The receiver and link bits of ``flags`` (:meth:`PulseFlag.from_packet`) become the
+    packet's indicators again; the packet count is not recorded (0).
+
+    Parameters
+    ----------
+    cols : mapping of str to ndarray
+        Columns ``t_ns``, ``channel``, ``flags`` of some rows of ``pulses``.
+    n_samples : int
+        Complex samples per pulse.
+    """
+    return [
+        EchoPacket(
+            channel,
+            t,
+            0,
+            n_samples,
+            not flags & PulseFlag.INVALID_DATA,
+            bool(flags & PulseFlag.SAMPLE_LOSS),
+            bool(flags & PulseFlag.OVER_RANGE),
+            int(bool(flags & PulseFlag.LOST_BEFORE)),
+        )
+        for t, channel, flags in zip(
+            cols["t_ns"].tolist(), cols["channel"].tolist(), cols["flags"].tolist(), strict=True
+        )
+    ]
+
+
+def encode_autofocus(subapertures: Sequence[SubapertureReport]) -> dict[str, npt.NDArray[Any]]:
+    """Columns of the ``autofocus`` table for subaperture reports (:data:`AUTOFOCUS_COLUMNS`)."""
+    n = len(subapertures)
+    cols = {}
+    for name, (col, field) in AUTOFOCUS_COLUMNS.items():
+        values = [field(s) for s in subapertures]
+        cols[name] = np.asarray(values, dtype=col.dtype).reshape(n, *col.shape)
+    return cols
+
+
+def encode_reference_track(track: ReferenceTrack) -> dict[str, Any]:
+    """The root attribute :data:`REFERENCE_TRACK_ATTR` (start GPS ns, NED unit axes, v0 m/s)."""
+    return {
+        "t0_ns": track.t0_ns,
+        "x_hat_ned": track.x_hat.tolist(),
+        "y_hat_ned": track.y_hat.tolist(),
+        "v0_mps": track.v0_mps,
+        "origin": "APC at t0_ns (INS-only: no absolute position)",
+    }
