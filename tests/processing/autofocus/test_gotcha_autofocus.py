@@ -1,7 +1,7 @@
 """Issue 4 acceptance 4 on GOTCHA (spotlight, 2 deg, 234 pulses).
 
 4a: the per-pulse ML phase estimator of ``sarmoco.processing.autofocus.spotlight`` (PGA's
-estimator at the brightest pixels) must not defocus the data as provided.
+estimator at the brightest pixels) must sharpen the data as provided (lower entropy).
 4b: a known LOS error (2.5 range cells smooth + 3 rad rms random walk) injected into the real
 phase history is recovered by range alignment + phase passes (``bench/gotcha_autofocus.py``).
 """
@@ -11,7 +11,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from bench.gotcha_autofocus import recover
 from sarmoco.drivers.gotcha import read_gotcha
@@ -25,13 +24,9 @@ from sarmoco.processing.imaging import (
 from sarmoco.processing.metrics import image_entropy
 from sarmoco.processing.types import C_MPS, ComplexArray, Image
 
-DATA = Path(__file__).resolve().parents[3] / ".." / "shared" / "data" / "gotcha"
-FILES = sorted(DATA.glob("data_3dsar_pass1_az00*_HH.mat"))
-pytestmark = pytest.mark.skipif(len(FILES) != 2, reason=f"GOTCHA files not found in {DATA}")
 
-
-def test_autofocus_does_not_worsen_provided_data() -> None:
-    d = read_gotcha(FILES)
+def test_autofocus_sharpens_provided_data(gotcha_files: list[Path]) -> None:
+    d = read_gotcha(gotcha_files)
     grid = PlaneGrid.centred(
         (0.0, 0.0, 0.0), 240, 240, 0.25, 0.25, facing_heading(d.apc_m, (0.0, 0.0, 0.0))
     )
@@ -51,8 +46,9 @@ def test_autofocus_does_not_worsen_provided_data() -> None:
     )
     h0 = image_entropy(before.data)
     h1 = image_entropy(image(res.apply(d.phase_history, d.freq_hz)).data)
-    # measured: 7.104 as provided, 7.008 after (0.19 rad rms phase removed)
-    assert h1 <= 1.005 * h0, (h0, h1)
+    # measured: 7.104 as provided, 7.008 after (0.19 rad rms phase removed): the bar is half
+    # that drop, so a no-op (or an estimate of the wrong sign) fails
+    assert h1 < h0 - 0.05, (h0, h1)
     assert res.rms_updates_rad[-1] < 0.01
     assert np.all(res.los_m == 0.0)
 
@@ -61,8 +57,8 @@ def _rms(x: np.ndarray) -> float:
     return float(np.sqrt(np.mean(x**2)))
 
 
-def test_autofocus_recovers_injected_error() -> None:
-    r = recover(read_gotcha(FILES))
+def test_autofocus_recovers_injected_error(gotcha_files: list[Path]) -> None:
+    r = recover(read_gotcha(gotcha_files))
     assert np.ptp(r.injected_m) / r.cell_m > 2.0  # the envelope error spans 2-3 range cells
     assert r.entropy_corrupted > 1.3 * r.entropy_provided
     # measured: 7.104 provided, 10.078 corrupted, 7.054 recovered (the bar is +1 %)
