@@ -124,6 +124,13 @@ def test_clean_close_trims_and_xarray_reads_it_directly(tmp_path: Path) -> None:
     np.testing.assert_array_equal(ds["pulse_id"].values, np.arange(46))
     tile = xr.open_zarr(path, group="images/tile_000000", consolidated=False)
     assert tile["data"].dims == ("axis0", "axis1") and tile["data"].dtype == np.complex64
+    image, attrs = store.image(0)
+    written: Image = cw.image_of(0)
+    np.testing.assert_array_equal(image.data, written.data)
+    np.testing.assert_array_equal(image.axis0_m, written.axis0_m)
+    np.testing.assert_array_equal(image.axis1_m, written.axis1_m)
+    assert image.frame == written.frame
+    assert (attrs["t0_ns"], attrs["t1_ns"], attrs["metrics"]) == (0, 1, {"entropy": 0.0})
 
 
 def test_complex64_echoes_motion_nav_and_raw_bytes(tmp_path: Path) -> None:
@@ -163,4 +170,3 @@ def test_sync_fsyncs_the_files_written(tmp_path: Path) -> None:
     assert rec.sync() >= 5  # chunks of 5 columns, their metadata, the committed count
     assert rec.sync() == 0
     rec.close()
-    assert isinstance(Image, type)
