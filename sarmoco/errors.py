@@ -24,10 +24,6 @@ class ProtocolError(SarmocoError, ValueError):
     """Bytes from a link or a log do not form a valid frame or packet."""
 
 
-class ChecksumError(ProtocolError):
-    """A frame's CRC or signature does not match its content."""
-
-
 class ClockError(SarmocoError, ValueError):
     """A clock cannot be mapped onto GPS time (no sync yet, a step, a reboot)."""
 

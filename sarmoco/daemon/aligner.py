@@ -22,7 +22,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
 from sarmoco.daemon.echoring import EchoBatch, EchoRing
 from sarmoco.daemon.flags import PulseFlag
@@ -30,9 +29,7 @@ from sarmoco.daemon.navbuffer import NO_TIME, NavBuffer, NavStream
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.geometry import lever_arm_ned
 from sarmoco.processing.navinterp import PulseNav, interpolate_nav
-from sarmoco.processing.types import FloatArray, IntArray, NavSamples
-
-BoolArray = npt.NDArray[np.bool_]
+from sarmoco.processing.types import BoolArray, FloatArray, IntArray, NavSamples
 
 
 @dataclass(frozen=True)

@@ -22,7 +22,6 @@ from sarmoco.processing import rangecomp
 from sarmoco.processing.autofocus import (
     AutofocusConfig,
     AutofocusGeometry,
-    Corrections,
     SlidingSubapertureAutofocus,
 )
 from sarmoco.processing.geometry import ReferenceTrack, vector_to_imaging
@@ -61,14 +60,11 @@ class FocusOutput:
     ----------
     motion : MocompSolution or None
         INS motion solution of the pulses pushed (None from :meth:`Focuser.finish`).
-    corrections : list of Corrections
-        Autofocus corrections of the pulses released by autofocus in this step.
     tiles : list of Tile
         Image tiles finished in this step.
     """
 
     motion: MocompSolution | None = None
-    corrections: list[Corrections] = field(default_factory=list)
     tiles: list[Tile] = field(default_factory=list)
 
 
@@ -177,7 +173,6 @@ class Focuser:
             out.tiles = self._image(rc, t_ns)
             return out
         focused, corr = self.autofocus.push(rc, t_ns)
-        out.corrections.append(corr)
         out.tiles = self._image(focused, corr.t_ns)
         return out
 
@@ -186,7 +181,6 @@ class Focuser:
         out = FocusOutput()
         if self.autofocus is not None:
             focused, corr = self.autofocus.flush()
-            out.corrections.append(corr)
             out.tiles = self._image(focused, corr.t_ns)
         if self.prefilter is not None:
             out.tiles += self._backproject(*self.prefilter.flush())

@@ -39,8 +39,7 @@ from sarmoco.daemon.status import Counters
 from sarmoco.drivers.radar import UDP_BATCH_PACKETS
 from sarmoco.drivers.samples import AttitudeSample, EchoPacket, Sample, VelocitySample
 from sarmoco.processing.metrics import image_contrast, image_entropy
-from sarmoco.processing.navinterp import BoolArray
-from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
+from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, IntArray
 
 log = logging.getLogger(__name__)
 

@@ -18,12 +18,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import numpy.typing as npt
 
 from sarmoco.errors import NavigationError
-from sarmoco.processing.types import FloatArray, IntArray, NavSamples
-
-BoolArray = npt.NDArray[np.bool_]
+from sarmoco.processing.types import BoolArray, FloatArray, IntArray, NavSamples
 
 
 @dataclass(frozen=True)

@@ -23,6 +23,7 @@ C_MPS = 299_792_458.0
 FloatArray = npt.NDArray[np.float64]
 ComplexArray = npt.NDArray[np.complexfloating]
 IntArray = npt.NDArray[np.int64]
+BoolArray = npt.NDArray[np.bool_]
 
 
 @dataclass(frozen=True)
@@ -149,25 +150,6 @@ class NavSamples:
             )
         if self.pos_ned is not None and self.pos_ned.shape != (n, 3):
             raise ProcessingError(f"NavSamples: pos_ned shape {self.pos_ned.shape} is not ({n}, 3)")
-
-
-@dataclass(frozen=True)
-class PulseBlock:
-    """A block of consecutive pulses of one channel.
-
-    Parameters
-    ----------
-    echo : ndarray of complex64, shape (P, S)
-        Raw or range-compressed samples, pulse-major.
-    t_ns : ndarray of int64, shape (P,)
-        Transmit time of each pulse, GPS ns.
-    pulse_id : ndarray of int64, shape (P,)
-        Running pulse number.
-    """
-
-    echo: ComplexArray
-    t_ns: IntArray
-    pulse_id: IntArray
 
 
 @dataclass(frozen=True)
