@@ -159,12 +159,31 @@ _IQ = pulses(6, seed=3)
 _PK = packets(_IQ)
 
 
+_DATAGRAMS = st.one_of(
+    st.binary(max_size=2000),
+    st.tuples(st.sampled_from(_PK), st.integers(0, len(_PK[0]) - 1), st.integers(0, 255)).map(
+        lambda t: t[0][: t[1]] + bytes([t[2]]) + t[0][t[1] + 1 :]
+    ),
+)
+"""Random bytes, and good packets with one byte replaced (in the header or the payload)."""
+
+
 @settings(max_examples=400, deadline=None)
-@given(st.binary(max_size=2000))
-def test_random_datagrams_never_raise(data: bytes) -> None:
+@given(_DATAGRAMS)
+def test_every_datagram_is_decoded_or_counted_bad(data: bytes) -> None:
+    """No datagram raises: each is refused (None, one parse error, the row untouched) or
+    decoded (one frame; a signal packet fills the row), and its bytes are counted."""
     dec = VitaDecoder(N)
-    row = np.zeros(N, np.complex64)
-    assert dec.decode_into(data, row) is None or dec.last_ok
+    row = np.full(N, 7 + 7j, np.complex64)
+    got = dec.decode_into(data, row)
+    c = dec.counters
+    assert c.bytes == len(data)
+    if dec.last_ok:
+        assert (c.frames, c.parse_errors) == (1, 0)
+        assert (got is None) == bool(np.all(row == 7 + 7j))
+    else:
+        assert got is None and (c.frames, c.parse_errors) == (0, 1)
+        assert np.all(row == 7 + 7j)
 
 
 @settings(max_examples=400, deadline=None)
