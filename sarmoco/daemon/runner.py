@@ -163,114 +163,194 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
         that reaches its end is finished, not failed: health and ``STATUS=`` say so
         and the keep-alive goes on.
     """
-    notifier = Notifier()
-    counters, health = Counters(), Health()
-    st = _LiveState(threading.Event())
+    stop = threading.Event()
+    _stop_on_signals(stop)
+    run = _LiveRun(cfg, store or new_store_path(cfg.recorder.directory, "run"), stop)
+    try:
+        run.supervise(idle_exit_s)
+    finally:
+        run.shut_down()
+    return 0
+
+
+def _stop_on_signals(stop: threading.Event) -> None:
+    """Set ``stop`` on SIGTERM (systemd) and SIGINT (Ctrl-C)."""
 
     def on_term(signum: int, frame: FrameType | None) -> None:
-        st.stop.set()
+        stop.set()
 
     signal.signal(signal.SIGTERM, on_term)
     signal.signal(signal.SIGINT, on_term)
-    status = _start_status(counters, health, cfg.status.http_port)
-    path = store or new_store_path(cfg.recorder.directory, "run")
-    recorder = open_recorder(cfg, path)
-    radar = open_radar(cfg)
-    ins = open_ins(cfg, keep_raw=cfg.recorder.raw_ins)
-    pipe = Pipeline(cfg, recorder, counters)
-    record_ins_format(recorder, ins)
-    counters.add_source("radar", radar.decoder.counters.snapshot)
-    counters.add_source("ins", ins.counters.snapshot)
 
-    def read_radar(link: _Link) -> int:
+
+class _LiveRun:
+    """A live run: status endpoint, store, links, reader threads, and the processing loop.
+
+    Parameters
+    ----------
+    cfg : Config
+        The configuration.
+    path : Path
+        Store to create.
+    stop : threading.Event
+        Set to end the run (by a signal).
+    """
+
+    def __init__(self, cfg: Config, path: Path, stop: threading.Event) -> None:
+        self.cfg = cfg
+        self.path = path
+        self.notifier = Notifier()
+        self.counters, self.health = Counters(), Health()
+        self.st = _LiveState(stop)
+        self.status = _start_status(self.counters, self.health, cfg.status.http_port)
+        self.recorder = open_recorder(cfg, path)
+        radar = open_radar(cfg)
+        ins = open_ins(cfg, keep_raw=cfg.recorder.raw_ins)
+        self.pipe = Pipeline(cfg, self.recorder, self.counters)
+        record_ins_format(self.recorder, ins)
+        self.counters.add_source("radar", radar.decoder.counters.snapshot)
+        self.counters.add_source("ins", ins.counters.snapshot)
+        self.threads = [
+            self._reader("radar", lambda: open_radar(cfg), radar, self._read_radar),
+            self._reader(
+                "ins", lambda: open_ins(cfg, keep_raw=cfg.recorder.raw_ins), ins, self._read_ins
+            ),
+        ]
+        log.info("sarmoco running", extra={"store": str(path), "radar": cfg.radar.link,
+                                            "ins": cfg.ins.link})  # fmt: skip
+        port = self.status.port if self.status else 0
+        print(f'{{"store": "{path}", "status_port": {port}}}', flush=True)
+        self.notifier.ready(f"recording to {path}")
+
+    # -- reader threads ---------------------------------------------------------------------
+
+    def _reader(
+        self,
+        name: str,
+        opener: Callable[[], _Link],
+        first: _Link,
+        read: Callable[[_Link], int],
+    ) -> threading.Thread:
+        """Start the thread that keeps reading one link (:func:`_keep_reading`)."""
+        thread = threading.Thread(
+            target=_keep_reading, args=(name, opener, first, read, self.st), name=name, daemon=True
+        )
+        thread.start()
+        return thread
+
+    def _read_radar(self, link: _Link) -> int:
+        """Read pulses into the ring (a file waits for room instead of dropping)."""
         assert isinstance(link, RadarSource)
-        limit = cfg.imaging.block_pulses
-        if isinstance(link, RadarFileSource):  # a file waits for room instead of dropping
-            limit = min(limit, pipe.ring.free)
+        limit = self.cfg.imaging.block_pulses
+        if isinstance(link, RadarFileSource):
+            limit = min(limit, self.pipe.ring.free)
             if not limit:
-                st.stop.wait(POLL_S)
+                self.st.stop.wait(POLL_S)
                 return 0
-        n = pipe.read_radar(link, POLL_S, limit)
+        n = self.pipe.read_radar(link, POLL_S, limit)
         if n:
-            st.last_pulse_mono = time.monotonic()
-            st.first_pulse_mono = st.first_pulse_mono or st.last_pulse_mono
+            self.st.last_pulse_mono = time.monotonic()
+            self.st.first_pulse_mono = self.st.first_pulse_mono or self.st.last_pulse_mono
         return n
 
-    def read_ins(link: _Link) -> int:
+    def _read_ins(self, link: _Link) -> int:
+        """Offer INS samples and the bytes they came in to the pipeline."""
         assert isinstance(link, Source)
         samples = link.poll(POLL_S)
         rx_ns = time.monotonic_ns()
-        pipe.add_ins_raw(link.take_raw(), rx_ns)
+        self.pipe.add_ins_raw(link.take_raw(), rx_ns)
         if samples:
-            st.last_nav_mono = time.monotonic()
-            pipe.add_nav(samples, rx_ns)
+            self.st.last_nav_mono = time.monotonic()
+            self.pipe.add_nav(samples, rx_ns)
         return len(samples)
 
-    threads = [
-        threading.Thread(
-            target=_keep_reading, args=("radar", lambda: open_radar(cfg), radar, read_radar, st),
-            name="radar", daemon=True,
-        ),
-        threading.Thread(
-            target=_keep_reading,
-            args=("ins", lambda: open_ins(cfg, keep_raw=cfg.recorder.raw_ins), ins, read_ins, st),
-            name="ins", daemon=True,
-        ),
-    ]  # fmt: skip
-    for t in threads:
-        t.start()
-    log.info("sarmoco running", extra={"store": str(path), "radar": cfg.radar.link,
-                                        "ins": cfg.ins.link})  # fmt: skip
-    print(f'{{"store": "{path}", "status_port": {status.port if status else 0}}}', flush=True)
-    notifier.ready(f"recording to {path}")
-    last_status = 0.0
-    try:
-        while not st.stop.is_set():
-            try:
-                released = pipe.process(pipe.now_ns(live=True))
-                health.set("processing", True)
-            except SarmocoError as exc:  # the pulses are recorded; only this block's focus is lost
-                released = 0
-                counters.inc("processing_errors")
-                health.set("processing", False, str(exc))
-                log.error("processing error, block skipped", extra={"error": str(exc)})
+    # -- processing loop ----------------------------------------------------------------------
+
+    def supervise(self, idle_exit_s: float | None) -> None:
+        """Process, report health and status, until stopped (or idle for ``idle_exit_s``)."""
+        last_status = 0.0
+        while not self.st.stop.is_set():
+            released = self._process()
             now = time.monotonic()
-            nav_age = now - st.last_nav_mono if st.last_nav_mono else float("inf")
-            ended = sorted(st.finished)
-            ok = all(t.is_alive() or t.name in ended for t in threads) and not st.link_down
-            health.set("links", ok, st.link_down or _finished_text(ended))
-            ins_detail = f"newest sample {nav_age:.2f} s old"
-            if "ins" in ended:  # a log read to its end: no newer sample will come
-                ins_detail = f"{_finished_text(['ins'])}, {ins_detail}"
-            health.set("ins", nav_age < INS_STALE_S or "ins" in ended, ins_detail)
-            if ok:
-                notifier.keepalive()
+            if self._update_health(now):
+                self.notifier.keepalive()
             if now - last_status >= 1.0:
                 last_status = now
-                counters.set("ins_age_seconds", nav_age)
-                notifier.status(
-                    f"{pipe.summary.pulses_received} pulses, INS age {nav_age:.2f} s, "
-                    f"backlog {len(pipe.ring)}{'; ' if ended else ''}{_finished_text(ended)}"
-                )
-            if idle_exit_s is not None and st.first_pulse_mono:
-                if now - st.last_pulse_mono > idle_exit_s:
-                    break
+                self._publish_status(now)
+            if self._idle(now, idle_exit_s):
+                break
             if released == 0:
                 time.sleep(POLL_S)
-    finally:
-        notifier.stopping()
-        st.stop.set()
-        for t in threads:
+
+    def _process(self) -> int:
+        """One pass of the pipeline; returns the pulses released.
+
+        A processing error loses only this block's focus (its pulses are recorded): it
+        is counted and reported unhealthy until a pass succeeds.
+        """
+        try:
+            released = self.pipe.process(self.pipe.now_ns(live=True))
+        except SarmocoError as exc:
+            self.counters.inc("processing_errors")
+            self.health.set("processing", False, str(exc))
+            log.error("processing error, block skipped", extra={"error": str(exc)})
+            return 0
+        self.health.set("processing", True)
+        return released
+
+    def _nav_age(self, now: float) -> float:
+        """Age of the newest INS sample (host clock), s; infinite before the first."""
+        return now - self.st.last_nav_mono if self.st.last_nav_mono else float("inf")
+
+    def _update_health(self, now: float) -> bool:
+        """Set the ``links`` and ``ins`` health checks; returns whether every link is up.
+
+        A reader that stopped because its file ended is not down; an INS log read to its
+        end is healthy however old its last sample.
+        """
+        st, ended = self.st, sorted(self.st.finished)
+        ok = all(t.is_alive() or t.name in ended for t in self.threads) and not st.link_down
+        self.health.set("links", ok, st.link_down or _finished_text(ended))
+        nav_age = self._nav_age(now)
+        ins_detail = f"newest sample {nav_age:.2f} s old"
+        if "ins" in ended:  # a log read to its end: no newer sample will come
+            ins_detail = f"{_finished_text(['ins'])}, {ins_detail}"
+        self.health.set("ins", nav_age < INS_STALE_S or "ins" in ended, ins_detail)
+        return ok
+
+    def _publish_status(self, now: float) -> None:
+        """The INS age counter and the systemd ``STATUS=`` line."""
+        nav_age = self._nav_age(now)
+        ended = sorted(self.st.finished)
+        self.counters.set("ins_age_seconds", nav_age)
+        self.notifier.status(
+            f"{self.pipe.summary.pulses_received} pulses, INS age {nav_age:.2f} s, "
+            f"backlog {len(self.pipe.ring)}{'; ' if ended else ''}{_finished_text(ended)}"
+        )
+
+    def _idle(self, now: float, idle_exit_s: float | None) -> bool:
+        """Whether no pulse came for ``idle_exit_s`` since pulses began (None: never)."""
+        st = self.st
+        return (
+            idle_exit_s is not None
+            and bool(st.first_pulse_mono)
+            and (now - st.last_pulse_mono > idle_exit_s)
+        )
+
+    def shut_down(self) -> None:
+        """Stop the readers, release and focus what is left, close the store and endpoints."""
+        self.notifier.stopping()
+        self.st.stop.set()
+        for t in self.threads:
             t.join(timeout=5.0)
         try:
-            summary = pipe.finish()
+            summary = self.pipe.finish()
         finally:  # a processing error in the last blocks must not leave the store open
-            recorder.close()
-            if status is not None:
-                status.stop()
-            notifier.close()
-        log.info("sarmoco stopped", extra=summary.as_dict() | {"store": str(path)})
-    return 0
+            self.recorder.close()
+            if self.status is not None:
+                self.status.stop()
+            self.notifier.close()
+        log.info("sarmoco stopped", extra=summary.as_dict() | {"store": str(self.path)})
 
 
 def replay_files(
