@@ -75,6 +75,8 @@ def config_table(scn: Scenario, **sections: dict[str, Any]) -> dict[str, Any]:
             "n_samples": r.n_samples,
             "range_gate_delay_s": r.range_gate_delay_s,
             "receive": r.receive,
+            "chirp_direction": r.chirp_direction,
+            "iq_conjugate": r.iq_conjugate,
         },
         "geometry": {"height_m": scn.altitude_m, "center_slant_range_m": scn.center_slant_range_m},
         "imaging": {

@@ -10,6 +10,7 @@ Errors name the key path, the bad value and what is allowed
 from __future__ import annotations
 
 import dataclasses
+import math
 import tomllib
 import types
 import typing
@@ -19,6 +20,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from sarmoco.errors import ConfigError
+from sarmoco.processing.types import C_MPS
 
 
 def _key(
@@ -54,7 +56,7 @@ class RadarConfig:
     prf_hz: float = _key(1000.0, "Nominal pulse repetition frequency", unit="Hz", gt=0)
     n_samples: int = _key(4096, "Complex samples per pulse", gt=0)
     range_gate_delay_s: float = _key(
-        6.0e-6,
+        5.0e-6,
         "Two-way delay from the pulse time stamp to the first sample (matched) or to the "
         "dechirp reference (dechirp)",
         unit="s",
@@ -63,8 +65,38 @@ class RadarConfig:
     receive: Literal["matched", "dechirp"] = _key(
         "matched", "Receiver: pulsed LFM (matched filter) or dechirp-on-receive (FFT)"
     )
+    chirp_direction: Literal["up", "down"] = _key(
+        "up", "Sweep of the transmitted chirp: up (frequency rising) or down (falling)"
+    )
+    iq_conjugate: bool = _key(
+        False,
+        "The digitiser delivers the conjugate of the baseband I/Q (spectral inversion: I and Q "
+        "swapped or Q negated, a high-side LO); the samples are conjugated before compression",
+    )
     sample_format: Literal["int16", "float32"] = _key("int16", "I/Q sample type on the wire")
-    channels: int = _key(1, "Receive channels (VITA stream IDs 0..channels-1)", gt=0)
+    channels: int = _key(
+        1,
+        "Receive channels (VITA stream IDs 0..channels-1); only 1 is implemented: packets of "
+        "other stream IDs are counted (radar driver's rejected) and skipped",
+        gt=0,
+    )
+
+    def slant_window_m(self) -> tuple[float, float]:
+        """Slant ranges of the first and last range bin of the compressed pulses, m.
+
+        The span of :func:`sarmoco.processing.rangecomp.range_axis_m`: matched filter
+        ``c/2 (gate + i / f_s)``; dechirp ``c/2 (gate + f_i / K)`` over the beat frequencies
+        ``f_i = (i - N/2) f_s / N``.
+        """
+        half_c = C_MPS / 2.0
+        n, fs, gate = self.n_samples, self.sample_rate_hz, self.range_gate_delay_s
+        if self.receive == "matched":
+            return half_c * gate, half_c * (gate + (n - 1) / fs)
+        k = self.bandwidth_hz / self.pulse_width_s
+        return (
+            half_c * (gate - (n // 2) * fs / n / k),
+            half_c * (gate + (n - 1 - n // 2) * fs / n / k),
+        )
 
 
 @dataclass(frozen=True)
@@ -292,9 +324,80 @@ def parse_config(table: Mapping[str, Any]) -> Config:
     Raises
     ------
     ConfigError
-        Naming the key path, the bad value and what is allowed.
+        Naming the key path, the bad value and what is allowed, or (:func:`check_geometry`)
+        the keys of a radar and geometry that cannot be imaged together.
     """
-    return _build(Config, table, "")
+    cfg: Config = _build(Config, table, "")
+    check_channels(cfg.radar)
+    check_geometry(cfg)
+    return cfg
+
+
+def check_channels(radar: RadarConfig) -> None:
+    """Refuse more than one receive channel (no array mode yet).
+
+    Raises
+    ------
+    ConfigError
+        If ``radar.channels`` > 1.
+    """
+    if radar.channels > 1:
+        raise ConfigError(
+            f"radar.channels: {radar.channels}: array mode is not implemented (each channel "
+            "would need its own aperture and image set); set radar.channels = 1: the daemon "
+            "focuses VITA stream ID 0 and counts and skips the packets of other stream IDs"
+        )
+
+
+def check_geometry(cfg: Config) -> None:
+    """Refuse a range window and imaging geometry that cannot give an image.
+
+    The range window is :meth:`RadarConfig.slant_window_m`; the scene centre is at
+    ``geometry.center_slant_range_m`` and ground range ``sqrt(R_c**2 - H**2)``, the imaged
+    swath ``imaging.swath_m`` of ground range centred on it.
+
+    Raises
+    ------
+    ConfigError
+        Naming the keys and values when the scene centre is not beyond the nadir range
+        (R_c <= H), the window starts inside the nadir range (first bin < H: the look angle of
+        those bins does not exist), or the scene centre or the swath lies outside the window
+        (or the swath reaches past nadir).
+    """
+    r, geo, swath = cfg.radar, cfg.geometry, cfg.imaging.swath_m
+    h, r_c = geo.height_m, geo.center_slant_range_m
+    if r_c <= h:
+        raise ConfigError(
+            f"geometry.center_slant_range_m: {r_c!r} m is not > geometry.height_m {h!r} m "
+            "(a scene centre at or inside the nadir range cannot be imaged)"
+        )
+    near, far = r.slant_window_m()
+    window = (
+        f"the range window {near:.2f} .. {far:.2f} m (radar.range_gate_delay_s "
+        f"{r.range_gate_delay_s!r} s, radar.n_samples {r.n_samples!r}, radar.sample_rate_hz "
+        f"{r.sample_rate_hz!r} Hz, radar.receive {r.receive!r})"
+    )
+    if near < h:
+        raise ConfigError(
+            f"radar.range_gate_delay_s: {r.range_gate_delay_s!r} s starts {window} inside the "
+            f"nadir range geometry.height_m {h!r} m (no ground at those ranges); raise the "
+            "gate delay or check geometry.height_m"
+        )
+    if not near <= r_c <= far:
+        raise ConfigError(f"geometry.center_slant_range_m: {r_c!r} m is outside {window}")
+    ground_c = math.sqrt(r_c**2 - h**2)
+    if swath / 2.0 >= ground_c:
+        raise ConfigError(
+            f"imaging.swath_m: {swath!r} m reaches past nadir (the scene centre's ground range "
+            f"is {ground_c:.2f} m: geometry.center_slant_range_m {r_c!r} m, geometry.height_m "
+            f"{h!r} m)"
+        )
+    lo, hi = math.hypot(ground_c - swath / 2.0, h), math.hypot(ground_c + swath / 2.0, h)
+    if lo < near or hi > far:
+        raise ConfigError(
+            f"imaging.swath_m: {swath!r} m about geometry.center_slant_range_m {r_c!r} m spans "
+            f"slant ranges {lo:.2f} .. {hi:.2f} m, outside {window}"
+        )
 
 
 def _build(cls: type, table: Any, prefix: str) -> Any:

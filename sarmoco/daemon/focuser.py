@@ -49,6 +49,8 @@ def radar_params(cfg: Config) -> RadarParams:
         n_samples=r.n_samples,
         range_gate_delay_s=r.range_gate_delay_s,
         receive=r.receive,
+        chirp_direction=r.chirp_direction,
+        iq_conjugate=r.iq_conjugate,
     )
 
 

@@ -241,6 +241,10 @@ class VitaDecoder:
         If given, each context packet is checked against it.
     link : str
         Name used in log messages.
+    stream_id : int or None
+        Accept the signal packets of this VITA stream ID only (one receive channel);
+        signal packets of other streams are counted in ``counters.rejected`` and
+        skipped (logged once per stream). None: every stream.
 
     Notes
     -----
@@ -258,6 +262,7 @@ class VitaDecoder:
         leap_s: int = 18,
         expect: ContextExpectation | None = None,
         link: str = "vita49",
+        stream_id: int | None = None,
     ) -> None:
         if n_samples < 1:
             raise ConfigError(f"radar.n_samples: {n_samples!r} is not >= 1")
@@ -267,6 +272,9 @@ class VitaDecoder:
         self.payload: PayloadFormat = payload
         self.leap_s = leap_s
         self.expect = expect
+        self.stream_id = stream_id
+        self.skipped_streams: set[int] = set()
+        """Stream IDs whose signal packets were skipped (each logged once)."""
         self.counters = DriverCounters()
         self.context: dict[int, ContextValues] = {}
         self._src_dtype = _SRC_DTYPES[payload]
@@ -274,7 +282,8 @@ class VitaDecoder:
         self._last_count: dict[tuple[int, int], int] = {}
         self._burst = BurstLog(log, link)
         self.last_ok = False
-        """Whether the last packet given to :meth:`decode_into` was accepted."""
+        """Whether the last packet given to :meth:`decode_into` was well formed (accepted, or
+        skipped as another stream's)."""
 
     @property
     def max_packet_bytes(self) -> int:
@@ -394,6 +403,10 @@ class VitaDecoder:
                 self._count(ptype, stream_id, count)
                 self.last_ok = True
             return None
+        if self.stream_id is not None and stream_id != self.stream_id:
+            self._skip_stream(stream_id)
+            self.last_ok = True  # well formed: a framer steps past the whole packet
+            return None
         if n - pos - 4 * trailer != self._payload_bytes:
             self._bad(
                 "payload size",
@@ -415,6 +428,17 @@ class VitaDecoder:
         self._burst.ok()
         self.last_ok = True
         return EchoPacket(stream_id, t_ns, count, self.n_samples, valid, loss, over, lost)
+
+    def _skip_stream(self, stream_id: int) -> None:
+        self.counters.rejected += 1
+        if stream_id not in self.skipped_streams:
+            self.skipped_streams.add(stream_id)
+            log.warning(
+                "radar: skipping the signal packets of VITA stream 0x%08x (only stream 0x%08x "
+                "is focused; counted in rejected)",
+                stream_id,
+                self.stream_id,
+            )
 
     def decode_batch(
         self,
@@ -464,6 +488,8 @@ class VitaDecoder:
         fast = (w0 & _FULL_HEADER_MASK) == template
         fast &= (np.asarray(lengths) == end + 4) & (hdr["ps"] < 1_000_000_000_000)
         fast &= (tsi == TSI_UTC) | (tsi == TSI_GPS)
+        if self.stream_id is not None:
+            fast &= hdr["sid"] == self.stream_id
         fields = (w0.tolist(), hdr["sid"].tolist(), hdr["sec"].tolist(), hdr["ps"].tolist(),
                   stage[:k, end : end + 4].view(">u4")[:, 0].tolist())  # fmt: skip
         dest = out.reshape(out.shape[0], -1).view(flat_dtype)

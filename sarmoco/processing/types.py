@@ -58,7 +58,7 @@ class RadarParams:
         chirp rate +B/T_p) or "down" (falling, -B/T_p).
     iq_conjugate : bool
         The receiver delivers the complex conjugate of the baseband signal
-        (spectral inversion: I/Q swapped or Q negated, e.g. a low-side local
+        (spectral inversion: I/Q swapped or Q negated, e.g. a high-side local
         oscillator); the range compression conjugates the samples first.
     """
 

@@ -198,6 +198,9 @@ def test_read_radar_reads_blocks_and_counts_only_real_drops(tmp_path: Path) -> N
     cfg = parse_config(
         {
             "radar": {"n_samples": READ_SAMPLES, "prf_hz": 100.0, "sample_format": "int16"},
+            # a scene inside the short range window (749.5 .. 759 m), or the config is refused
+            "geometry": {"center_slant_range_m": 754.0},
+            "imaging": {"swath_m": 4.0},
             "status": {"http_port": 0},
         }
     )
