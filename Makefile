@@ -17,7 +17,7 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
-BENCHES := bench_mocomp bench_imaging bench_autofocus bench_drivers thz_table2 ku_vehicle_table
+BENCHES := bench_mocomp bench_imaging bench_autofocus bench_drivers bench_sim thz_table2 ku_vehicle_table
 
 bench: $(STAMP)
 	for b in $(BENCHES); do $(BIN)/python -m bench.$$b || exit 1; done

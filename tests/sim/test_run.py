@@ -1,9 +1,9 @@
-"""simulate(): a scaled run is fast, follows the true APC pulse by pulse, and records its truth."""
+"""simulate(): a scaled run is complete, follows the true APC pulse by pulse, and records its
+truth (its speed is measured by ``bench/bench_sim.py``, not asserted here)."""
 
 from __future__ import annotations
 
 import json
-import time
 from pathlib import Path
 
 import numpy as np
@@ -25,13 +25,10 @@ TLOG = (
 
 
 @pytest.mark.parametrize("name", ["thz-spotlight", "ku-vehicle", "ku-microuav"])
-def test_scaled_run_is_fast_and_complete(name: str) -> None:
+def test_scaled_run_is_complete(name: str) -> None:
     scn = load_preset(name, scale=0.1)
-    t0 = time.perf_counter()
     run = simulate(scn, MotionSpec(kind="turbulence", seed=1), "tactical", seed=4)
-    elapsed = time.perf_counter() - t0
     p = scn.n_pulses
-    assert elapsed < 10.0, elapsed
     assert run.echo.shape == (p, scn.radar.n_samples) and run.echo.dtype == np.complex64
     assert run.t_ns.dtype == np.int64 and run.t_ns[0] == run.t0_ns == scn.t0_ns
     assert np.all(np.diff(run.t_ns) > 0)
