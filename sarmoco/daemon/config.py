@@ -378,10 +378,17 @@ def check_geometry(cfg: Config) -> None:
         f"{r.sample_rate_hz!r} Hz, radar.receive {r.receive!r})"
     )
     if near < h:
+        remedy = (
+            f"raise it to at least {2.0 * h / C_MPS:.4g} s"
+            if r.receive == "matched"
+            else "the dechirp window reaches c f_s / 4K = "
+            f"{C_MPS * r.sample_rate_hz * r.pulse_width_s / (4.0 * r.bandwidth_hz):.2f} m either "
+            "side of the reference: lower radar.sample_rate_hz (decimate)"
+        )
         raise ConfigError(
             f"radar.range_gate_delay_s: {r.range_gate_delay_s!r} s starts {window} inside the "
-            f"nadir range geometry.height_m {h!r} m (no ground at those ranges); raise the "
-            "gate delay or check geometry.height_m"
+            f"nadir range geometry.height_m {h!r} m (no ground at those ranges); {remedy}, or "
+            "check geometry.height_m"
         )
     if not near <= r_c <= far:
         raise ConfigError(f"geometry.center_slant_range_m: {r_c!r} m is outside {window}")

@@ -127,7 +127,17 @@ def test_readme_table_is_generated_from_the_code(repo_root: Path) -> None:
             "radar.range_gate_delay_s: 5e-06 s starts the range window 749.48 .. 1363.31 m "
             "(radar.range_gate_delay_s 5e-06 s, radar.n_samples 4096, radar.sample_rate_hz "
             "1000000000.0 Hz, radar.receive 'matched') inside the nadir range "
-            "geometry.height_m 800.0 m",
+            "geometry.height_m 800.0 m (no ground at those ranges); raise it to at least "
+            "5.337e-06 s, or check geometry.height_m",
+        ),
+        (
+            {"radar": {"receive": "dechirp"}},
+            "radar.range_gate_delay_s: 5e-06 s starts the range window -249.83 .. 1748.30 m "
+            "(radar.range_gate_delay_s 5e-06 s, radar.n_samples 4096, radar.sample_rate_hz "
+            "1000000000.0 Hz, radar.receive 'dechirp') inside the nadir range geometry.height_m "
+            "100.0 m (no ground at those ranges); the dechirp window reaches c f_s / 4K = "
+            "999.31 m either side of the reference: lower radar.sample_rate_hz (decimate), or "
+            "check geometry.height_m",
         ),
         (
             {"geometry": {"center_slant_range_m": 1400.0}},
@@ -161,6 +171,7 @@ def test_readme_table_is_generated_from_the_code(repo_root: Path) -> None:
     ids=[
         "centre-at-nadir",
         "gate-inside-nadir",
+        "dechirp-window-inside-nadir",
         "centre-outside",
         "swath-outside",
         "swath-past-nadir",
