@@ -109,7 +109,7 @@ def _add_sim_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def _cmd_sim(args: argparse.Namespace) -> int:
-    from sarmoco.app.simcommand import run_command
+    from sarmoco.app.simcommand import run_command, scenario_overrides
 
     status = run_command(args)
     if status == 0 and args.out is not None:
@@ -119,7 +119,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
 
         out = Path(args.out)
         table = config_table(
-            load_preset(args.preset, args.scale),
+            load_preset(args.preset, args.scale, **scenario_overrides(args)),
             radar={"link": str(out / RADAR_FILE), "sample_format": args.payload},
             ins={"protocol": "mavlink", "link": str(out / NAV_FILES["mavlink"])},
             recorder={"directory": str(out)},

@@ -14,12 +14,15 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from sarmoco.app.simcommand import platform_arguments, scenario_overrides
 from sarmoco.app.simconfig import config_table, write_config
 from sarmoco.daemon.report import write_report
 from sarmoco.errors import SarmocoError
+from sarmoco.sim.insemitters import INS_EMITTERS
 from sarmoco.sim.scenario import load_preset
 
 PRESET = "ku-vehicle"
@@ -64,20 +67,13 @@ def _connect_link(info: dict[str, Any] | str) -> str:
     return f"{info['interface']}:{info['channel']}"
 
 
-INS_SPECS = {
-    "mavlink": "mavlink:udpout:127.0.0.1:{port}",
-    "sbg": "sbg:pty",
-    "sbg-can": "sbg-can:slcan-pty",
-}
-"""``sarmoco sim --ins`` for each INS protocol the daemon speaks."""
-
-
 def run_loopback(
     out: Path,
     scale: float = 0.1,
     ins: str = "mavlink",
     radar: str = "udp",
     motion: str = "turbulence",
+    platform: Sequence[str] = (),
     **sections: dict[str, Any],
 ) -> dict[str, Any]:
     """Play a scaled ku-vehicle scenario from ``sarmoco sim --serve`` into ``sarmoco run``.
@@ -94,12 +90,16 @@ def run_loopback(
         Output folder: ``sarmoco.toml``, ``truth.json``, ``run.zarr``, ``report/``.
     scale : float
         Scenario scale (``sarmoco sim --scale``).
-    ins : {"mavlink", "sbg", "sbg-can"}
-        INS protocol: MAVLink over UDP, SBG over a pty, SBG CAN through slcan on a pty.
+    ins : str
+        INS protocol (a key of :data:`~sarmoco.sim.insemitters.INS_EMITTERS`) on its
+        loopback link: MAVLink over UDP, SBG over a pty, SBG CAN through slcan on a pty.
     radar : {"udp", "tcp"}
         VITA 49 transport.
     motion : str
         Platform motion (``sarmoco sim --motion``).
+    platform : sequence of str
+        Extra ``sarmoco sim`` arguments of the platform (``--heading-deg``, ``--look-side``,
+        ``--lever-arm``); the daemon's configuration follows them.
     **sections : dict
         Extra configuration keys per section (e.g. ``autofocus={"enabled": False}``).
 
@@ -114,15 +114,15 @@ def run_loopback(
     sim = subprocess.Popen(
         [*py, "sim", "--preset", PRESET, "--scale", str(scale), "--motion", motion,
          "--motion-seed", "1", "--ins-grade", "tactical", "--serve", "--radar", radar_url,
-         "--ins", INS_SPECS[ins].format(port=free_udp_port()),
-         "--truth", str(out / "truth.json")],
+         "--ins", f"{ins}:{INS_EMITTERS[ins].loopback.format(port=free_udp_port())}",
+         "--truth", str(out / "truth.json"), *platform],
         stdout=subprocess.PIPE, text=True,
     )  # fmt: skip
     daemon: subprocess.Popen[str] | None = None
     try:
         hello = read_json_line(sim, "the simulator", DAEMON_START_S)
         table = config_table(
-            load_preset(PRESET, scale),
+            load_preset(PRESET, scale, **scenario_overrides(platform_arguments(platform))),
             radar={"link": hello["radar"]["connect"]},
             ins={"protocol": ins, "link": _connect_link(hello["ins"][0]["connect"])},
             recorder={"directory": str(out)},

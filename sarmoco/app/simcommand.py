@@ -44,28 +44,28 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import math
 import os
 import signal
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 from types import FrameType
 from typing import Any
 
 from sarmoco.drivers.clock import GPS_LEAP_SECONDS_DEFAULT
 from sarmoco.errors import ConfigError
-from sarmoco.sim.emit_can import SbgCanEmitter
-from sarmoco.sim.emit_mavlink import MavlinkEmitter
 from sarmoco.sim.emit_radar import RadarEmitter
-from sarmoco.sim.emit_sbg import SbgEmitter
 from sarmoco.sim.emitter import Emitter, WireTime
 from sarmoco.sim.faults import Faults, parse_faults
 from sarmoco.sim.ins import GRADES
+from sarmoco.sim.insemitters import host_port, live_ins_emitter
 from sarmoco.sim.insfeed import InsFeed
-from sarmoco.sim.links import Link, PtyLink, TcpServerLink, UdpOutLink
+from sarmoco.sim.links import Link, TcpServerLink, UdpOutLink
 from sarmoco.sim.outfiles import NAV_FILES, TRUTH_FILE, truth_record, write_run, write_truth
 from sarmoco.sim.player import Pacing, play_emitters
 from sarmoco.sim.run import SimRun, simulate
-from sarmoco.sim.scenario import PRESETS, load_preset
+from sarmoco.sim.scenario import DEFAULT_LEVER_ARM_M, PRESETS, load_preset
 from sarmoco.sim.trajectory import MotionSpec
 
 
@@ -108,6 +108,50 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--truth", type=Path, help="live: also write the truth record here")
     p.add_argument("--leap-s", type=int, default=GPS_LEAP_SECONDS_DEFAULT, help="GPS - UTC, s")
+    add_platform_arguments(p)
+
+
+def add_platform_arguments(p: argparse.ArgumentParser) -> None:
+    """The platform's arguments: track heading, look side, lever arm."""
+    p.add_argument(
+        "--heading-deg", type=float, default=0.0, help="track heading, deg from north (default 0)"
+    )
+    p.add_argument("--look-side", default="right", choices=("right", "left"))
+    p.add_argument(
+        "--lever-arm",
+        type=_lever_arm,
+        default=None,
+        metavar="F,R,D",
+        help="INS to antenna phase centre, body frame, m (default: the preset's "
+        f"{','.join(map(str, DEFAULT_LEVER_ARM_M))})",
+    )
+
+
+def _lever_arm(text: str) -> tuple[float, float, float]:
+    parts = text.split(",")
+    try:
+        f, r, d = (float(v) for v in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not three numbers F,R,D in m") from None
+    return f, r, d
+
+
+def platform_arguments(argv: Sequence[str]) -> argparse.Namespace:
+    """Parse only the platform arguments (see :func:`add_platform_arguments`)."""
+    p = argparse.ArgumentParser(prog="sarmoco sim", add_help=False)
+    add_platform_arguments(p)
+    return p.parse_args(list(argv))
+
+
+def scenario_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The :func:`load_preset` overrides of the platform arguments (heading, look side, arm)."""
+    over: dict[str, Any] = {
+        "heading_rad": math.radians(args.heading_deg),
+        "look_side": args.look_side,
+    }
+    if args.lever_arm is not None:
+        over["lever_arm_m"] = args.lever_arm
+    return over
 
 
 def _motion(text: str, seed: int) -> MotionSpec:
@@ -119,54 +163,19 @@ def _motion(text: str, seed: int) -> MotionSpec:
     raise ConfigError(f"--motion {text!r}: want ideal, turbulence or flightlog:PATH.tlog")
 
 
-def _host_port(text: str, what: str) -> tuple[str, int]:
-    host, sep, port = text.rpartition(":")
-    if not sep or not port.isdigit():
-        raise ConfigError(f"{what} {text!r}: want HOST:PORT")
-    return host, int(port)
-
-
 def radar_link(url: str) -> Link:
     """The radar link of ``--radar URL``."""
     scheme, sep, rest = url.partition("://")
     if sep and scheme == "udp":
-        return UdpOutLink(*_host_port(rest, "--radar"))
+        return UdpOutLink(*host_port(rest, "--radar"))
     if sep and scheme == "tcp":
-        return TcpServerLink(*_host_port(rest, "--radar"))
+        return TcpServerLink(*host_port(rest, "--radar"))
     raise ConfigError(f"--radar {url!r}: want udp://127.0.0.1:PORT or tcp://127.0.0.1:PORT")
-
-
-def ins_emitter(spec: str, feed: InsFeed, faults: Faults, seed: int, rank: int) -> Emitter:
-    """The INS emitter of one ``--ins SPEC`` (live)."""
-    proto, _, where = spec.partition(":")
-    common: dict[str, Any] = {"faults": faults.ins, "seed": seed, "rank": rank}
-    if proto == "mavlink":
-        kind, _, address = where.partition(":")
-        if kind == "udpout":
-            return MavlinkEmitter(UdpOutLink(*_host_port(address, "--ins")), feed, **common)
-        if kind == "tcp":
-            return MavlinkEmitter(TcpServerLink(*_host_port(address, "--ins")), feed, **common)
-        if kind == "pty":
-            return MavlinkEmitter(PtyLink(), feed, **common)
-    elif proto == "sbg" and where == "pty":
-        return SbgEmitter(PtyLink(), feed, **common)
-    elif proto == "sbg-can":
-        kind, _, port = where.partition(":")
-        if kind == "slcan-pty":
-            return SbgCanEmitter(PtyLink(), feed, "slcan", **common)
-        if kind == "socketcand" and port.isdigit():
-            return SbgCanEmitter(
-                TcpServerLink("127.0.0.1", int(port)), feed, "socketcand", **common
-            )
-    raise ConfigError(
-        f"--ins {spec!r}: want mavlink:udpout:HOST:PORT, mavlink:tcp:HOST:PORT, mavlink:pty, "
-        "sbg:pty, sbg-can:slcan-pty or sbg-can:socketcand:PORT"
-    )
 
 
 def build_run(args: argparse.Namespace, faults: Faults) -> SimRun:
     """Simulate the scenario the arguments describe."""
-    scn = load_preset(args.preset, scale=args.scale)
+    scn = load_preset(args.preset, scale=args.scale, **scenario_overrides(args))
     return simulate(
         scn,
         _motion(args.motion, args.motion_seed),
@@ -222,7 +231,8 @@ def _serve(args: argparse.Namespace, run: SimRun, faults: Faults) -> int:
                 seed=args.seed * 16, rank=0,
             )  # fmt: skip
         for k, spec in enumerate(args.ins or [], start=1):
-            emitters[f"ins{k}"] = ins_emitter(spec, feed, faults, args.seed * 16 + k, k)
+            options: dict[str, Any] = {"faults": faults.ins, "seed": args.seed * 16 + k, "rank": k}
+            emitters[f"ins{k}"] = live_ins_emitter(spec, feed, options)
         _print_line(
             {
                 "event": "listening",

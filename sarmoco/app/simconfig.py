@@ -78,7 +78,12 @@ def config_table(scn: Scenario, **sections: dict[str, Any]) -> dict[str, Any]:
             "chirp_direction": r.chirp_direction,
             "iq_conjugate": r.iq_conjugate,
         },
-        "geometry": {"height_m": scn.altitude_m, "center_slant_range_m": scn.center_slant_range_m},
+        "geometry": {
+            "height_m": scn.altitude_m,
+            "center_slant_range_m": scn.center_slant_range_m,
+            "look_side": scn.look_side,
+        },
+        "ins": {"lever_arm_m": list(scn.lever_arm_m)},
         "imaging": {
             "swath_m": 1.1 * scn.swath_m,
             "tile_length_m": TILE_LENGTH_M,

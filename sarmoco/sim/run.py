@@ -12,7 +12,7 @@ from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 from sarmoco.sim.echo import synthesize
 from sarmoco.sim.ins import InsMeasurement, measure_ins
 from sarmoco.sim.scenario import Scenario
-from sarmoco.sim.trajectory import MotionSpec, Trajectory, true_trajectory
+from sarmoco.sim.trajectory import MotionSpec, Trajectory, apc_trajectory, true_trajectory
 
 INS_MARGIN_S = 0.5
 """The INS record starts this long before the first pulse and ends this long after the last, s."""
@@ -33,7 +33,7 @@ class SimRun:
     apc_ned, vel_ned : ndarray, shape (P, 3)
         True APC position (m) and velocity (m/s) per pulse, NED.
     traj : Trajectory
-        True kinematics at the pulses (with acceleration and attitude).
+        True APC kinematics at the pulses (with acceleration and attitude).
     ins : InsMeasurement
         Simulated navigation samples.
     targets_ned : ndarray, shape (K, 3)
@@ -73,6 +73,9 @@ class SimRun:
                 "aperture_s": scn.aperture_s,
                 "integration_angle_rad": scn.integration_angle_rad,
                 "scene_center_ned": list(scn.scene_center_ned),
+                "heading_rad": scn.heading_rad,
+                "look_side": scn.look_side,
+                "lever_arm_m": list(scn.lever_arm_m),
                 "snr_db": scn.snr_db,
                 "radar": radar,
             },
@@ -138,7 +141,7 @@ def simulate(
     n = scn.n_pulses if n_pulses is None else n_pulses
     t_ns = pulse_times_ns(scn.t0_ns, scn.radar.prf_hz, n)
     t_s = ((t_ns - scn.t0_ns) * 1e-9).astype(np.float64)
-    traj = true_trajectory(scn, t_s, motion)
+    traj = apc_trajectory(scn, t_s, motion)
     targets, amps = scn.targets_array()
     noise_seed, ins_seed = np.random.SeedSequence(seed).spawn(2)
     echo = synthesize(

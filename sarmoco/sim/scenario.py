@@ -1,10 +1,17 @@
 """Simulated acquisition scenarios: radar, nominal flight line, scene, loaded from TOML presets.
 
-Nominal geometry (all positions in local NED, m): the platform flies due north (+x) at
-``speed_mps`` at depth ``-altitude_m`` (the ground is the plane ``z_ned = 0``), along the line
-``east = 0``, and looks to the right (east, +y). The scene centre is at north 0, east
-``sqrt(R_c**2 - H**2)``; the track starts at ``track_start_north_m`` so that the scene is at
-broadside mid-aperture. Simulation time ``t_s`` counts seconds from the first pulse, whose GPS
+Nominal geometry, in the *track frame* (x along the nominal track, y across it toward the
+side the antenna looks, z down; m): the platform flies along +x at ``speed_mps`` at depth
+``-altitude_m`` (the ground is the plane ``z = 0``), along the line ``y = 0``. The scene
+centre is at x 0, y ``sqrt(R_c**2 - H**2)``; the track starts at ``track_start_north_m`` (along
+x) so that the scene is at broadside mid-aperture. The track frame is placed in local NED by
+the heading ``heading_rad`` (x toward north rotated by the heading toward east) and the look
+side (``look_side``: the track frame's y is the right of the track for "right", its left for
+"left"): see :meth:`Scenario.to_ned`. With the defaults (heading 0, looking right) the two
+frames coincide. Target positions and ``scene_center_ned`` are stored in NED; target
+overrides given to :func:`load_preset` are in the track frame. The antenna phase centre sits
+``lever_arm_m`` (body frame: forward, right, down) from the INS point that the trajectory
+describes. Simulation time ``t_s`` counts seconds from the first pulse, whose GPS
 time is ``t0_ns``.
 
 Presets (``sarmoco/sim/presets/*.toml``) hold the papers' numbers (METHODS §6) and say in
@@ -42,6 +49,10 @@ RANGE_MARGIN_M = 3.0
 
 PRF_OVERSAMPLING = 2.0
 """A scaled PRF never drops below this multiple of the scene's Doppler bandwidth."""
+
+DEFAULT_LEVER_ARM_M = (0.30, 0.15, 0.20)
+"""INS-to-antenna phase centre offset of a simulated platform, body frame (forward, right,
+down), m (0.39 m: an IMU in the fuselage, the antenna under the nose/side)."""
 
 
 @dataclass(frozen=True)
@@ -97,6 +108,12 @@ class Scenario:
         North position of the nominal APC at the first pulse, m.
     t0_ns : int
         GPS time of the first pulse, ns.
+    heading_rad : float
+        Heading of the nominal track, rad from north toward east.
+    look_side : {"right", "left"}
+        Side of the track the antenna looks to.
+    lever_arm_m : tuple of 3 float
+        INS point to antenna phase centre, body frame (forward, right, down), m.
     """
 
     name: str
@@ -114,7 +131,20 @@ class Scenario:
     integration_angle_rad: float
     track_start_north_m: float
     t0_ns: int = DEFAULT_T0_NS
+    heading_rad: float = 0.0
+    look_side: Literal["right", "left"] = "right"
+    lever_arm_m: tuple[float, float, float] = DEFAULT_LEVER_ARM_M
     notes: dict[str, float] = field(default_factory=dict, compare=False)
+
+    @property
+    def track_to_ned(self) -> FloatArray:
+        """Rotation (and mirror, looking left) from the track frame to NED, (3, 3)."""
+        return _track_to_ned(self.heading_rad, self.look_side)
+
+    @property
+    def heading_to_ned(self) -> FloatArray:
+        """Rotation by the heading alone (the platform's forward/right/down axes), (3, 3)."""
+        return _track_to_ned(self.heading_rad, "right")
 
     @property
     def n_pulses(self) -> int:
@@ -150,7 +180,8 @@ class Scenario:
         pos[:, 2] = -self.altitude_m
         vel = np.zeros((t.size, 3))
         vel[:, 0] = self.speed_mps
-        return pos, vel
+        rot = self.track_to_ned
+        return pos @ rot.T, vel @ rot.T
 
     def targets_array(self) -> tuple[FloatArray, np.ndarray]:
         """Targets as arrays: positions (K, 3) NED in m, complex amplitudes (K,)."""
@@ -161,8 +192,8 @@ class Scenario:
     def illumination(self, apc_ned: FloatArray, targets_ned: FloatArray) -> FloatArray:
         """Two-way antenna weight of each target at each pulse (rect beam).
 
-        Stripmap: 1 where the target's squint from the nominal broadside (east) direction,
-        ``asin(d_north / R)``, is within half the integration angle, else 0. The beam is fixed
+        Stripmap: 1 where the target's squint from the nominal broadside direction,
+        ``asin(d_along / R)``, is within half the integration angle, else 0. The beam is fixed
         to the nominal heading (attitude errors do not steer it). Spotlight: 1 everywhere.
 
         Parameters
@@ -179,27 +210,36 @@ class Scenario:
         if self.mode == "spotlight":
             return np.ones((apc_ned.shape[0], targets_ned.shape[0]))
         d = targets_ned[None, :, :] - apc_ned[:, None, :]
-        sin_squint = d[..., 0] / np.linalg.norm(d, axis=-1)
+        sin_squint = (d @ self.track_to_ned[:, 0]) / np.linalg.norm(d, axis=-1)
         return (np.abs(sin_squint) <= math.sin(self.integration_angle_rad / 2.0)).astype(float)
 
 
 def scene_targets(scn: Scenario, n: int, rng: np.random.Generator) -> tuple[Target, ...]:
     """Random distributed scene: ``n`` scatterers with circular-Gaussian amplitudes.
 
-    Positions are uniform on the ground over the swath (east) and over the same extent along
-    track (north), centred on the scene centre; amplitudes have unit mean power.
+    Positions are uniform on the ground over the swath (across track) and over the same extent
+    along track, centred on the scene centre; amplitudes have unit mean power.
 
     Returns
     -------
     tuple of Target
+        Positions in NED.
     """
-    north = scn.scene_center_ned[0] + (rng.random(n) - 0.5) * scn.swath_m
-    east = scn.scene_center_ned[1] + (rng.random(n) - 0.5) * scn.swath_m
+    offset = np.zeros((n, 3))
+    offset[:, :2] = (rng.random((n, 2)) - 0.5) * scn.swath_m
+    pos = np.asarray(scn.scene_center_ned) + offset @ scn.track_to_ned.T
     amp = (rng.standard_normal(n) + 1j * rng.standard_normal(n)) / math.sqrt(2.0)
-    return tuple(
-        Target((float(x), float(y), 0.0), complex(a))
-        for x, y, a in zip(north, east, amp, strict=True)
-    )
+    return tuple(Target(_point(x), complex(a)) for x, a in zip(pos, amp, strict=True))
+
+
+def _point(xyz: FloatArray) -> tuple[float, float, float]:
+    return float(xyz[0]), float(xyz[1]), float(xyz[2])
+
+
+def _track_to_ned(heading_rad: float, look_side: str) -> FloatArray:
+    c, s = math.cos(heading_rad), math.sin(heading_rad)
+    mirror = 1.0 if look_side == "right" else -1.0
+    return np.array([[c, -s * mirror, 0.0], [s, c * mirror, 0.0], [0.0, 0.0, 1.0]])
 
 
 _RADAR_KEYS = {f.name for f in fields(RadarParams)}
@@ -399,6 +439,14 @@ def load_preset(name: str, scale: float = 1.0, **overrides: Any) -> Scenario:
     )
     if p["mode"] not in ("stripmap", "spotlight"):
         raise ConfigError(f"scenario.mode: {p['mode']!r} is not 'stripmap' or 'spotlight'")
+    look_side = p.get("look_side", "right")
+    if look_side not in ("right", "left"):
+        raise ConfigError(f"scenario.look_side: {look_side!r} is not 'right' or 'left'")
+    heading = float(p.get("heading_rad", 0.0))
+    lever = tuple(float(v) for v in p.get("lever_arm_m", DEFAULT_LEVER_ARM_M))
+    if len(lever) != 3:
+        raise ConfigError(f"scenario.lever_arm_m: {p.get('lever_arm_m')!r} is not 3 numbers")
+    rot = _track_to_ned(heading, look_side)
     notes = {k: float(raw[k]) for k in _PRESET_KEYS if k in raw}
     notes["slant_window_near_m"], notes["slant_window_far_m"] = near, far
     return Scenario(
@@ -410,12 +458,15 @@ def load_preset(name: str, scale: float = 1.0, **overrides: Any) -> Scenario:
         swath_m=p["swath_m"],
         mode=p["mode"],
         aperture_s=float(p["aperture_s"]),
-        targets=targets,
+        targets=tuple(Target(_point(rot @ np.asarray(t.pos_ned)), t.amplitude) for t in targets),
         snr_db=None if p["snr_db"] is None else float(p["snr_db"]),
         scale=scale,
-        scene_center_ned=(0.0, ground_c, 0.0),
+        scene_center_ned=(float(rot[0, 1] * ground_c), float(rot[1, 1] * ground_c), 0.0),
         integration_angle_rad=float(p["integration_angle_rad"]),
         track_start_north_m=float(p["track_start_north_m"]),
         t0_ns=int(p["t0_ns"]),
+        heading_rad=heading,
+        look_side=look_side,
+        lever_arm_m=_point(np.asarray(lever)),
         notes=notes,
     )

@@ -1,9 +1,14 @@
-"""True APC trajectory: the scenario's straight nominal line plus smooth deviations.
+"""True trajectory: the scenario's straight nominal line plus smooth deviations.
+
+:func:`true_trajectory` gives the kinematics of the INS point (what the INS measures);
+:func:`apc_trajectory` moves it by the scenario's lever arm, rotated by the attitude, to the
+antenna phase centre (APC: where the echoes come from). Deviations are generated about a
+track heading north and then rotated by the scenario's heading (yaw gains the heading).
 
 Three kinds (:class:`MotionSpec`):
 
 ``ideal``
-    The nominal line, level, heading north.
+    The nominal line, level, at the scenario's heading.
 ``turbulence``
     Cross-track (east) and vertical (down) displacement, along-track speed variation and
     roll/pitch/yaw each follow an independent seeded Gaussian-like process with the
@@ -31,8 +36,7 @@ Three kinds (:class:`MotionSpec`):
     logged yaw minus the smoothed course (crab and heading wander).
 
 Frames: NED, m, s; ``t_s`` is time since the first pulse. Quaternions are scalar-first and
-rotate body to NED (3-2-1 yaw, pitch, roll; METHODS §1). The APC is taken as the IMU point
-(no lever arm).
+rotate body to NED (3-2-1 yaw, pitch, roll; METHODS §1).
 """
 
 from __future__ import annotations
@@ -48,6 +52,7 @@ from scipy.interpolate import BSpline, make_smoothing_spline
 from scipy.ndimage import gaussian_filter1d
 
 from sarmoco.errors import ConfigError, DataFileError, NavigationError
+from sarmoco.processing.geometry import lever_arm_ned
 from sarmoco.processing.types import FloatArray
 from sarmoco.sim.scenario import Scenario
 
@@ -100,7 +105,7 @@ class MotionSpec:
 
 @dataclass(frozen=True)
 class Trajectory:
-    """True APC kinematics at given times (NED, SI units).
+    """True kinematics of one point of the platform at given times (NED, SI units).
 
     Parameters
     ----------
@@ -380,7 +385,7 @@ def _deviation(scn: Scenario, spec: MotionSpec) -> Deviation | None:
 
 
 def true_trajectory(scn: Scenario, t_s: npt.ArrayLike, spec: MotionSpec) -> Trajectory:
-    """True APC kinematics at ``t_s`` (seconds since the first pulse).
+    """True kinematics of the INS point at ``t_s`` (seconds since the first pulse).
 
     The same ``spec`` gives the same continuous trajectory for any choice of ``t_s``.
 
@@ -395,5 +400,41 @@ def true_trajectory(scn: Scenario, t_s: npt.ArrayLike, spec: MotionSpec) -> Traj
     dev = _deviation(scn, spec)
     if dev is not None:
         dp, dv, da, euler = dev(t)
-        pos, vel, acc = pos + dp, vel + dv, da
+        rot = scn.heading_to_ned
+        pos, vel, acc = pos + dp @ rot.T, vel + dv @ rot.T, da @ rot.T
+    euler = euler + np.array([0.0, 0.0, scn.heading_rad])
     return Trajectory(t_s=t, pos_ned=pos, vel_ned=vel, acc_ned=acc, quat=euler_to_quat(euler))
+
+
+ARM_RATE_STEP_S = 1e-4
+"""Half step of the central differences that give the lever arm's rate and acceleration, s."""
+
+
+def apc_trajectory(scn: Scenario, t_s: npt.ArrayLike, spec: MotionSpec) -> Trajectory:
+    """True kinematics of the antenna phase centre: the INS point plus ``R(q) l``.
+
+    ``l`` is ``scn.lever_arm_m`` (body frame); the arm's velocity and acceleration are
+    central differences of the continuous attitude (step :data:`ARM_RATE_STEP_S`).
+
+    Returns
+    -------
+    Trajectory
+        Position, velocity and acceleration of the APC; attitude of the platform.
+    """
+    t = np.asarray(t_s, dtype=np.float64).reshape(-1)
+    imu = true_trajectory(scn, t, spec)
+    arm_body = np.asarray(scn.lever_arm_m, dtype=np.float64)
+    if not arm_body.any():
+        return imu
+    h = ARM_RATE_STEP_S
+    arms = [
+        lever_arm_ned(q, arm_body)
+        for q in (true_trajectory(scn, t + d, spec).quat for d in (-h, 0.0, h))
+    ]
+    return Trajectory(
+        t_s=t,
+        pos_ned=imu.pos_ned + arms[1],
+        vel_ned=imu.vel_ned + (arms[2] - arms[0]) / (2.0 * h),
+        acc_ned=imu.acc_ned + (arms[2] - 2.0 * arms[1] + arms[0]) / h**2,
+        quat=imu.quat,
+    )
