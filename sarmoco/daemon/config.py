@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from sarmoco.daemon.links import INS_OPENERS
 from sarmoco.errors import ConfigError
 from sarmoco.processing.types import C_MPS
 
@@ -32,9 +33,14 @@ def _key(
     ge: float | None = None,
     le: float | None = None,
     lt: float | None = None,
+    choices: tuple[str, ...] = (),
 ) -> Any:
-    """Declare a config key with its documentation and numeric bounds."""
-    meta = {"doc": doc, "unit": unit, "gt": gt, "ge": ge, "le": le, "lt": lt}
+    """Declare a config key with its documentation, numeric bounds or allowed strings.
+
+    ``choices`` is for string keys whose values come from a registry (a ``Literal``
+    type states fixed ones).
+    """
+    meta = {"doc": doc, "unit": unit, "gt": gt, "ge": ge, "le": le, "lt": lt, "choices": choices}
     if isinstance(default, list | dict):
         raise TypeError("mutable defaults are not allowed in config sections")
     return field(default=default, metadata=meta)
@@ -103,7 +109,7 @@ class RadarConfig:
 class InsConfig:
     """Navigation source (INS velocity and attitude)."""
 
-    protocol: Literal["mavlink", "sbg", "sbg-can"] = _key("mavlink", "Wire protocol of the INS")
+    protocol: str = _key("mavlink", "Wire protocol of the INS", choices=tuple(INS_OPENERS))
     link: str = _key(
         "udpin:127.0.0.1:14550",
         "MAVLink: a pymavlink connection string (udpin:, tcp:, /dev/tty..., .tlog, .bin); "
@@ -453,6 +459,9 @@ def _scalar(tp: type, value: Any, path: str, meta: Mapping[str, Any]) -> Any:
     if tp is str:
         if not isinstance(value, str):
             raise ConfigError(f"{path}: {value!r} is not a string")
+        choices = meta.get("choices")
+        if choices and value not in choices:
+            raise ConfigError(f"{path}: {value!r} is not one of {', '.join(map(repr, choices))}")
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
@@ -524,6 +533,8 @@ def _type_text(tp: Any) -> str:
 def _allowed_text(tp: Any, meta: Mapping[str, Any]) -> str:
     if typing.get_origin(tp) is Literal:
         return ", ".join(_toml_value(a) for a in typing.get_args(tp))
+    if meta.get("choices"):
+        return ", ".join(_toml_value(a) for a in meta["choices"])
     words = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}
     return ", ".join(f"{w} {meta[k]:g}" for k, w in words.items() if meta.get(k) is not None)
 

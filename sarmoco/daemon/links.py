@@ -1,18 +1,27 @@
-"""Open the configured radar and INS links (live or from files) as driver sources."""
+"""Open the configured radar and INS links (live or from files) as driver sources.
+
+INS protocols are a registry, :data:`INS_OPENERS`: protocol name (the values of
+``ins.protocol``, which :mod:`sarmoco.daemon.config` takes from its keys) to the
+function that opens ``ins.link`` with that protocol. Each opener imports its driver
+when called (as python-can loads its interfaces), so the configuration, which needs
+only the names, does not load pymavlink or python-can. A new protocol is one opener
+here and its emitter in :mod:`sarmoco.sim.insemitters`.
+"""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 from urllib.parse import urlsplit
 
-from sarmoco.daemon.config import Config
-from sarmoco.drivers.can_source import CanLogSource, CanSource
-from sarmoco.drivers.mavlink import open_mavlink
 from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource, RadarUdpSource
-from sarmoco.drivers.sbg import SbgFileSource, SbgSerialSource
 from sarmoco.drivers.source import Source
 from sarmoco.drivers.vita49 import ContextExpectation, VitaDecoder
 from sarmoco.errors import ConfigError
+
+if TYPE_CHECKING:  # config imports this module for the protocol names
+    from sarmoco.daemon.config import Config, InsConfig
 
 CAN_LOG_SUFFIXES = (".log", ".asc", ".blf", ".trc", ".csv")
 """File suffixes that name a CAN log (replayed through ``can.LogReader``)."""
@@ -70,41 +79,56 @@ def open_ins(cfg: Config, link: str | None = None, keep_raw: bool = False) -> So
     Raises
     ------
     ConfigError
-        If the link does not fit the protocol.
+        If the protocol is not in :data:`INS_OPENERS` or the link does not fit it.
     DriverError
         If it cannot be opened.
     """
-    source = _open_ins(cfg, cfg.ins.link if link is None else link)
+    opener = INS_OPENERS.get(cfg.ins.protocol)
+    if opener is None:
+        known = ", ".join(map(repr, INS_OPENERS))
+        raise ConfigError(f"ins.protocol: {cfg.ins.protocol!r} is not one of {known}")
+    source = opener(cfg.ins, cfg.ins.link if link is None else link)
     if keep_raw:
         source.keep_raw()
     return source
 
 
-def _open_ins(cfg: Config, text: str) -> Source:
-    ins = cfg.ins
+def _open_mavlink(ins: InsConfig, link: str) -> Source:
+    """MAVLink: a pymavlink connection string, a ``.tlog`` or a dataflash ``.bin``."""
+    from sarmoco.drivers.mavlink import open_mavlink
+
+    return open_mavlink(
+        link,
+        leap_s=ins.gps_minus_utc_s,
+        signing_key=bytes.fromhex(ins.signing_key_hex) if ins.signing_key_hex else None,
+        baudrate=ins.baudrate,
+        rates_hz=_mavlink_rates(ins.rate_hz),
+    )
+
+
+def _open_sbg(ins: InsConfig, link: str) -> Source:
+    """SBG sbgECom: a serial device (``/dev/...``) or a file of logged bytes."""
+    from sarmoco.drivers.sbg import SbgFileSource, SbgSerialSource
+
+    if link.startswith("/dev/"):
+        return SbgSerialSource(link, ins.baudrate, ins.gps_minus_utc_s)
+    return SbgFileSource(link, ins.gps_minus_utc_s)
+
+
+def _open_sbg_can(ins: InsConfig, link: str) -> Source:
+    """SBG on CAN: ``INTERFACE:CHANNEL``, ``socketcand:HOST:PORT:CHANNEL`` or a CAN log file."""
+    from sarmoco.drivers.can_source import CanLogSource, CanSource
+
     leap = ins.gps_minus_utc_s
-    if ins.protocol == "mavlink":
-        key = bytes.fromhex(ins.signing_key_hex) if ins.signing_key_hex else None
-        return open_mavlink(
-            text,
-            leap_s=leap,
-            signing_key=key,
-            baudrate=ins.baudrate,
-            rates_hz=_mavlink_rates(ins.rate_hz),
-        )
-    if ins.protocol == "sbg":
-        if text.startswith("/dev/"):
-            return SbgSerialSource(text, ins.baudrate, leap)
-        return SbgFileSource(text, leap)
-    if text.endswith(CAN_LOG_SUFFIXES) and Path(text).is_file():
-        return CanLogSource(text, leap)
-    interface, _, channel = text.partition(":")
+    if link.endswith(CAN_LOG_SUFFIXES) and Path(link).is_file():
+        return CanLogSource(link, leap)
+    interface, _, channel = link.partition(":")
     if not channel:
-        raise ConfigError(f"ins.link: {text!r} is not INTERFACE:CHANNEL or a CAN log file")
+        raise ConfigError(f"ins.link: {link!r} is not INTERFACE:CHANNEL or a CAN log file")
     if interface == "socketcand":
         host, port, chan = [*channel.rsplit(":", 2), "", ""][:3]
         if not port.isdigit():
-            raise ConfigError(f"ins.link: {text!r} is not socketcand:HOST:PORT:CHANNEL")
+            raise ConfigError(f"ins.link: {link!r} is not socketcand:HOST:PORT:CHANNEL")
         return CanSource.open("socketcand", chan or "can0", leap, host=host, port=int(port))
     return CanSource.open(interface, channel, leap)
 
@@ -116,3 +140,14 @@ def _mavlink_rates(rate_hz: float) -> dict[str, float]:
         "ATTITUDE_QUATERNION": rate_hz,
         "SYSTEM_TIME": 1.0,
     }
+
+
+InsOpener = Callable[["InsConfig", str], Source]
+"""Opens an INS link (``ins.link`` or a replayed file) with the ``ins`` settings."""
+
+INS_OPENERS: dict[str, InsOpener] = {
+    "mavlink": _open_mavlink,
+    "sbg": _open_sbg,
+    "sbg-can": _open_sbg_can,
+}
+"""Every INS protocol the daemon speaks, by its ``ins.protocol`` name."""

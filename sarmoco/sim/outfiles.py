@@ -25,22 +25,19 @@ from typing import Any
 
 from sarmoco.drivers.vita49 import PayloadFormat
 from sarmoco.errors import DataFileError
-from sarmoco.sim.emit_can import SbgCanEmitter
-from sarmoco.sim.emit_mavlink import MavlinkEmitter
 from sarmoco.sim.emit_radar import RadarEmitter
-from sarmoco.sim.emit_sbg import SbgEmitter
 from sarmoco.sim.emitter import Emitter, WireTime
 from sarmoco.sim.faults import Faults
+from sarmoco.sim.insemitters import INS_EMITTERS
 from sarmoco.sim.insfeed import InsFeed
 from sarmoco.sim.links import FileLink
 from sarmoco.sim.player import Pacing, play_emitters
 from sarmoco.sim.run import SimRun
 
-NAV_FILES = {"mavlink": "nav.tlog", "sbg": "ins.sbg", "sbg-can": "ins.log"}
-"""File written for each INS protocol."""
+NAV_FILES = {name: kind.file for name, kind in INS_EMITTERS.items()}
+"""File written for each INS protocol (:data:`~sarmoco.sim.insemitters.INS_EMITTERS`)."""
 RADAR_FILE = "radar.vrt"
 TRUTH_FILE = "truth.json"
-TLOG_SYSTEM_TIME_HZ = 5.0
 
 
 def truth_record(
@@ -82,7 +79,7 @@ def write_run(
     faults: Faults,
     out_dir: Path,
     *,
-    nav: Sequence[str] = ("mavlink", "sbg", "sbg-can"),
+    nav: Sequence[str] = tuple(NAV_FILES),
     payload: PayloadFormat = "int16",
     stream_id: int = 0,
     seed: int = 0,
@@ -98,8 +95,8 @@ def write_run(
         Faults to inject (each file draws its own).
     out_dir : Path
         Directory, created if needed.
-    nav : sequence of {"mavlink", "sbg", "sbg-can"}
-        INS recordings to write.
+    nav : sequence of str
+        INS recordings to write, by protocol name (keys of :data:`NAV_FILES`).
     payload : {"int16", "float32"}
         Radar I/Q format.
     stream_id : int
@@ -132,18 +129,8 @@ def write_run(
     }
     for k, proto in enumerate(nav, start=1):
         link = FileLink(out_dir / NAV_FILES[proto])
-        common: dict[str, Any] = {"faults": faults.ins, "seed": seed * 16 + k, "rank": k}
-        if proto == "mavlink":
-            rates = {
-                "LOCAL_POSITION_NED": feed.rate_hz,
-                "ATTITUDE_QUATERNION": feed.rate_hz,
-                "SYSTEM_TIME": TLOG_SYSTEM_TIME_HZ,
-            }
-            emitters[proto] = MavlinkEmitter(link, feed, rates_hz=rates, **common)
-        elif proto == "sbg":
-            emitters[proto] = SbgEmitter(link, feed, **common)
-        else:
-            emitters[proto] = SbgCanEmitter(link, feed, "candump", **common)
+        options: dict[str, Any] = {"faults": faults.ins, "seed": seed * 16 + k, "rank": k}
+        emitters[proto] = INS_EMITTERS[proto].to_file(link, feed, options)
     try:
         result = play_emitters(list(emitters.values()), pacing or Pacing(realtime=False))
     finally:

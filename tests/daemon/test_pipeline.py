@@ -9,7 +9,6 @@ IRW ≤ 1.1 × theory) at the right place.
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import socket
 from pathlib import Path
@@ -17,12 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sarmoco.app.simconfig import (
-    MIN_SUBAPERTURE_PULSES,
-    autofocus_table,
-    scenario_config,
-    synthetic_aperture_s,
-)
+from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.config import Config, parse_config
 from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.links import open_radar
@@ -126,27 +120,7 @@ def test_an_empty_tile_is_a_product_not_an_error() -> None:
     assert tile_metrics(point) == {"entropy": 0.0, "contrast": pytest.approx(np.sqrt(19.0))}
 
 
-# -- autofocus subapertures scaled to the scenario ------------------------------------------
-
-
-@pytest.mark.parametrize("preset", ["ku-vehicle", "ku-microuav", "thz-spotlight"])
-def test_simconfig_fits_the_subapertures_into_the_synthetic_aperture(preset: str) -> None:
-    scn = load_preset(preset, 1.0)
-    t_sa = synthetic_aperture_s(scn)
-    af = scenario_config(scn).autofocus
-    assert af.enabled
-    assert 2 * af.subaperture_s <= t_sa and af.subaperture_s <= 0.4
-    assert af.subaperture_s * scn.radar.prf_hz >= MIN_SUBAPERTURE_PULSES
-    assert af.hop_s == pytest.approx(af.subaperture_s / 4)  # the default overlap
-    if preset.startswith("ku"):
-        assert (af.subaperture_s, af.hop_s) == (0.4, 0.1)  # the defaults fit: unchanged
-    else:
-        assert t_sa == pytest.approx(scn.aperture_s)  # spotlight: the whole aperture
-        assert af.subaperture_s == pytest.approx(t_sa / 4)
-    slow = dataclasses.replace(scn, radar=dataclasses.replace(scn.radar, prf_hz=300.0))
-    if 2 * MIN_SUBAPERTURE_PULSES / 300.0 > t_sa:  # two subapertures do not fit: off
-        assert autofocus_table(slow) == {"enabled": False}
-        assert not scenario_config(slow).autofocus.enabled
+# -- autofocus subapertures scaled to the scenario (tests/app/test_simconfig.py) ------------
 
 
 def test_thz_spotlight_focuses_with_the_scaled_autofocus(tmp_path: Path) -> None:
