@@ -25,7 +25,7 @@ import logging
 import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -74,9 +74,48 @@ _FULL_HEADER = np.dtype(
 """Header of a signal packet of the full profile (with class ID), before the payload."""
 BATCH_MIN_PACKETS = 32
 """Batches smaller than this are decoded packet by packet (numpy's fixed cost per call)."""
-_FULL_HEADER_MASK = 0xFFFFFFFF & ~(0xF << 16) & ~(3 << 22) & ~(3 << 24)
-"""Header bits that are the same in every full-profile signal packet of one configuration
-(all but the packet count, the TSI and the two bits the profile ignores)."""
+PS_PER_S = 1_000_000_000_000
+"""Picoseconds per second: the timestamp fraction is below it."""
+
+
+def _header_checks(w0: Any, n_bytes: Any) -> tuple[tuple[str, Any], ...]:
+    """The profile's checks of a packet's first header word against the packet length.
+
+    Parameters
+    ----------
+    w0 : int or ndarray of uint32
+        First header word (one packet in :meth:`VitaDecoder.decode_into`, or one per
+        packet of a batch in :meth:`VitaDecoder.decode_batch`, checked elementwise).
+    n_bytes : int or ndarray of int
+        Packet length, bytes.
+
+    Returns
+    -------
+    tuple of (str, bool or ndarray of bool)
+        In the order they are reported: what is wrong when a check fails, and whether it
+        holds: the announced size is the length, the packet type is in the profile, the
+        timestamp is UTC or GPS seconds with a real-time picosecond fraction.
+    """
+    ptype, tsi, tsf = w0 >> 28, (w0 >> 22) & 3, (w0 >> 20) & 3
+    return (
+        ("length", (w0 & 0xFFFF) * 4 == n_bytes),
+        ("packet type", (ptype == TYPE_SIGNAL_SID) | (ptype == TYPE_CONTEXT)),
+        ("timestamp", ((tsi == TSI_UTC) | (tsi == TSI_GPS)) & (tsf == TSF_REALTIME_PS)),
+    )
+
+
+def _header_fault(kind: str, w0: int, n_bytes: int) -> str:
+    """How a failed check of :func:`_header_checks` is logged."""
+    if kind == "length":
+        return f"header says {(w0 & 0xFFFF) * 4} bytes, packet has {n_bytes}"
+    if kind == "packet type":
+        return f"type {w0 >> 28} is not in the profile (1, 4)"
+    return f"TSI {(w0 >> 22) & 3} / TSF {(w0 >> 20) & 3} is not UTC|GPS / real-time ps"
+
+
+def _fraction_ok(ps: Any) -> Any:
+    """Whether a timestamp fraction (ps; int or elementwise array) is below one second."""
+    return ps < PS_PER_S
 
 
 def _timestamp_words(t_gps_ns: int, time_base: TimeBase, leap_s: int) -> tuple[int, int]:
@@ -372,17 +411,11 @@ class VitaDecoder:
             self._bad("short packet", f"{n} bytes")
             return None
         w0 = _U32.unpack_from(packet, 0)[0]
-        ptype, size = w0 >> 28, w0 & 0xFFFF
-        if size * 4 != n:
-            self._bad("length", f"header says {size * 4} bytes, packet has {n}")
-            return None
-        if ptype not in (TYPE_SIGNAL_SID, TYPE_CONTEXT):
-            self._bad("packet type", f"type {ptype} is not in the profile (1, 4)")
-            return None
-        tsi, tsf = (w0 >> 22) & 3, (w0 >> 20) & 3
-        if tsi not in (TSI_UTC, TSI_GPS) or tsf != TSF_REALTIME_PS:
-            self._bad("timestamp", f"TSI {tsi} / TSF {tsf} is not UTC|GPS / real-time ps")
-            return None
+        for kind, ok in _header_checks(w0, n):
+            if not ok:
+                self._bad(kind, _header_fault(kind, w0, n))
+                return None
+        ptype, tsi = w0 >> 28, (w0 >> 22) & 3
         has_class = (w0 >> 27) & 1
         trailer = (w0 >> 26) & 1 if ptype == TYPE_SIGNAL_SID else 0
         pos = 8 + 8 * has_class
@@ -392,7 +425,7 @@ class VitaDecoder:
         stream_id = _U32.unpack_from(packet, 4)[0]
         seconds = _U32.unpack_from(packet, pos)[0]
         ps = _Q64.unpack_from(packet, pos + 4)[0]
-        if ps >= 1_000_000_000_000:
+        if not _fraction_ok(ps):
             self._bad("timestamp", f"fractional {ps} ps is not < 1 s")
             return None
         t_ns = self._time(tsi, seconds, ps)
@@ -403,7 +436,7 @@ class VitaDecoder:
                 self._count(ptype, stream_id, count)
                 self.last_ok = True
             return None
-        if self.stream_id is not None and stream_id != self.stream_id:
+        if not self._accepts(stream_id):
             self._skip_stream(stream_id)
             self.last_ok = True  # well formed: a framer steps past the whole packet
             return None
@@ -428,6 +461,10 @@ class VitaDecoder:
         self._burst.ok()
         self.last_ok = True
         return EchoPacket(stream_id, t_ns, count, self.n_samples, valid, loss, over, lost)
+
+    def _accepts(self, stream_id: Any) -> Any:
+        """Whether signal packets of ``stream_id`` are decoded (int, or elementwise array)."""
+        return True if self.stream_id is None else stream_id == self.stream_id
 
     def _skip_stream(self, stream_id: int) -> None:
         self.counters.rejected += 1
@@ -483,13 +520,12 @@ class VitaDecoder:
             return got
         flat_dtype = self.check_row(out[0]).dtype
         hdr = stage[:k, : _FULL_HEADER.itemsize].view(_FULL_HEADER)[:, 0]
-        w0, tsi = hdr["w0"], (hdr["w0"] >> 22) & 3
-        template = (TYPE_SIGNAL_SID << 28) | (3 << 26) | (TSF_REALTIME_PS << 20) | (end + 4) // 4
-        fast = (w0 & _FULL_HEADER_MASK) == template
-        fast &= (np.asarray(lengths) == end + 4) & (hdr["ps"] < 1_000_000_000_000)
-        fast &= (tsi == TSI_UTC) | (tsi == TSI_GPS)
-        if self.stream_id is not None:
-            fast &= hdr["sid"] == self.stream_id
+        w0, n = hdr["w0"], np.asarray(lengths)
+        # the checks decode_into makes, on every header at once; then what makes a packet
+        # one of the full profile's signal packets (type, class ID and trailer, size)
+        fast = np.logical_and.reduce([ok for _, ok in _header_checks(w0, n)])
+        fast &= _fraction_ok(hdr["ps"]) & self._accepts(hdr["sid"])
+        fast &= ((w0 >> 28) == TYPE_SIGNAL_SID) & (((w0 >> 26) & 3) == 3) & (n == end + 4)
         fields = (w0.tolist(), hdr["sid"].tolist(), hdr["sec"].tolist(), hdr["ps"].tolist(),
                   stage[:k, end : end + 4].view(">u4")[:, 0].tolist())  # fmt: skip
         dest = out.reshape(out.shape[0], -1).view(flat_dtype)

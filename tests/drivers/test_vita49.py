@@ -315,3 +315,26 @@ def test_batch_decoder_equals_packet_decoder(
     assert got == want
     np.testing.assert_array_equal(out[: len(got)], rows)
     assert dec.counters.snapshot() == counters
+
+
+@pytest.mark.parametrize("batched", [False, True], ids=["decode_into", "decode_batch"])
+def test_timestamp_kinds_outside_the_profile_are_rejected(batched: bool) -> None:
+    """TSI 0 (none) or 3 (other), or a fraction that is not real-time picoseconds: the
+    header checks both decode paths share refuse the packet, and only it."""
+    iq = pulses(40, seed=4)
+    datagrams = [bytearray(p) for p in packets(iq)]
+    bad = {5: (0, 2), 9: (3, 2), 13: (2, 1), 17: (1, 3)}  # packet: (TSI, TSF)
+    for k, (tsi, tsf) in bad.items():
+        datagrams[k][1] = (datagrams[k][1] & 0x0F) | (tsi << 6) | (tsf << 4)
+    dec = VitaDecoder(N)
+    out = np.zeros((len(datagrams), N), np.complex64)
+    if batched:
+        stage = np.zeros((len(datagrams), dec.max_packet_bytes + 4), np.uint8)
+        for i, d in enumerate(datagrams):
+            stage[i, : len(d)] = np.frombuffer(bytes(d), np.uint8)
+        got = dec.decode_batch(stage, [len(d) for d in datagrams], out)
+    else:
+        got = [e for i, d in enumerate(datagrams) if (e := dec.decode_into(bytes(d), out[i]))]
+    keep = [k for k in range(len(datagrams)) if k not in bad]
+    assert [e.t_gps_ns for e in got] == [times(len(iq))[k] for k in keep]
+    assert dec.counters.parse_errors == len(bad)
