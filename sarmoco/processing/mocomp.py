@@ -18,7 +18,8 @@ running state is the pair (ΔY, ΔZ), which also serves every range bin.
   ``2π v0² τ² d_los / (λ r²)`` of eq. 29 is applied with that physical sign.
 - Envelope: where |d_los| at the scene centre exceeds ``envelope_fraction``
   of the range resolution cell, the pulse is resampled in range (linear phase
-  in range frequency, sub-sample, circular) so that the range error
+  in range frequency, sub-sample, zero-padded: what leaves the window is lost,
+  never wrapped onto its other end) so that the range error
   ΔR = -d_los is removed: its content moves by +d_los toward far range.
 
 Inputs are range-compressed pulses (P, S) whose bin i lies at slant range
@@ -191,8 +192,8 @@ def apply_delay(spec: ComplexArray, shift_bins: FloatArray) -> None:
     rows, n = spec.shape
     s = np.asarray(shift_bins, dtype=np.float64)[:, None]
     half = n // 2
-    block = 1 << max(0, round(0.5 * np.log2(max(half, 1))))
-    if n % 2 or half % block or not spec.flags.c_contiguous:
+    block = _separable_block(n)
+    if block is None or not spec.flags.c_contiguous:
         spec *= _phasor(s * np.fft.fftfreq(n))
         return
     count = half // block
@@ -200,6 +201,13 @@ def apply_delay(spec: ComplexArray, shift_bins: FloatArray) -> None:
     view *= _phasor(s * (np.arange(count) * block / n))[:, None, :, None]
     view *= _phasor(s * (np.arange(block) / n))[:, None, None, :]
     spec[:, half:] *= _phasor(s * (-half / n))
+
+
+def _separable_block(n: int) -> int | None:
+    """Fine-table length of :func:`apply_delay` for spectra of length n; None: no separable form."""
+    half = n // 2
+    block = 1 << max(0, round(0.5 * np.log2(max(half, 1))))
+    return None if n % 2 or half % block else block
 
 
 def _phasor(cycles: FloatArray) -> ComplexArray:
@@ -212,10 +220,13 @@ def _phasor(cycles: FloatArray) -> ComplexArray:
 
 
 def shift_range(echo: ComplexArray, shift_bins: FloatArray) -> ComplexArray:
-    """Delay each row by a fractional number of bins (toward higher index), circularly.
+    """Delay each row by a fractional number of bins (toward higher index), without wrap.
 
-    Band-limited (FFT) interpolation: exact for a signal sampled above its
-    bandwidth, apart from the wrap-around at the window edges.
+    Band-limited (FFT) interpolation on a zero-padded window: the FFT is at least
+    ``S + max|shift| + SHIFT_GUARD_BINS`` long, so what a shift moves past either end
+    of the range window lands in the padding and is cut off (energy leaves the
+    window instead of wrapping onto the other end). A row shifted by the whole
+    window or more comes back as zeros.
 
     Parameters
     ----------
@@ -224,10 +235,32 @@ def shift_range(echo: ComplexArray, shift_bins: FloatArray) -> ComplexArray:
     shift_bins : ndarray of float64, shape (P,)
         Shift of each pulse in bins (positive: toward far range).
     """
-    spec = np.ascontiguousarray(scipy.fft.fft(echo, axis=1), dtype=np.complex64)
-    apply_delay(spec, shift_bins)
-    out: ComplexArray = scipy.fft.ifft(spec, axis=1, overwrite_x=True)
-    return out.astype(echo.dtype, copy=False)
+    n = echo.shape[1]
+    shift = np.asarray(shift_bins, dtype=np.float64)
+    inside = np.abs(shift) < n
+    out = np.zeros(echo.shape, dtype=echo.dtype)
+    if not inside.any():
+        return out
+    reach = int(np.ceil(np.abs(shift[inside]).max()))
+    n_fft = _padded_length(n + reach + SHIFT_GUARD_BINS)
+    spec = np.ascontiguousarray(scipy.fft.fft(echo[inside], n_fft, axis=1), dtype=np.complex64)
+    apply_delay(spec, shift[inside])
+    moved = scipy.fft.ifft(spec, axis=1, overwrite_x=True)[:, :n]
+    out[inside] = moved
+    return out
+
+
+SHIFT_GUARD_BINS = 16
+"""Zero padding beyond the largest shift in :func:`shift_range`, bins: room for the
+sinc tails of a peak moved off the window's edge."""
+
+
+def _padded_length(n: int) -> int:
+    """Smallest fast FFT length >= n that :func:`apply_delay` handles with its separable tables."""
+    m = int(scipy.fft.next_fast_len(n))
+    while _separable_block(m) is None:
+        m = int(scipy.fft.next_fast_len(m + 1))
+    return m
 
 
 def _squint_coef(geom: LosGeometry, t_ns: IntArray) -> FloatArray:

@@ -49,12 +49,10 @@ def _pulse_times(rng: np.random.Generator, n: int) -> np.ndarray:
     return (10**15 + np.cumsum(rng.integers(45_000, 55_000, size=n))).astype(np.int64)
 
 
-def _dirichlet(n: int, pos_bins: np.ndarray, half_band: int) -> np.ndarray:
-    """Periodic band-limited peaks at fractional bins ``pos_bins`` (P,), shape (P, n)."""
-    m = np.arange(-half_band, half_band + 1)
-    lag = (np.arange(n)[None, :, None] - pos_bins[:, None, None]) / n
-    arg = 2j * np.pi * m[None, None, :] * lag
-    return np.exp(arg).sum(axis=2) / m.shape[0]
+def _gauss_peaks(n: int, pos_bins: np.ndarray, sigma: float = 3.0) -> np.ndarray:
+    """Band-limited (to float precision) peaks with a carrier at fractional bins, shape (P, n)."""
+    lag = np.arange(n)[None, :] - pos_bins[:, None]
+    return np.exp(-0.5 * (lag / sigma) ** 2 + 0.3j * lag)
 
 
 def test_trapezoid_is_exact_for_constant_acceleration_on_non_uniform_times() -> None:
@@ -84,8 +82,8 @@ def test_phase_and_envelope_bring_every_pulse_back_to_the_reference_track() -> N
     disp[0] = 0.0
     d = disp[:, 0] * np.sin(beta) + disp[:, 1] * np.cos(beta)
     r_k = SCENE_R_M - d  # the APC moved toward the scene by d
-    echo = _dirichlet(n, (r_k - axis[0]) / dr, 50) * np.exp(-4j * np.pi * r_k / lam)[:, None]
-    ref = _dirichlet(n, np.array([(SCENE_R_M - axis[0]) / dr]), 50)[0]
+    echo = _gauss_peaks(n, (r_k - axis[0]) / dr) * np.exp(-4j * np.pi * r_k / lam)[:, None]
+    ref = _gauss_peaks(n, np.array([(SCENE_R_M - axis[0]) / dr]))[0]
     ref = ref * np.exp(-4j * np.pi * SCENE_R_M / lam)
     geom = LosGeometry.build(RADAR, axis, DEPTH_M, SCENE_R_M, 60.0, envelope_fraction=0.0)
     t_ns = _pulse_times(rng, p)
@@ -109,14 +107,24 @@ def test_phase_and_envelope_bring_every_pulse_back_to_the_reference_track() -> N
 
 @pytest.mark.parametrize("n", [128, 96, 127])  # separable tables, and the general path
 def test_shift_range_is_a_sub_sample_delay(n: int) -> None:
-    x = _dirichlet(n, np.array([40.0, 40.0]), 30)
+    x = _gauss_peaks(n, np.array([40.0, 40.0]))
     y = shift_range(x.astype(np.complex64), np.array([2.5, -7.25]))
-    np.testing.assert_allclose(y, _dirichlet(n, np.array([42.5, 32.75]), 30), atol=3e-6)
+    np.testing.assert_allclose(y, _gauss_peaks(n, np.array([42.5, 32.75])), atol=3e-6)
     s = np.array([0.3, -11.7, 1000.25])
     spec = np.ones((3, n), dtype=np.complex64)
     apply_delay(spec, s)
     expect = np.exp(-2j * np.pi * np.fft.fftfreq(n)[None, :] * s[:, None])
     np.testing.assert_allclose(spec, expect, atol=2e-6)
+
+
+@pytest.mark.parametrize("n", [256, 127])
+def test_shift_range_loses_what_leaves_the_window_instead_of_wrapping(n: int) -> None:
+    """A peak 20 bins from either edge, moved 35 bins toward that edge, leaves the window."""
+    x = _gauss_peaks(n, np.array([n - 20.0, 20.0, n - 20.0])).astype(np.complex64)
+    y = shift_range(x, np.array([35.0, -35.0, 3.0 * n]))
+    assert np.abs(y).max() < 1e-5  # circular: a full peak (1.0) at bin 15 / n - 15
+    inside = shift_range(x[:1], np.array([-25.0]))  # the same peak moved inward stays whole
+    np.testing.assert_allclose(inside, _gauss_peaks(n, np.array([n - 45.0])), atol=3e-6)
 
 
 @pytest.mark.parametrize("order", [1, 2])
