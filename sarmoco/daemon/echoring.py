@@ -13,9 +13,23 @@ which counts them and flags the next committed pulse
 :attr:`~sarmoco.daemon.flags.PulseFlag.DROPPED_BEFORE`. A full ring polled
 while nothing arrives counts nothing.
 
-Pulses leave the ring in reservation order. Any number of producers may hold
-slots at once; a reserved slot that is neither committed nor given back holds
-back the pulses reserved after it.
+Pulses leave the ring in time order, each time once. Any number of producers
+may hold slots at once; a reserved slot that is neither committed nor given back
+holds back the pulses reserved after it. The consumer's looks (``len``,
+:meth:`EchoRing.peek_times`; one thread, the one that calls :meth:`EchoRing.pop`)
+first sort out what the network did to the committed pulses not seen yet
+(:meth:`EchoRing.pop` takes the pulses looked at):
+
+- a pulse whose time equals that of a pulse still waiting, or of the last one
+  taken, is a duplicate: counted (:attr:`EchoRing.duplicates`) and discarded;
+- a pulse older than the newest one waiting (a reordered datagram) is put back
+  in time order (:attr:`EchoRing.reordered`) when its place is among the last
+  :data:`REORDER_WINDOW` waiting pulses; one whose place has already been taken
+  out of the ring, or lies further back, is counted
+  (:attr:`EchoRing.late_dropped`) and discarded.
+
+A discarded pulse leaves a hole in the ring that is freed with the pulses around
+it; the producer is never held back by it.
 """
 
 from __future__ import annotations
@@ -35,6 +49,11 @@ SampleFormat = Literal["complex64", "int16"]
 """How samples are held: ``complex64`` (float32 I/Q) or ``int16`` I/Q pairs (last axis I, Q)."""
 
 _FREE, _RESERVED, _COMMITTED, _ABORTED = 0, 1, 2, 3
+"""Slot states; ``_ABORTED`` also marks a discarded pulse (a hole waiting to be freed)."""
+
+REORDER_WINDOW = 64
+"""Waiting pulses among which a late pulse is put back in place: a pulse late by more is
+dropped (bounds the rows moved per late pulse)."""
 
 
 def sample_shape(n_samples: int, sample_format: SampleFormat) -> tuple[int, ...]:
@@ -149,6 +168,9 @@ class EchoRing:
     ----------
     dropped : int
         Pulses read while the ring was full and discarded (:meth:`note_dropped`).
+    duplicates, reordered, late_dropped : int
+        Committed pulses discarded as duplicates, put back in time order, and
+        discarded as too late (module doc).
     committed_total, aborted_total, popped_total : int
         Running counts of committed pulses, slots given back by :meth:`abort`, and
         consumed pulses.
@@ -178,10 +200,17 @@ class EchoRing:
         self._state = np.full(capacity, _FREE, dtype=np.uint8)
         self._head = 0  # next seq to reserve
         self._tail = 0  # oldest seq not yet consumed
-        self._ready = 0  # committed slots at the tail, in order, not yet consumed
+        self._span = 0  # slots from the tail that are committed or holes (none reserved)
+        self._checked = 0  # of those, the first ones sorted out (in time order, no repeats)
+        self._ready = 0  # committed pulses among the checked slots
+        self._newest_ns: int | None = None  # newest pulse time checked (waiting or taken)
+        self._taken_ns: int | None = None  # time of the last pulse taken
         self._drop_pending = False
         self._lock = threading.Lock()
         self.dropped = 0
+        self.duplicates = 0
+        self.reordered = 0
+        self.late_dropped = 0
         self.committed_total = 0
         self.aborted_total = 0
         self.popped_total = 0
@@ -320,8 +349,9 @@ class EchoRing:
             return self.capacity - (self._head - self._tail)
 
     def __len__(self) -> int:
-        """Committed pulses ready to be taken, oldest first, in order."""
+        """Committed pulses ready to be taken, in time order (consumer: sorts them out)."""
         with self._lock:
+            self._sort_out()
             return self._ready
 
     def peek_times(self, max_n: int | None = None) -> IntArray:
@@ -333,12 +363,16 @@ class EchoRing:
             Look at no more than this many pulses.
         """
         with self._lock:
+            self._sort_out()
             n = self._ready if max_n is None else min(max_n, self._ready)
-            idx = self._indices(n)
+            idx, _ = self._indices(n)
             return self._t_ns[idx].copy()
 
     def pop(self, n: int) -> EchoBatch:
         """Take the ``n`` oldest ready pulses out of the ring (copied, slots freed).
+
+        The pulses are those a look (``len``, :meth:`peek_times`) saw first; new ones
+        are sorted out only when fewer than ``n`` were seen.
 
         Raises
         ------
@@ -347,8 +381,10 @@ class EchoRing:
         """
         with self._lock:
             if n > self._ready:
+                self._sort_out()
+            if n > self._ready:
                 raise ProcessingError(f"EchoRing.pop: {n} pulses asked, {self._ready} ready")
-            idx = self._indices(n)
+            idx, used = self._indices(n)
         batch = EchoBatch(
             samples=self._samples[idx],
             t_ns=self._t_ns[idx],
@@ -357,29 +393,87 @@ class EchoRing:
             flags=self._flags[idx],
         )
         with self._lock:
-            self._state[idx] = _FREE
-            self._tail += n
+            self._state[(self._tail + np.arange(used)) % self.capacity] = _FREE
+            self._tail += used
+            self._span -= used
+            self._checked -= used
             self._ready -= n
             self.popped_total += n
+            if n:
+                self._taken_ns = int(batch.t_ns[-1])
             self._advance_ready()
         return batch
 
-    def _indices(self, n: int) -> npt.NDArray[np.intp]:
-        """Ring positions of the first ``n`` ready pulses (lock held)."""
-        return (self._tail + np.arange(n)) % self.capacity
+    def _indices(self, n: int) -> tuple[npt.NDArray[np.intp], int]:
+        """Ring positions of the first ``n`` ready pulses, and the slots up to the last
+        of them (holes included) from the tail (lock held)."""
+        pos = (self._tail + np.arange(self._checked)) % self.capacity
+        if self._ready < self._checked:  # holes among them
+            pos = pos[self._state[pos] == _COMMITTED]
+        idx = pos[:n]
+        used = 0 if n == 0 else int((idx[-1] - self._tail) % self.capacity) + 1
+        return idx, used
 
     def _advance_ready(self) -> None:
-        """Count newly ready slots at the tail; free aborted ones there (lock held)."""
-        while self._tail + self._ready < self._head:
-            i = (self._tail + self._ready) % self.capacity
+        """Extend the span over newly committed slots and holes; free holes at the tail
+        (lock held)."""
+        while self._tail + self._span < self._head:
+            i = (self._tail + self._span) % self.capacity
             state = self._state[i]
-            if state == _COMMITTED:
-                self._ready += 1
-            elif state == _ABORTED and self._ready == 0:  # ready runs hold no holes
+            if state == _ABORTED and self._span == 0:
                 self._state[i] = _FREE
                 self._tail += 1
+            elif state in (_COMMITTED, _ABORTED):
+                self._span += 1
             else:
                 break
+
+    def _sort_out(self) -> None:
+        """Check the span's new slots: keep, put back in order, or discard (module doc;
+        lock held, consumer thread only: the rows moved belong to no producer)."""
+        while self._checked < self._span:
+            off = self._checked
+            i = (self._tail + off) % self.capacity
+            self._checked += 1
+            if self._state[i] != _COMMITTED:
+                continue
+            t = int(self._t_ns[i])
+            if self._newest_ns is None or t > self._newest_ns:
+                self._newest_ns = t
+                self._ready += 1
+                continue
+            if self._taken_ns is not None and t <= self._taken_ns:
+                self._discard(i, duplicate=t == self._taken_ns)
+                continue
+            lo = max(0, off - REORDER_WINDOW)
+            pos = (self._tail + np.arange(lo, off)) % self.capacity
+            pos = pos[self._state[pos] == _COMMITTED]
+            times = self._t_ns[pos]
+            k = int(np.searchsorted(times, t))
+            if k < times.size and times[k] == t:
+                self._discard(i, duplicate=True)
+            elif k == 0 and self._ready > pos.size:  # its place is further back
+                self._discard(i, duplicate=False)
+            else:
+                self._move_back(int((pos[k] - self._tail) % self.capacity), off)
+                self.reordered += 1
+                self._ready += 1
+
+    def _discard(self, i: int, duplicate: bool) -> None:
+        """Make the committed slot ``i`` a hole, counted as a duplicate or late (lock held)."""
+        self._state[i] = _ABORTED
+        if duplicate:
+            self.duplicates += 1
+        else:
+            self.late_dropped += 1
+
+    def _move_back(self, to: int, off: int) -> None:
+        """Move the slot at span offset ``off`` to offset ``to``; those between move up one."""
+        pos = (self._tail + np.arange(to, off + 1)) % self.capacity
+        src = np.roll(pos, 1)
+        for arr in (self._samples, self._t_ns, self._pulse_id, self._channel, self._flags,
+                    self._state):  # fmt: skip
+            arr[pos] = arr[src]
 
     def _check(self, seq: int, n: int) -> int:
         """Ring position of ``n`` reserved slots from ``seq``; raises if any is not reserved."""

@@ -78,6 +78,10 @@ class RunSummary:
     nav_samples: int = 0
     tiles: int = 0
     tile_metrics: list[dict[str, float]] = field(default_factory=list)
+    pulses_dropped_ring: int = 0
+    pulses_duplicate: int = 0
+    pulses_reordered: int = 0
+    pulses_late_dropped: int = 0
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-able form."""
@@ -88,6 +92,10 @@ class RunSummary:
             "nav_samples": self.nav_samples,
             "tiles": self.tiles,
             "tile_metrics": self.tile_metrics,
+            "pulses_dropped_ring": self.pulses_dropped_ring,
+            "pulses_duplicate": self.pulses_duplicate,
+            "pulses_reordered": self.pulses_reordered,
+            "pulses_late_dropped": self.pulses_late_dropped,
         }
 
 
@@ -135,6 +143,10 @@ class _Pulses:
         """The pulses from row ``first`` on."""
         return _Pulses(*(getattr(self, f.name)[first:] for f in fields(self)))
 
+    def rows(self, keep: BoolArray) -> _Pulses:
+        """The pulses where ``keep`` is True."""
+        return _Pulses(*(getattr(self, f.name)[keep] for f in fields(self)))
+
 
 class Pipeline:
     """One run's buffers, alignment, focusing and recording.
@@ -176,6 +188,11 @@ class Pipeline:
         self._latest_pulse_mono_ns = 0
         self._pending: list[AlignedBlock] = []
         self._pending_n = 0
+        self._focused_ns: int | None = None
+        """Time of the newest pulse given to the focuser, GPS ns."""
+        self.out_of_order = 0
+        """Pulses not newer than one before them, kept from the focuser (the ring sorts
+        pulses out already, so this stays 0 unless something upstream breaks)."""
         self._last_nav: tuple[int, FloatArray, FloatArray] = (0, np.zeros(3), np.eye(4)[0])
         """Time (GPS ns), velocity and attitude of the last pulse with navigation."""
         fmt = ring_format(cfg)
@@ -286,6 +303,9 @@ class Pipeline:
         self._focus_pending()
         if self.focuser is not None:
             self._record(self.focuser.finish())
+        r, summary = self.ring, self.summary
+        summary.pulses_dropped_ring, summary.pulses_duplicate = r.dropped, r.duplicates
+        summary.pulses_reordered, summary.pulses_late_dropped = r.reordered, r.late_dropped
         self.recorder.set_metrics(self.summary.as_dict())
         self._update_counters()
         return self.summary
@@ -305,6 +325,15 @@ class Pipeline:
             return
         blocks, self._pending, self._pending_n = self._pending, [], 0
         p = _Pulses.join(blocks)
+        fresh = _strictly_increasing(p.t_ns, self._focused_ns)
+        if not fresh.all():
+            self.out_of_order += int(np.count_nonzero(~fresh))
+            log.warning("pulses out of time order kept from the focuser",
+                        extra={"pulses": int(np.count_nonzero(~fresh))})  # fmt: skip
+            p = p.rows(fresh)
+            if p.t_ns.size == 0:
+                return
+        self._focused_ns = int(p.t_ns[-1])
         self.summary.pulses_nav_flagged += int(np.count_nonzero(~p.usable))
         if self.focuser is None:
             started = self._start_focusing(p)
@@ -414,6 +443,10 @@ class Pipeline:
             "pulses_processed": self.summary.pulses_processed,
             "pulses_nav_flagged": self.summary.pulses_nav_flagged,
             "pulses_dropped_ring": self.ring.dropped,
+            "pulses_duplicate": self.ring.duplicates,
+            "pulses_reordered": self.ring.reordered,
+            "pulses_late_dropped": self.ring.late_dropped,
+            "pulses_out_of_order": self.out_of_order,
             "nav_samples": self.summary.nav_samples,
             "tiles": self.summary.tiles,
         }
@@ -431,6 +464,13 @@ def tile_metrics(data: ComplexArray) -> dict[str, float]:
     if not np.any(data):
         return {"entropy": math.nan, "contrast": math.nan}
     return {"entropy": image_entropy(data), "contrast": image_contrast(data)}
+
+
+def _strictly_increasing(t_ns: IntArray, after_ns: int | None) -> BoolArray:
+    """Mask of the pulses later than ``after_ns`` (GPS ns) and than every pulse before them."""
+    floor = np.iinfo(np.int64).min if after_ns is None else after_ns
+    before = np.maximum.accumulate(np.concatenate([[floor], t_ns[:-1]]))
+    return np.asarray(t_ns > before, dtype=bool)
 
 
 _T = TypeVar("_T")

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import numpy as np
 import pytest
 
-from sarmoco.daemon.echoring import EchoRing, to_complex64
+from sarmoco.daemon.echoring import REORDER_WINDOW, EchoRing, to_complex64
 from sarmoco.daemon.flags import PulseFlag
 from sarmoco.errors import ProcessingError
 
@@ -80,7 +81,7 @@ def test_blocks_stop_at_the_ring_end_and_give_back_unused_rows() -> None:
     ring.commit_block(d, [30, 31], [30, 31], [0, 0], [0, 0])
     assert len(ring) == 0  # c, reserved first, holds d back
     ring.commit_block(c, [20, 21], [20, 21], [0, 0], [0, 0])  # c's rest is aborted, not at head
-    assert len(ring) == 2
+    assert len(ring) == 4  # c's given-back rows are holes that hold nothing back
     np.testing.assert_array_equal(ring.pop(2).pulse_id, [20, 21])
     assert len(ring) == 2  # c's given-back rows are freed, d's pulses follow
     np.testing.assert_array_equal(ring.pop(2).pulse_id, [30, 31])
@@ -163,3 +164,80 @@ def test_threaded_producer_never_blocks_and_nothing_is_corrupted() -> None:
     jumped = np.diff([-1, *seen]) > 1
     np.testing.assert_array_equal(np.array(flags) == PulseFlag.DROPPED_BEFORE, jumped)
     assert ring.committed_total == len(seen) == ring.popped_total
+
+
+def _commit_times(ring: EchoRing, times: list[int]) -> None:
+    """Commit pulses with these times, in this order; each row holds its time."""
+    for t in times:
+        slot = ring.reserve()
+        assert slot is not None
+        slot.samples[...] = t
+        ring.commit(slot, t_ns=t, pulse_id=t)
+
+
+def test_duplicates_are_dropped_and_late_pulses_put_back_in_order() -> None:
+    ring = EchoRing(16, 3)
+    _commit_times(ring, [10, 20, 20, 40, 30, 50, 10])  # a duplicate, a swap, a stale repeat
+    np.testing.assert_array_equal(ring.peek_times(), [10, 20, 30, 40, 50])
+    assert (ring.duplicates, ring.reordered, ring.late_dropped) == (2, 1, 0)
+    batch = ring.pop(3)
+    np.testing.assert_array_equal(batch.t_ns, [10, 20, 30])
+    np.testing.assert_array_equal(batch.samples.real[:, 0], [10, 20, 30])  # rows moved too
+    _commit_times(ring, [25, 30, 60, 45])  # 25: its place was taken; 30: the last taken
+    assert len(ring) == 4  # the consumer's calls sort the new pulses out
+    assert (ring.duplicates, ring.late_dropped, ring.reordered) == (3, 1, 2)
+    batch = ring.pop(len(ring))
+    np.testing.assert_array_equal(batch.t_ns, [40, 45, 50, 60])
+    np.testing.assert_array_equal(batch.samples.real[:, 0], [40, 45, 50, 60])
+    assert ring.free == 16  # the holes were freed with the pulses around them
+    assert ring.committed_total == 11 and ring.popped_total == 7
+
+
+def test_a_pulse_later_than_the_reorder_window_is_dropped() -> None:
+    ring = EchoRing(256, 2)
+    _commit_times(ring, [*range(100, 100 + 10 * (REORDER_WINDOW + 5), 10), 105, 745])
+    t = ring.peek_times()
+    assert ring.late_dropped == 1 and ring.reordered == 1  # 105: too far back; 745: in place
+    assert (np.diff(t) > 0).all() and 105 not in t and 745 in t
+
+
+def test_threaded_producer_through_a_duplicating_reordering_network() -> None:
+    """1 % duplicates and 1 % swaps with the next datagram, the producer in its own thread:
+    the consumer sees every pulse once, in time order, its samples intact."""
+    ring = EchoRing(128, 64, "int16")
+    rng = np.random.default_rng(5)
+    wire: list[int] = []
+    for k in range(10_000):
+        wire.append(k)
+        if rng.random() < 0.01:
+            wire.append(k)
+        if len(wire) > 1 and rng.random() < 0.01:
+            wire[-1], wire[-2] = wire[-2], wire[-1]
+    seen: list[int] = []
+    done = threading.Event()
+
+    def produce() -> None:
+        k = 0
+        while k < len(wire):
+            block = ring.reserve_block(int(rng.integers(1, 20)))
+            if block is None:  # wait: no drops here, every pulse must be sorted out
+                time.sleep(1e-4)
+                continue
+            ids = np.array(wire[k : k + len(block)])
+            block.samples[: ids.size, :, 0] = (ids % 30_000)[:, None]
+            ring.commit_block(block, ids * 1000, ids, np.zeros(ids.size), np.zeros(ids.size))
+            k += ids.size
+        done.set()
+
+    thread = threading.Thread(target=produce, daemon=True)  # a failure must not hang
+    thread.start()
+    while not (done.is_set() and len(ring) == 0):
+        n = len(ring)
+        if n:
+            batch = ring.pop(min(n, 16))
+            assert (batch.samples[:, :, 0] == (batch.t_ns // 1000 % 30_000)[:, None]).all()
+            seen.extend((batch.t_ns // 1000).tolist())
+    thread.join()
+    assert ring.duplicates == len(wire) - 10_000 > 50
+    assert ring.reordered > 50
+    assert seen == sorted(set(seen)) and len(seen) + ring.late_dropped == 10_000
