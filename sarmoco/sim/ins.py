@@ -142,7 +142,6 @@ class InsGrade:
     attitude_from_course: bool = False
     rate_fixed: bool = False
 
-    @property
     def velocity_channel(self) -> AidedChannel:
         """The aided velocity error of one NED axis, SI units."""
         return AidedChannel(
@@ -389,7 +388,9 @@ def aided_error(
     # the bias-driven part starts from its stationary law given the bias (cov c, variance v)
     c = sb**2 * tau * tb / (tau + tb)
     v = channel.bias_rms**2
-    x0 = (c / sb**2) * bias[0] + math.sqrt(max(v - c**2 / sb**2, 0.0)) * draws[1, 0] if sb else 0.0
+    x0 = 0.0
+    if sb > 0:
+        x0 = (c / sb**2) * bias[0] + math.sqrt(max(v - c**2 / sb**2, 0.0)) * draws[1, 0]
     xb = _ar1(phi, x0, tau * (1 - phi) * bias[:-1])
     q = channel.noise_density * math.sqrt(0.5 * tau * (1 - phi**2))
     xn = _ar1(phi, channel.noise_rms * draws[2, 0], q * draws[3, 1:])
@@ -467,7 +468,7 @@ def measure_ins(
     dt = float(t_s[-1] - t_s[0]) / (n - 1) if n > 1 else 1.0 / rate
     truth = traj_fn(t_s)
     rng = np.random.default_rng(seed)
-    aided = [aided_error(rng, n, dt, g.velocity_channel) for _ in range(3)]
+    aided = [aided_error(rng, n, dt, g.velocity_channel()) for _ in range(3)]
     receiver = _bias_process(rng, t_s, g.vel_bias_mps, g.vel_bias_drift_mps_per_sqrt_s)
     vel_bias = np.stack([b for _, b in aided], axis=1) + receiver
     vel_err = np.stack([x for x, _ in aided], axis=1) + receiver
