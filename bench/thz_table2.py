@@ -115,8 +115,15 @@ def scenario(scale: float) -> Scenario:
         Target((ALONG_OFFSET_M, gc - off, 0.0)),
         Target((-ALONG_OFFSET_M, gc + off, 0.0)),
     )
+    # No lever arm: this study feeds the INS samples straight to the focusing core, which
+    # takes the antenna phase centre's velocity (the daemon's aligner adds the arm).
     return load_preset(
-        "thz-spotlight", scale, center_slant_range_m=3000.0, speed_mps=62.0, targets=targets
+        "thz-spotlight",
+        scale,
+        center_slant_range_m=3000.0,
+        speed_mps=62.0,
+        targets=targets,
+        lever_arm_m=(0.0, 0.0, 0.0),
     )
 
 
