@@ -25,7 +25,7 @@ from sarmoco.processing.autofocus import (
     SlidingSubapertureAutofocus,
 )
 from sarmoco.processing.geometry import ReferenceTrack, vector_to_imaging
-from sarmoco.processing.imaging.presum import AzimuthPrefilter
+from sarmoco.processing.imaging.presum import AzimuthPrefilter, fill_slots, slot_steps
 from sarmoco.processing.imaging.tiles import Tile, TileImager, TileLayout
 from sarmoco.processing.mocomp import (
     InsMotionCompensator,
@@ -108,6 +108,10 @@ class Focuser:
             else None
         )
         self._last_tau_ns: int | None = None
+        self._slot_ns: int | None = None
+        """Time of the last pulse given to the autofocus, GPS ns."""
+        self._period_ns = round(1e9 / self.radar.prf_hz)
+        self._max_fill_slots = max(1, round(cfg.autofocus.subaperture_s * self.radar.prf_hz))
         af = cfg.autofocus
         self.autofocus = (
             SlidingSubapertureAutofocus(
@@ -174,9 +178,27 @@ class Focuser:
         if self.autofocus is None:
             out.tiles = self._image(rc, t_ns)
             return out
+        rc, t_ns = self._keep_slots(rc, t_ns)
         focused, corr = self.autofocus.push(rc, t_ns)
         out.tiles = self._image(focused, corr.t_ns)
         return out
+
+    def _keep_slots(self, rc: ComplexArray, t_ns: IntArray) -> tuple[ComplexArray, IntArray]:
+        """Zero rows in the PRF slots of missing pulses, for the autofocus.
+
+        The autofocus estimates Doppler rates with FFTs over the pulses of a subaperture,
+        taken as uniformly spaced: a lost datagram that left no hole would shift every
+        later pulse of the subaperture by a PRI (2 % loss: -13.1 -> -10.4..-11.1 dB
+        azimuth PSLR on ku-vehicle x0.1). Gaps up to a subaperture are filled; a longer
+        one leaves no subaperture to estimate across anyway.
+        """
+        if t_ns.size == 0:
+            return rc, t_ns
+        last = self._slot_ns if self._slot_ns is not None else int(t_ns[0]) - self._period_ns
+        steps = slot_steps(t_ns, last, self._period_ns)
+        self._slot_ns = int(t_ns[-1])
+        steps[(steps < 1) | (steps > self._max_fill_slots)] = 1
+        return fill_slots(rc, t_ns, steps, last)
 
     def finish(self) -> FocusOutput:
         """Release what autofocus and the pre-filter still hold; close every tile (end of run)."""

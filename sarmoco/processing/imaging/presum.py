@@ -168,8 +168,7 @@ class AzimuthPrefilter:
             return rc, t_ns
         if self._hist is None:
             self._start(rc.shape[1], int(t_ns[0]))
-        steps = np.diff(t_ns, prepend=self._last_t)
-        steps = np.rint(steps / self._period_ns).astype(np.int64)
+        steps = slot_steps(t_ns, self._last_t, self._period_ns)
         if np.any(steps < 1):
             raise ProcessingError("AzimuthPrefilter: pulse times do not increase by a slot")
         gap = np.flatnonzero(steps > self.taps.size)
@@ -203,20 +202,9 @@ class AzimuthPrefilter:
         self, rc: ComplexArray, t_ns: IntArray, steps: IntArray
     ) -> tuple[ComplexArray, IntArray]:
         """Place a block without long gaps on its slots (zeros between) and filter."""
-        offset = np.cumsum(steps)  # slot of each pulse, 1 = the slot after the last one
-        n_new = int(offset[-1])
-        assert self._hist is not None
-        if n_new == rc.shape[0]:  # no pulse missing: the block is the slots
-            new = np.ascontiguousarray(rc, dtype=np.complex64)
-        else:
-            new = np.zeros((n_new, self._hist.shape[1]), np.complex64)
-            new[offset - 1] = rc
-        known = np.concatenate([[0], offset]).astype(np.float64)
-        dt_known = np.concatenate([[0], t_ns - self._last_t]).astype(np.float64)  # exact: small
-        dt_new = np.interp(np.arange(1, n_new + 1), known, dt_known)
-        t_new = self._last_t + np.rint(dt_new).astype(np.int64)
+        new, t_new = fill_slots(rc, t_ns, steps, self._last_t)
         self._last_t = int(t_ns[-1])
-        return self._filter(new, t_new, self._next_slot + n_new - 1 - self._half)
+        return self._filter(new, t_new, self._next_slot + new.shape[0] - 1 - self._half)
 
     def _filter(
         self, new: ComplexArray, t_new: IntArray, last_centre: int
@@ -245,6 +233,64 @@ class AzimuthPrefilter:
             self._hist = np.concatenate([hist[new.shape[0] :], new])
         self._hist_t = t_x[t_x.shape[0] - n_hist :].copy()
         return out, t_x[centres - first_slot]
+
+
+def slot_steps(t_ns: IntArray, last_ns: int, period_ns: float) -> IntArray:
+    """Slots of the nominal PRF grid from each pulse's predecessor to it.
+
+    Parameters
+    ----------
+    t_ns : ndarray of int64, shape (P,)
+        Pulse times, GPS ns.
+    last_ns : int
+        Time of the pulse before the first, GPS ns.
+    period_ns : float
+        Nominal pulse repetition interval, ns.
+
+    Returns
+    -------
+    ndarray of int64, shape (P,)
+        ``round((t_k - t_{k-1}) / period)``: 1 between consecutive pulses, ``1 + m``
+        after ``m`` missing ones.
+    """
+    return np.rint(np.diff(t_ns, prepend=last_ns) / period_ns).astype(np.int64)
+
+
+def fill_slots(
+    rc: ComplexArray, t_ns: IntArray, steps: IntArray, last_ns: int
+) -> tuple[ComplexArray, IntArray]:
+    """Pulses on their slots of the PRF grid: a zero row in every empty slot.
+
+    Parameters
+    ----------
+    rc : ndarray of complex, shape (P, S)
+        Pulses (range-compressed or raw).
+    t_ns : ndarray of int64, shape (P,)
+        Their times, GPS ns, increasing.
+    steps : ndarray of int, shape (P,)
+        Slots from each pulse's predecessor to it (:func:`slot_steps`), each >= 1.
+    last_ns : int
+        Time of the pulse before the first, GPS ns.
+
+    Returns
+    -------
+    slots : ndarray of complex64, shape (sum(steps), S)
+        The pulses at their slots, zeros between (``rc`` as complex64 when no slot is
+        empty).
+    t_slots : ndarray of int64, shape (sum(steps),)
+        Slot times, GPS ns: the pulses' own, an empty slot's interpolated linearly
+        between the pulses around it.
+    """
+    offset = np.cumsum(steps)  # slot of each pulse, 1 = the slot after the last one
+    n_new = int(offset[-1]) if offset.size else 0
+    if n_new == rc.shape[0]:  # no pulse missing: the block is the slots
+        return np.ascontiguousarray(rc, dtype=np.complex64), t_ns
+    new = np.zeros((n_new, rc.shape[1]), np.complex64)
+    new[offset - 1] = rc
+    known = np.concatenate([[0], offset]).astype(np.float64)
+    dt_known = np.concatenate([[0], t_ns - last_ns]).astype(np.float64)  # exact: small
+    dt_new = np.interp(np.arange(1, n_new + 1), known, dt_known)
+    return new, last_ns + np.rint(dt_new).astype(np.int64)
 
 
 def _empty(n_samples: int) -> tuple[ComplexArray, IntArray]:
