@@ -9,6 +9,7 @@ IRW ≤ 1.1 × theory) at the right place.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import socket
 from pathlib import Path
@@ -28,7 +29,7 @@ from sarmoco.daemon.store import open_store
 from sarmoco.drivers.radar import RadarUdpSource
 from sarmoco.drivers.samples import AttitudeSample, EchoPacket, Validity, VelocitySample
 from sarmoco.drivers.vita49 import encode_signal_packet
-from sarmoco.processing.metrics import point_target_metrics
+from sarmoco.processing.metrics import PointTargetMetrics, point_target_metrics
 from sarmoco.processing.types import Image
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
@@ -123,30 +124,67 @@ def test_an_empty_tile_is_a_product_not_an_error() -> None:
 # -- autofocus subapertures scaled to the scenario (tests/app/test_simconfig.py) ------------
 
 
+# -- thz-spotlight: the autofocus removes what the INS alone leaves -------------------------
+
+INS_ACCEL_BIAS_MPS2 = 0.2
+"""East acceleration bias of the INS in the thz-spotlight test, m/s²."""
+
+
+def _with_ins_accel_bias(run: SimRun, bias_mps2: float) -> SimRun:
+    """``run`` whose INS east velocity drifts by ``bias_mps2`` per second from the first pulse."""
+    nav = run.ins.nav
+    vel = nav.vel_ned.copy()
+    vel[:, 1] += bias_mps2 * (nav.t_ns - run.t_ns[0]) * 1e-9
+    ins = dataclasses.replace(run.ins, nav=dataclasses.replace(nav, vel_ned=vel))
+    return dataclasses.replace(run, ins=ins)
+
+
+def _target_metrics(
+    run: SimRun, cfg: Config, store_path: Path
+) -> list[tuple[PointTargetMetrics, tuple[float, float, float]]]:
+    """Feed ``run`` through a pipeline with ``cfg``; the metrics of every target in the
+    recorded strip (a ±1 m window: one target only) and its place in the imaging frame, m."""
+    pipe = feed(run, cfg, store_path)
+    store = open_store(store_path)
+    if cfg.autofocus.enabled:
+        assert store.committed("autofocus") >= 2
+    image = strip(store)
+    assert pipe.focuser is not None and image is not None
+    out = []
+    for tg in run.targets_ned:
+        x, y, z = (float(v) for v in pipe.focuser.track.rotation @ (tg - run.apc_ned[0]))
+        i = int(np.argmin(np.abs(image.axis0_m - x)))
+        j = int(np.argmin(np.abs(image.axis1_m - y)))
+        h0, h1 = (round(1.0 / abs(d)) for d in image.spacing_m)
+        rows, cols = slice(max(i - h0, 0), i + h0 + 1), slice(max(j - h1, 0), j + h1 + 1)
+        sub = Image(image.data[rows, cols], image.axis0_m[rows], image.axis1_m[cols], image.frame)
+        out.append((point_target_metrics(sub), (x, y, z)))
+    return out
+
+
 def test_thz_spotlight_focuses_with_the_scaled_autofocus(tmp_path: Path) -> None:
     """thz-spotlight (0.12 s aperture, shorter than the default 0.4 s subaperture) with
     0.3 m rms sway and a tactical INS, through the pipeline with the autofocus settings
     of :func:`scenario_config`: the autofocus runs (it never did with the default) and
     every target focuses to PSLR <= -12.5 dB and IRW <= 1.1 x theory in both dimensions
-    within 0.5 m of its place (INS alone leaves the azimuth PSLR near -11.8 dB)."""
-    run = simulate(load_preset("thz-spotlight", 0.1), MOTION, "tactical", seed=0)
+    within 0.5 m of its place. The INS velocities carry an east ramp of
+    :data:`INS_ACCEL_BIAS_MPS2` (a 20 mg accelerometer bias that INS-only compensation
+    integrates into a quadratic LOS error): INS alone leaves every target's azimuth PSLR
+    above the bar (measured -6.5 dB; -13.1 to -13.2 dB with the autofocus), so a no-op
+    autofocus fails. (Without the ramp the tactical INS alone now reaches -13.2 dB.)"""
+    run = _with_ins_accel_bias(
+        simulate(load_preset("thz-spotlight", 0.1), MOTION, "tactical", seed=0),
+        INS_ACCEL_BIAS_MPS2,
+    )
     scn = run.scenario
+    ins_only = scenario_config(
+        scn, radar={"sample_format": "float32"}, autofocus={"enabled": False}
+    )
+    for m, _ in _target_metrics(run, ins_only, tmp_path / "ins.zarr"):
+        assert m.axis0.pslr_db > -12.5, m
     cfg = scenario_config(scn, radar={"sample_format": "float32"})
     assert cfg.autofocus.enabled and cfg.autofocus.subaperture_s < scn.aperture_s / 2
-    pipe = feed(run, cfg, tmp_path / "thz.zarr")
-    store = open_store(tmp_path / "thz.zarr")
-    assert store.committed("autofocus") >= 2
-    image = strip(store)
-    assert pipe.focuser is not None and image is not None
-    track = pipe.focuser.track
-    for tg in run.targets_ned:
-        x, y, z = track.rotation @ (tg - run.apc_ned[0])
-        i = int(np.argmin(np.abs(image.axis0_m - x)))
-        j = int(np.argmin(np.abs(image.axis1_m - y)))
-        h0, h1 = (round(1.0 / abs(d)) for d in image.spacing_m)  # +-1 m: one target only
-        rows, cols = slice(max(i - h0, 0), i + h0 + 1), slice(max(j - h1, 0), j + h1 + 1)
-        sub = Image(image.data[rows, cols], image.axis0_m[rows], image.axis1_m[cols], image.frame)
-        m = point_target_metrics(sub)
+    for m, (x, y, z) in _target_metrics(run, cfg, tmp_path / "thz.zarr"):
         irw_rg = 0.886 * scn.radar.range_resolution_m * math.hypot(y, z) / y
         assert math.hypot(m.axis0.peak_m - x, m.axis1.peak_m - y) < 0.5, m
         assert m.axis0.pslr_db <= -12.5 and m.axis1.pslr_db <= -12.5, m
