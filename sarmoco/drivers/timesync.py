@@ -3,9 +3,9 @@
 * :class:`LinearClockFit` — offset and skew from (device time, reference time)
   pairs over a sliding window, with outlier rejection; used for SBG UTC_TIME,
   MAVLink SYSTEM_TIME and dataflash GPS records.
-* :class:`TimesyncEstimator` — the MAVLink TIMESYNC exchange: round-trip
-  filtering (only the fastest round trips are trusted), offset and skew,
-  outlier rejection, reset on reboot, and a stated error bound.
+* :class:`TimesyncEstimator` — the MAVLink TIMESYNC exchange: minimum-round-trip
+  filtering (only exchanges within a margin of the fastest recent round trip are
+  trusted), offset and skew, reset on reboot, and a stated error bound.
 * :class:`CounterUnwrapper` — extends a wrapping device counter and detects reboots.
 """
 
@@ -204,44 +204,68 @@ class TimesyncEstimator:
     Parameters
     ----------
     window : int
-        Exchanges kept.
-    keep_fraction : float
-        Only exchanges whose round trip is within the fastest ``keep_fraction``
-        of the window enter the fit (slow round trips carry queueing asymmetry).
+        Exchanges kept: the sliding window over which the minimum round trip is
+        taken and the clock fitted (32 at the MAVLink source's 4 Hz: 8 s).
+    rtt_margin_ns : int
+        Minimum-round-trip filter: only exchanges whose round trip is at most the
+        window's minimum plus this enter the fit, ns (see Notes).
     max_rtt_ns : int
-        Exchanges slower than this are discarded outright.
+        Exchanges slower than this are discarded outright, ns.
     outlier_ns : int
-        Exchanges whose offset disagrees with the fit by more than this plus
-        their own half round trip are rejected.
+        An admitted exchange further than this from the fit of the earlier ones is
+        rejected; half a window of them in a row means the remote clock stepped and
+        the fit restarts from them (:class:`LinearClockFit`), ns.
+    ready_exchanges : int
+        Exchanges in the window before :meth:`to_local` answers: the minimum of
+        one round trip is no minimum (the first request often waits while the
+        peer starts up).
 
     Notes
     -----
-    With a symmetric path the remote instant lies within ±RTT/2 of the
-    midpoint; :attr:`bound_ns` is half the slowest round trip admitted to the
-    fit plus three times the fit's RMS residual. A remote clock that goes
-    backwards (reboot) resets the estimate.
+    Minimum-round-trip filter, as NTP's clock filter and PX4's timesync. The remote
+    stamp ``tc1`` is taken between our send ``t_s`` and our receive ``t_r``, so an
+    exchange's midpoint ``(t_s + t_r) / 2`` differs from the local time of ``tc1``
+    by ``(d_out - d_back) / 2``, the one-way delays' asymmetry. A loaded host (or a
+    queue on the link) delays one leg: with ``d_out = a + x`` and ``d_back = b + y``
+    (``a``, ``b`` the unloaded delays, ``x``, ``y`` ≥ 0 the queueing), the error is
+    ``(a - b) / 2 + (x - y) / 2`` and ``|x - y| ≤ x + y = RTT - a - b``. An exchange
+    admitted with ``RTT ≤ RTT_min + rtt_margin_ns`` (``RTT_min``: the smallest round
+    trip in the window) therefore carries at most ``rtt_margin_ns / 2`` more
+    queueing error than the fastest one, however long the delays of the others; a
+    fastest-fraction rule would admit delayed exchanges whenever most of the window
+    is delayed (a loaded host). The admitted exchanges are fitted for offset and skew
+    (:class:`LinearClockFit`, skew clipped at :data:`MAX_SKEW`).
+
+    :attr:`bound_ns` is half the slowest admitted round trip (causality: the remote
+    instant lies between send and receive) plus three times the fit's RMS residual.
+    A remote clock that goes back by more than ``max_rtt_ns`` is a reboot and resets
+    the estimate; a smaller step back is a response overtaken by a later one (no
+    exchange is slower than ``max_rtt_ns``) and is kept.
     """
 
     def __init__(
         self,
         window: int = 32,
-        keep_fraction: float = 0.5,
+        rtt_margin_ns: int = 500_000,
         max_rtt_ns: int = 200_000_000,
         outlier_ns: int = 5_000_000,
+        ready_exchanges: int = 3,
     ) -> None:
         self._window: deque[TimesyncExchange] = deque(maxlen=window)
-        self._keep = keep_fraction
+        self._margin = rtt_margin_ns
         self._max_rtt = max_rtt_ns
-        self._outlier = outlier_ns
-        self._fit = LinearClockFit(window=window, outlier_ns=1 << 62, min_pairs=4)
+        self._ready_exchanges = ready_exchanges
+        self._fit = LinearClockFit(window=window, outlier_ns=outlier_ns, min_pairs=4)
         self._fit_rtt_ns = 0
         self.rejected = 0
+        """Exchanges discarded (round trip negative or over ``max_rtt_ns``) or not
+        admitted to the fit when they arrived."""
         self.resets = 0
 
     @property
     def ready(self) -> bool:
-        """Whether at least one exchange has been accepted."""
-        return self._fit.ready
+        """Whether ``ready_exchanges`` exchanges are in the window, so :meth:`to_local` answers."""
+        return self._fit.ready and len(self._window) >= self._ready_exchanges
 
     @property
     def bound_ns(self) -> int:
@@ -255,27 +279,36 @@ class TimesyncEstimator:
         self.resets += 1
 
     def add(self, ex: TimesyncExchange) -> bool:
-        """Add one exchange; returns False when it is discarded or rejected."""
+        """Add one exchange; returns False when it is discarded or not admitted to the fit."""
         if ex.rtt_ns < 0 or ex.rtt_ns > self._max_rtt:
             self.rejected += 1
             return False
-        if self._window and ex.remote_ns < self._window[-1].remote_ns:
+        if self._window and ex.remote_ns < self._window[-1].remote_ns - self._max_rtt:
             self.reset()
-        if self._fit.ready:
-            err = abs(self._fit.map(ex.remote_ns) - ex.midpoint_ns)
-            if err > self._outlier + ex.rtt_ns // 2:
-                self.rejected += 1
-                return False
         self._window.append(ex)
-        rtts = sorted(e.rtt_ns for e in self._window)
-        cut = rtts[max(0, int(len(rtts) * self._keep) - 1)]
-        best = [e for e in self._window if e.rtt_ns <= cut]
+        rtt_min = min(e.rtt_ns for e in self._window)
+        admitted = sorted(
+            (e for e in self._window if e.rtt_ns <= rtt_min + self._margin),
+            key=lambda e: e.remote_ns,
+        )
         self._fit.reset()
-        for e in best:
-            self._fit.add(e.remote_ns, e.midpoint_ns)
-        self._fit_rtt_ns = cut
-        return True
+        accepted = False
+        for e in admitted:
+            ok = self._fit.add(e.remote_ns, e.midpoint_ns)
+            accepted = ok if e is ex else accepted
+        self._fit_rtt_ns = max(e.rtt_ns for e in admitted)
+        if not accepted:
+            self.rejected += 1
+        return accepted
 
     def to_local(self, remote_ns: int) -> int:
-        """Local clock time of a remote clock time, ns (raises ClockError before the first sync)."""
+        """Local clock time of a remote clock time, ns.
+
+        Raises
+        ------
+        ClockError
+            Before ``ready_exchanges`` exchanges.
+        """
+        if not self.ready:
+            raise ClockError("TIMESYNC not settled yet (too few exchanges)")
         return self._fit.map(remote_ns)
