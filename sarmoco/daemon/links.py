@@ -5,7 +5,7 @@ INS protocols are a registry, :data:`INS_OPENERS`: protocol name (the values of
 function that opens ``ins.link`` with that protocol. Each opener imports its driver
 when called (as python-can loads its interfaces), so the configuration, which needs
 only the names, does not load pymavlink or python-can. A new protocol is one opener
-here and its emitter in :mod:`sarmoco.sim.insemitters`.
+here and its emitter in the simulator (``INS_EMITTERS``, which the tests hold to these names).
 """
 
 from __future__ import annotations
