@@ -180,7 +180,7 @@ class Table:
 
 
 class Recorder(Closing):
-    """Writes one run into a new zarr v3 store (the layout is in the module doc).
+    """Writes one run into a new zarr v3 store (layout: :mod:`sarmoco.daemon.schema`).
 
     Parameters
     ----------

@@ -93,9 +93,9 @@ def test_nav_samples_round_trip_through_a_store(recorder: Recorder) -> None:
         while not source.eof:
             replayed += source.poll()
     assert len(replayed) == len(accepted) == len(rows) - 1
-    for got, want in zip(replayed, accepted, strict=True):
-        assert isinstance(got, VelocitySample | AttitudeSample)
-        same_sample(got, want)
+    for sample, want in zip(replayed, accepted, strict=True):
+        assert isinstance(sample, VelocitySample | AttitudeSample)
+        same_sample(sample, want)
 
 
 def test_a_nav_kind_the_decoder_does_not_know_is_an_error() -> None:
