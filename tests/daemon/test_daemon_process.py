@@ -667,8 +667,9 @@ def decode_all(cfg: Config, path: Path) -> list[Sample]:
         ("radar", {"prf_hz": -3.0}, "radar.prf_hz"),
         ("recorder", {"fsync_s": 1.0}, "recorder.fsync_s"),
         ("ins", {"protocol": "nmea"}, "ins.protocol"),
+        ("radar", {"range_gate_delay_s": 0.0}, "inside the nadir range geometry.height_m"),
     ],
-    ids=["bound", "unknown-key", "not-allowed"],
+    ids=["bound", "unknown-key", "not-allowed", "gate-inside-nadir"],
 )
 def test_bad_config_exits_2_naming_the_key(
     sim: SimFiles, tmp_path: Path, section: str, values: dict[str, Any], key: str
