@@ -9,6 +9,8 @@ every INS sample at its time; the live openers read the same bytes from a pseudo
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -69,6 +71,18 @@ def test_the_registries_and_the_configuration_name_the_same_protocols() -> None:
     assert row["allowed"] == '"mavlink", "sbg", "sbg-can"' and row["type"] == "string"
     for name in INS_OPENERS:
         assert parse_config({"ins": {"protocol": name}}).ins.protocol == name
+
+
+def test_the_configuration_loads_no_ins_driver() -> None:
+    """The openers import their drivers when called: reading a configuration (which takes
+    the protocol names from the registry) loads neither pymavlink nor python-can."""
+    code = (
+        "import sys\nimport sarmoco.daemon.config\n"
+        "print(sorted(m for m in ('pymavlink', 'can', 'serial') if m in sys.modules))"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "[]"
 
 
 def test_an_unknown_protocol_is_a_config_error_naming_the_key() -> None:
