@@ -6,8 +6,9 @@ onto GPS time by :class:`BootClockModel`:
 
 * TIMESYNC (live links): the source sends a request every ``timesync_period_s``;
   :class:`~sarmoco.drivers.timesync.TimesyncEstimator` fits boot time → host
-  clock from the fastest round trips. The host clock (``time.time_ns``) must be
-  UTC-disciplined (chrony/PTP/GPS); GPS = host + leap seconds. The estimate's
+  clock from the exchanges within a margin of the fastest recent round trip. The
+  host clock (``time.time_ns``) must be UTC-disciplined (chrony/PTP/GPS);
+  GPS = host + leap seconds. The estimate's
   stated error bound is :attr:`MavlinkSource.time_bound_ns`.
 * SYSTEM_TIME (always; the only reference in replay): pairs of
   ``time_boot_ms`` and the autopilot's GPS-derived UNIX time, fitted with
@@ -290,7 +291,9 @@ class MavlinkSource(Source):
         Whether ``time.time_ns()`` is UTC-disciplined (then TIMESYNC maps boot
         time to GPS; otherwise only SYSTEM_TIME does).
     timesync_period_s : float
-        Interval between TIMESYNC requests, s (live links).
+        Interval between TIMESYNC requests, s (live links); a fifth of it until the
+        estimator has the exchanges it needs (after start and after a reboot), so
+        samples do not wait long for their first time stamps.
     baudrate : int
         Serial line rate, baud.
     source_system, source_component : int
@@ -368,7 +371,8 @@ class MavlinkSource(Source):
         now = time.time_ns()
         if now < self._next_timesync_ns or self._target is None:
             return
-        self._next_timesync_ns = now + self._timesync_period_ns
+        settled = self.decoder.model.timesync.ready
+        self._next_timesync_ns = now + self._timesync_period_ns // (1 if settled else 5)
         self._outstanding = {k: v for k, v in self._outstanding.items() if now - k < 10**9}
         self._outstanding[now] = now
         self._conn.mav.timesync_send(0, now)

@@ -42,6 +42,8 @@ class Autopilot(threading.Thread):
         self.duration_s = duration_s
         self.truth: dict[int, tuple[int, tuple[float, ...], tuple[float, ...]]] = {}
         self.commands: list[tuple[int, float]] = []
+        self.timesync_requests: list[float] = []
+        """Monotonic times at which TIMESYNC requests were answered, s."""
 
     def boot_ns(self) -> int:
         return round((time.time_ns() - self.h0) * (1 + SKEW))
@@ -63,14 +65,17 @@ class Autopilot(threading.Thread):
             while (m := self.conn.recv_match(blocking=False)) is not None:
                 if m.get_type() == "TIMESYNC" and m.tc1 == 0:
                     mav.timesync_send(self.boot_ns(), m.ts1)
+                    self.timesync_requests.append(time.monotonic())
                 elif m.get_type() == "COMMAND_LONG":
                     self.commands.append((m.command, m.param1))
             k += 1
             time.sleep(0.01)
 
 
-def run_link(key: bytes | None, sender_key: bytes | None) -> tuple[MavlinkSource, Autopilot, list]:
-    src = MavlinkSource("udpin:127.0.0.1:0", signing_key=key, timesync_period_s=0.1)
+def run_link(
+    key: bytes | None, sender_key: bytes | None, timesync_period_s: float = 0.1
+) -> tuple[MavlinkSource, Autopilot, list]:
+    src = MavlinkSource("udpin:127.0.0.1:0", signing_key=key, timesync_period_s=timesync_period_s)
     port = src._conn.port.getsockname()[1]
     ap = Autopilot(port, sender_key)
     ap.start()
@@ -102,6 +107,18 @@ def test_udp_round_trip_timesync_rates() -> None:
         else:
             assert s.quat_wxyz == pytest.approx(q, abs=1e-6)
     assert max(errors) < 20e6 and src.time_bound_ns < 20e6  # loopback: well under 20 ms
+
+
+def test_timesync_settles_quickly_then_slows_down() -> None:
+    """Requests go five times faster until the estimator has its three exchanges (the
+    samples wait for them), then at the configured period."""
+    src, ap, got = run_link(None, None, timesync_period_s=0.25)
+    src.close()
+    t = np.array(ap.timesync_requests)
+    assert t.size >= 8
+    assert t[2] - t[0] < 0.15  # three exchanges in ~0.1 s, not 0.5 s
+    assert np.median(np.diff(t[4:])) == pytest.approx(0.25, abs=0.03)
+    assert src.decoder.model.timesync.ready and got
 
 
 def test_signing_rejects_unsigned_and_bad_keys() -> None:
