@@ -8,7 +8,7 @@ origin) and nothing else. The rows:
 
 - ``nav only``: backprojection on that track;
 - ``baseline``: the paper's comparison, contrast optimisation, phase step only (no envelope);
-- ``two-step``: map drift, envelope step then second-order phase step (METHODS §3);
+- ``two-step``: map drift, envelope step then second-order phase step (docs/methods.md §3);
 - ``two-step+PGA``: followed by PGA on the corrected pulses.
 
 Every image is a backprojection on a small ground grid around each target (IMAGING's
@@ -103,7 +103,7 @@ def expected_position(
 ) -> FloatArray:
     """Where target ``k`` appears in a backprojection on ``track`` of the corrected data, NED m.
 
-    The corrections cannot observe a constant or a linear LOS displacement (METHODS §3), and
+    The corrections cannot observe a constant or a linear LOS displacement (docs/methods.md §3), and
     GPS-grade navigation leaves both against the fitted track (with 0.3 m noise over a
     1.4 s aperture the track's LOS slope is off by about 0.01 v): a linear range error ``b t``
     moves a target by ``-b R / v`` along track, a constant one moves it in range. So the

@@ -13,7 +13,8 @@ target, with the APC positions the row's method believes in):
 
 - ``truth``: the true APC positions, no compensation (the ideal-focus reference);
 - ``raw``: no compensation, imaged on the INS reference track;
-- ``INS D_los (1st order)``: METHODS §2 with the scene-centre β, envelope shift above 0.25 cell;
+- ``INS D_los (1st order)``: docs/methods.md §2 with the scene-centre β, envelope shift above
+  0.25 cell;
 - ``INS D_los + range-variant``: β per range bin plus the eq. 29 term;
 - ``position-based (GPS)``: the deviation of the GPS-grade positions (10 Hz, 0.3 m white,
   ≈2 m offset; ``sim.ins.GRADES["gps"]``) from their own reference track, same correction and

@@ -1,4 +1,4 @@
-"""Lint, types and the layering rule of DESIGN.md, run as part of the suite."""
+"""Lint, types and the layering rule of docs/design.md §1, run as part of the suite."""
 
 from __future__ import annotations
 

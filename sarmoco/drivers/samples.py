@@ -1,7 +1,7 @@
 """Typed, timestamped samples produced by every driver.
 
 Drivers do not depend on :mod:`sarmoco.processing`; the daemon converts these
-records into its own arrays. Conventions (METHODS §1): SI units, velocities in
+records into its own arrays. Conventions (docs/methods.md §1): SI units, velocities in
 local NED (north, east, down) m/s, quaternions scalar-first ``(w, x, y, z)``
 rotating body-frame vectors into NED, times in GPS ns since 1980-01-06
 (:mod:`sarmoco.drivers.clock`).

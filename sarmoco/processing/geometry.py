@@ -1,4 +1,4 @@
-"""Frames of METHODS.md §1: NED, the imaging frame, look angle and lever arm.
+"""Frames of docs/methods.md §1: NED, the imaging frame, look angle and lever arm.
 
 The imaging frame has its origin at the reference antenna phase centre (APC)
 at the first pulse of the aperture; **x** is the horizontal unit vector of the
@@ -109,7 +109,7 @@ class ReferenceTrack:
         """Actual minus reference APC at the same times, imaging frame, (P, 3), m.
 
         Columns are (Δx, Δy, Δz); Δy, Δz are the cross-track and vertical
-        deviations that METHODS §1 projects on the line of sight.
+        deviations that docs/methods.md §1 projects on the line of sight.
         """
         return ned_to_imaging(pos_ned, self) - self.position_imaging(t_ns)
 
@@ -196,7 +196,7 @@ def imaging_to_ned(pos_img: FloatArray, track: ReferenceTrack) -> FloatArray:
 
 
 def look_angle(slant_range_m: FloatArray | float, depth_m: float) -> FloatArray:
-    """Off-nadir look angle over flat ground, cos β = H / r (METHODS §1).
+    """Off-nadir look angle over flat ground, cos β = H / r (docs/methods.md §1).
 
     Parameters
     ----------

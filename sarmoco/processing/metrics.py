@@ -1,4 +1,4 @@
-"""Image quality measures: point-target response and scene sharpness (METHODS §5).
+"""Image quality measures: point-target response and scene sharpness (docs/methods.md §5).
 
 Point-target measures work on a 1-D complex cut through the peak. The cut is
 spectrally centred (its dominant spatial frequency, e.g. the carrier that a

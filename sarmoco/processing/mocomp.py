@@ -1,4 +1,4 @@
-"""INS-only per-pulse motion compensation (METHODS.md §2, THz paper eqs. 14-32).
+"""INS-only per-pulse motion compensation (docs/methods.md §2, THz paper eqs. 14-32).
 
 The APC deviation from the reference track is the trapezoidal integral of the
 INS velocity (imaging frame y, z) over the actual pulse times::

@@ -1,4 +1,4 @@
-"""Navigation samples interpolated to pulse times (DESIGN.md, Time).
+"""Navigation samples interpolated to pulse times (docs/design.md §4, time base).
 
 Position: cubic Hermite between the two bracketing samples using the INS
 velocity as the end-point derivatives (local, so it streams: a pulse needs

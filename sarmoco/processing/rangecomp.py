@@ -6,7 +6,7 @@ The waveform conventions are those of :mod:`sarmoco.sim.echo` (a centred chirp
 conjugate of that baseband (``radar.iq_conjugate``, spectral inversion) has its samples
 conjugated first. After :func:`compress`, a point target at slant range R peaks at
 ``range_axis_m(radar) == R`` (between bins when R is) and the peak carries the phase
-``exp(-j 4 pi R / lambda)`` (METHODS §1). Output bins are in increasing slant range for both
+``exp(-j 4 pi R / lambda)`` (docs/methods.md §1). Output bins are in increasing slant range for both
 receive chains and both chirp directions. Pulses are independent, so any block of pulses can
 be compressed on its own.
 

@@ -2,7 +2,7 @@
 
 Units are SI throughout (m, s, Hz, rad); times are GPS time in integer
 nanoseconds (``int64``) unless a name says otherwise. Positions and velocities
-are in local NED (north, east, down) unless a name says ``imaging`` (METHODS §1).
+are in local NED (north, east, down) unless a name says ``imaging`` (docs/methods.md §1).
 Quaternions are scalar-first ``[w, x, y, z]`` and rotate body-frame vectors
 into NED (3-2-1 yaw, pitch, roll).
 """

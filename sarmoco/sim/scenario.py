@@ -14,7 +14,7 @@ overrides given to :func:`load_preset` are in the track frame. The antenna phase
 describes. Simulation time ``t_s`` counts seconds from the first pulse, whose GPS
 time is ``t0_ns``.
 
-Presets (``sarmoco/sim/presets/*.toml``) hold the papers' numbers (METHODS §6) and say in
+Presets (``sarmoco/sim/presets/*.toml``) hold the papers' numbers (docs/methods.md §6) and say in
 comments which values are our own choices. ``scale`` (0 < scale <= 1) shrinks the swath, the
 pulse width (hence the fast-time samples) and the PRF (down to twice the Doppler bandwidth) for
 fast tests, keeping carrier, bandwidth, sample rate, integration angle and therefore both

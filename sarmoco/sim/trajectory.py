@@ -36,7 +36,7 @@ Three kinds (:class:`MotionSpec`):
     logged yaw minus the smoothed course (crab and heading wander).
 
 Frames: NED, m, s; ``t_s`` is time since the first pulse. Quaternions are scalar-first and
-rotate body to NED (3-2-1 yaw, pitch, roll; METHODS §1).
+rotate body to NED (3-2-1 yaw, pitch, roll; docs/methods.md §1).
 """
 
 from __future__ import annotations

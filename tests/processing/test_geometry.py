@@ -1,4 +1,4 @@
-"""Frames, reference track, look angle and lever arm (METHODS §1)."""
+"""Frames, reference track, look angle and lever arm (docs/methods.md §1)."""
 
 from __future__ import annotations
 

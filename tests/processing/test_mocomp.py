@@ -1,4 +1,5 @@
-"""INS-only motion compensation (METHODS §2): trapezoid D_los, phase, envelope, streaming."""
+"""INS-only motion compensation (docs/methods.md §2): trapezoid D_los, phase, envelope,
+streaming."""
 
 from __future__ import annotations
 

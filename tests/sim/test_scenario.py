@@ -1,4 +1,5 @@
-"""Presets load, carry the papers' numbers (METHODS §6) and scale without changing physics."""
+"""Presets load, carry the papers' numbers (docs/methods.md §6) and scale without changing
+physics."""
 
 from __future__ import annotations
 

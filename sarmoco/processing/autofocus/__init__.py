@@ -1,4 +1,4 @@
-"""Echo-based autofocus: sliding-subaperture two-step method (METHODS §3) and PGA.
+"""Echo-based autofocus: sliding-subaperture two-step method (docs/methods.md §3) and PGA.
 
 Public entry points: :class:`SlidingSubapertureAutofocus` (streaming),
 :func:`autofocus_offline` (whole aperture), :func:`pga` (refinement), and the records in

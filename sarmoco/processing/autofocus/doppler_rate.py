@@ -3,7 +3,7 @@
 The input is range-compressed data (pulses x range bins) already compensated with the
 navigation solution; a point target at zero-Doppler range R seen by a straight track at speed
 v has azimuth phase ``pi * gamma0 * (t - t_n)**2`` with the nominal rate
-``gamma0 = -2 v**2 / (lambda R)`` (METHODS §1: echo phase exp(-j 4 pi R / lambda)).
+``gamma0 = -2 v**2 / (lambda R)`` (docs/methods.md §1: echo phase exp(-j 4 pi R / lambda)).
 A line is azimuth-compressed for estimation by dechirping with a trial rate about the
 subaperture centre and an FFT; every target of the line becomes a tone, so aliasing of
 targets outside the subaperture does not matter. Rates are in Hz/s, times in s.

@@ -1,4 +1,4 @@
-"""Phase gradient autofocus (METHODS §3, PGA paragraph; THz paper refinement stage).
+"""Phase gradient autofocus (docs/methods.md §3, PGA paragraph; THz paper refinement stage).
 
 The core works on azimuth-compressed lines whose inverse FFT along azimuth is the phase
 history on the pulse axis (dechirped lines). Per iteration: the brightest scatterer of each

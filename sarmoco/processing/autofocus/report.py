@@ -24,7 +24,7 @@ class LineRates:
         Doppler-rate error of each line relative to the nominal rate, Hz/s.
     weight : ndarray, shape (N,)
         Weight in the fits: the line's compressed peak-to-median power ratio minus one (its
-        signal-to-noise ratio; METHODS §3 eq. 13 uses the mean magnitude, see
+        signal-to-noise ratio; docs/methods.md §3 eq. 13 uses the mean magnitude, see
         ``streaming._line_rates``), zero for a rejected line.
     quality : ndarray, shape (N,)
         Reliability in [0, 1] (map drift: normalised correlation peak; contrast: relative
@@ -49,7 +49,7 @@ class LineRates:
 
 @dataclass(frozen=True)
 class SubapertureReport:
-    """Estimates of one subaperture (both steps of METHODS §3).
+    """Estimates of one subaperture (both steps of docs/methods.md §3).
 
     Parameters
     ----------

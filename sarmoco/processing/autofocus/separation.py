@@ -1,6 +1,6 @@
-"""Weighted least squares on the line rates of one subaperture (METHODS §3 steps 2 and 3).
+"""Weighted least squares on the line rates of one subaperture (docs/methods.md §3 steps 2 and 3).
 
-Envelope step: ``Δγ_i = (2/λ)(a_y sin β_i + a_z cos β_i)``. In the frame of METHODS §1 (y to
+Envelope step: ``Δγ_i = (2/λ)(a_y sin β_i + a_z cos β_i)``. In the frame of docs/methods.md §1 (y to
 the scene, z down) the APC deviation shortens the range by d_los, the echo gains the phase
 ``+4π d_los/λ`` and the rate ``(2/λ) d''_los``; the sign is checked against a simulated target
 in the tests (the paper prints the opposite sign for its own axes). Note that over flat ground

@@ -3,7 +3,7 @@
 For every pulse ``p`` and pixel ``x`` the range ``R = |apc_p - x|`` is computed
 in float64, the range-compressed line is read at ``R - R_ref,p`` (FFT
 upsampled, then linear interpolation) and the echo phase
-``exp(-j 4 pi (R - R_ref,p) / lambda)`` (METHODS §1) is removed:
+``exp(-j 4 pi (R - R_ref,p) / lambda)`` (docs/methods.md §1) is removed:
 
     I(x) = sum_p  rc_p(R - R_ref,p) * exp(+j 4 pi (R - R_ref,p) / lambda)
 

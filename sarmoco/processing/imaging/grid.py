@@ -1,7 +1,7 @@
 """Pixel grids on a horizontal plane, shared by backprojection and polar format.
 
 A :class:`PlaneGrid` lives in any right-handed Cartesian frame whose third axis
-is vertical (the imaging frame of METHODS §1 with z down, NED, or a provider's
+is vertical (the imaging frame of docs/methods.md §1 with z down, NED, or a provider's
 scene frame with z up). Pixel ``(i, j)`` sits at
 ``origin + axis0[i] * e0 + axis1[j] * e1`` with the horizontal unit vectors
 ``e0 = (cos h, sin h, 0)`` and ``e1 = (-sin h, cos h, 0)``, ``h`` the heading

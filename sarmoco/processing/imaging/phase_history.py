@@ -1,6 +1,6 @@
 """Conversions between range-compressed pulses and a deramped phase history.
 
-Sign convention (METHODS §1): after range compression a point target at range
+Sign convention (docs/methods.md §1): after range compression a point target at range
 ``R`` is a sinc at ``R`` with phase ``exp(-j 4 pi R / lambda)``; its phase
 history (the range spectrum) is ``exp(-j 4 pi f R / c)`` over the transmitted
 band ``f``. A phase history *deramped* to a reference range ``R_ref`` per pulse

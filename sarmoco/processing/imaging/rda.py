@@ -5,7 +5,7 @@ a straight reference track; axis 1 is the slant range ``r0`` of closest
 approach. Azimuth is processed in spatial frequency ``kx`` (cycles/m; the
 Doppler frequency is ``v kx``), with ``sin(theta) = lambda kx / 2`` the squint
 of a Doppler bin and ``D = cos(theta)``. A point target at ``(x0, r0)`` (echo
-phase ``exp(-j 4 pi R / lambda)``, METHODS §1) has, in the range-Doppler
+phase ``exp(-j 4 pi R / lambda)``, docs/methods.md §1) has, in the range-Doppler
 domain, its range at ``r0 / D`` and azimuth phase
 ``exp(-j 4 pi r0 D / lambda - j 2 pi kx x0)`` (stationary phase, exact for a
 straight track). The steps:

@@ -1,6 +1,6 @@
 """Streaming backprojection onto ground tiles laid along a straight reference track.
 
-The imaging frame is that of METHODS §1 (x along the reference track, y toward
+The imaging frame is that of docs/methods.md §1 (x along the reference track, y toward
 the illuminated side, z down; origin at the reference APC at its start time).
 Tile ``k`` covers ``k L <= x < (k + 1) L`` and the ground-range band
 ``y_c ± W/2`` on the flat ground ``z = H``. A pixel takes the pulses that see

@@ -1,4 +1,4 @@
-"""Range-compressed point-target data formed directly from the exact range (METHODS §1).
+"""Range-compressed point-target data formed directly from the exact range (docs/methods.md §1).
 
 Each target contributes ``a sinc((r - R_k) / rho) exp(-j 4 pi R_k / lambda)`` to pulse k,
 with ``R_k = |apc_k - target|`` in the imaging frame (x along track, y to the scene, z down).

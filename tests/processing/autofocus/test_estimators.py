@@ -26,7 +26,7 @@ def accelerated() -> S.Synthetic:
 
 @pytest.mark.parametrize("method", ["map_drift", "contrast"])
 def test_rate_sign_and_size(accelerated: S.Synthetic, method: str) -> None:
-    """The measured rate error is +(2/λ)(a_y sin β + a_z cos β) in the METHODS §1 frame."""
+    """The measured rate error is +(2/λ)(a_y sin β + a_z cos β) in the docs/methods.md §1 frame."""
     syn = accelerated
     bins = dr.select_lines(syn.rc, 5, 10)
     assert bins.size == 5
