@@ -180,6 +180,19 @@ class MocompConfig:
         "-9.3 -> -12.9 dB PSLR); false: uniform speed v0 (the autofocus then absorbs the "
         "speed error; with true it currently ends 0.3-0.8 dB worse, see README)",
     )
+    segments: bool = _key(
+        True,
+        "Cut the strip into straight reference-track segments (a new track after each "
+        "turn and where the INS track leaves the current one by segment_tolerance_m; "
+        "pulses in turns are flagged TURN and not imaged); false: one track for the run",
+    )
+    segment_tolerance_m: float = _key(
+        3.0,
+        "Cross-track/vertical deviation from the reference track at which a new segment "
+        "starts (bounds D_los and the envelope shift)",
+        unit="m",
+        gt=0,
+    )
 
 
 @dataclass(frozen=True)

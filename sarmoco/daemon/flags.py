@@ -39,6 +39,10 @@ class PulseFlag(enum.IntFlag):
     """Radar packets of this channel were lost on the link before this pulse."""
     DROPPED_BEFORE = 1 << 6
     """The echo ring was full: the daemon dropped pulses before this one."""
+    TURN = 1 << 7
+    """The platform was turning (the heading averaged over a synthetic aperture changed by
+    more than half the azimuth beam within one, :mod:`sarmoco.processing.segments`): the
+    pulse was not imaged. Set by the focuser, after the pulse was first recorded."""
 
     @classmethod
     def from_packet(cls, packet: EchoPacket) -> PulseFlag:

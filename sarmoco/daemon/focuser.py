@@ -1,19 +1,26 @@
 """The streaming focusing chain of the daemon, configured from :class:`Config`.
 
 Per block of aligned pulses: range compression → INS-only compensation
-(D_los, METHODS §2) → sliding-subaperture autofocus (METHODS §3, optional) →
+(D_los, docs/methods.md §2) → sliding-subaperture autofocus (docs/methods.md §3, optional) →
 azimuth pre-filter (low-pass and decimate in slow time to the Doppler band of
 the culled beam, optional) → backprojection onto ground tiles. Every stage is a
 processing object with its own carried state, so a live run and a replay of the
-same pulses give the same products. The reference track is fixed from the INS
-velocity of the first block (straight line at the mean horizontal velocity,
-METHODS §1).
+same pulses give the same products.
+
+The strip is cut into segments (:mod:`sarmoco.processing.segments`): the first
+reference track is the straight line at the mean INS velocity of the first block
+(docs/methods.md §1); after each turn, and wherever the INS track leaves the current line by
+``mocomp.segment_tolerance_m``, the segment's autofocus is flushed, its tiles are
+closed, and a new segment starts with a new track, a new D_los (from 0), a new
+autofocus and a new tile imager. Pulses in turns are not imaged (the pipeline flags
+them ``TURN``).
 """
 
 from __future__ import annotations
 
+import itertools
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
@@ -34,7 +41,8 @@ from sarmoco.processing.mocomp import (
     MocompSolution,
     integrate_los,
 )
-from sarmoco.processing.types import ComplexArray, FloatArray, IntArray, RadarParams
+from sarmoco.processing.segments import Segmenter, SegmentLimits
+from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, IntArray, RadarParams
 
 
 def radar_params(cfg: Config) -> RadarParams:
@@ -61,47 +69,45 @@ class FocusOutput:
     Attributes
     ----------
     motion : MocompSolution or None
-        INS motion solution of the pulses pushed (None from :meth:`Focuser.finish`).
+        INS motion solution of the pulses pushed (None from :meth:`Focuser.finish`);
+        NaN for pulses in turns (not compensated).
     tiles : list of Tile
         Image tiles finished in this step.
+    tracks : list of ReferenceTrack
+        The reference track of each tile (same order as ``tiles``): the tile's axes are
+        metres in that track's imaging frame.
+    turn : ndarray of bool, shape (P,)
+        Pulses pushed that are in a turn and were not imaged (empty from finish).
     """
 
     motion: MocompSolution | None = None
     tiles: list[Tile] = field(default_factory=list)
+    tracks: list[ReferenceTrack] = field(default_factory=list)
+    turn: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+
+    def add_tiles(self, tiles: list[Tile], track: ReferenceTrack) -> None:
+        """Append tiles formed on ``track``."""
+        self.tiles += tiles
+        self.tracks += [track] * len(tiles)
 
 
-class Focuser:
-    """Range compression, INS compensation, autofocus, azimuth pre-filter, tiled backprojection.
+class _Segment:
+    """INS compensation, autofocus, pre-filter and tiles of one straight reference track."""
 
-    Parameters
-    ----------
-    cfg : Config
-        Daemon configuration (radar, geometry, mocomp, autofocus, imaging).
-    t0_ns : int
-        GPS time of the first pulse: the reference track starts there, ns.
-    velocity_ned : ndarray, shape (3,)
-        Mean INS velocity at the start, NED, m/s: fixes the track heading and speed v0.
-    """
-
-    def __init__(self, cfg: Config, t0_ns: int, velocity_ned: FloatArray) -> None:
-        self.cfg = cfg
-        self.radar = radar_params(cfg)
-        self.range_m = rangecomp.range_axis_m(self.radar)
-        self.window = None if cfg.imaging.window == "none" else cfg.imaging.window
-        geo = cfg.geometry
-        self.track = ReferenceTrack.from_velocity(
-            np.zeros(3), np.asarray(velocity_ned, dtype=np.float64), t0_ns, geo.look_side
-        )
+    def __init__(self, cfg: Config, radar: RadarParams, track: ReferenceTrack) -> None:
+        self.track = track
+        geo, im, af = cfg.geometry, cfg.imaging, cfg.autofocus
+        range_m = rangecomp.range_axis_m(radar)
         los = LosGeometry.build(
-            self.radar,
-            self.range_m,
+            radar,
+            range_m,
             geo.height_m,
             geo.center_slant_range_m,
-            self.track.v0_mps,
+            track.v0_mps,
             order=cfg.mocomp.order,
             envelope_fraction=cfg.mocomp.envelope_fraction,
         )
-        self.mocomp = InsMotionCompensator(self.track, los)
+        self.mocomp = InsMotionCompensator(track, los)
         self._along: LosState | None = (
             LosState(last_vel_yz=np.zeros(1), disp_yz_m=np.zeros(1))
             if cfg.mocomp.along_track
@@ -110,18 +116,14 @@ class Focuser:
         self._last_tau_ns: int | None = None
         self._slot_ns: int | None = None
         """Time of the last pulse given to the autofocus, GPS ns."""
-        self._period_ns = round(1e9 / self.radar.prf_hz)
-        self._max_fill_slots = max(1, round(cfg.autofocus.subaperture_s * self.radar.prf_hz))
-        af = cfg.autofocus
+        self._period_ns = round(1e9 / radar.prf_hz)
+        self._max_fill_slots = max(1, round(af.subaperture_s * radar.prf_hz))
         self.autofocus = (
             SlidingSubapertureAutofocus(
                 AutofocusGeometry(
-                    self.radar.wavelength_m,
-                    self.track.v0_mps,
-                    geo.height_m,
-                    geo.center_slant_range_m,
+                    radar.wavelength_m, track.v0_mps, geo.height_m, geo.center_slant_range_m
                 ),
-                self.range_m,
+                range_m,
                 AutofocusConfig(
                     subaperture_s=af.subaperture_s,
                     hop_s=af.hop_s,
@@ -137,8 +139,7 @@ class Focuser:
             else None
         )
         ground_range = math.sqrt(max(geo.center_slant_range_m**2 - geo.height_m**2, 0.0))
-        im = cfg.imaging
-        beam_rad = math.radians(im.azimuth_beamwidth_deg + 2.0 * im.squint_tolerance_deg)
+        beam_rad = _beam_rad(cfg)
         self.imager = TileImager(
             TileLayout(
                 height_m=geo.height_m,
@@ -148,40 +149,27 @@ class Focuser:
                 pixel_m=im.pixel_m,
                 beamwidth_rad=beam_rad,
             ),
-            self.range_m,
-            self.radar.wavelength_m,
+            range_m,
+            radar.wavelength_m,
         )
-        doppler_hz = 2.0 * self.track.v0_mps * math.sin(beam_rad / 2.0) / self.radar.wavelength_m
+        doppler_hz = 2.0 * track.v0_mps * math.sin(beam_rad / 2.0) / radar.wavelength_m
         self.prefilter = (
-            AzimuthPrefilter(self.radar.prf_hz, doppler_hz, im.prefilter_oversampling)
+            AzimuthPrefilter(radar.prf_hz, doppler_hz, im.prefilter_oversampling)
             if im.prefilter and doppler_hz > 0
             else None
         )
 
-    def push(self, raw: ComplexArray, t_ns: IntArray, vel_ned: FloatArray) -> FocusOutput:
-        """Process one block of aligned raw pulses.
-
-        Parameters
-        ----------
-        raw : ndarray of complex, shape (P, S)
-            Raw echoes (ADC counts).
-        t_ns : ndarray of int64, shape (P,)
-            Pulse times, GPS ns, increasing across calls.
-        vel_ned : ndarray, shape (P, 3)
-            Antenna phase centre velocity at the pulses (the aligner adds the lever
-            arm's rate to the IMU velocity), NED, m/s.
-        """
-        rc = rangecomp.compress(self.radar, raw, self.window)
+    def push(
+        self, rc: ComplexArray, t_ns: IntArray, vel_ned: FloatArray
+    ) -> tuple[MocompSolution, list[Tile]]:
+        """Compensate, autofocus and image range-compressed pulses of this segment."""
         rc, motion = self.mocomp.compensate(rc, t_ns, vel_ned)
-        out = FocusOutput(motion=motion)
         t_ns = self._along_track_time(t_ns, vel_ned)
         if self.autofocus is None:
-            out.tiles = self._image(rc, t_ns)
-            return out
+            return motion, self._image(rc, t_ns)
         rc, t_ns = self._keep_slots(rc, t_ns)
         focused, corr = self.autofocus.push(rc, t_ns)
-        out.tiles = self._image(focused, corr.t_ns)
-        return out
+        return motion, self._image(focused, corr.t_ns)
 
     def _keep_slots(self, rc: ComplexArray, t_ns: IntArray) -> tuple[ComplexArray, IntArray]:
         """Zero rows in the PRF slots of missing pulses, for the autofocus.
@@ -200,16 +188,15 @@ class Focuser:
         steps[(steps < 1) | (steps > self._max_fill_slots)] = 1
         return fill_slots(rc, t_ns, steps, last)
 
-    def finish(self) -> FocusOutput:
-        """Release what autofocus and the pre-filter still hold; close every tile (end of run)."""
-        out = FocusOutput()
+    def finish(self) -> list[Tile]:
+        """Release what autofocus and the pre-filter still hold; close every tile."""
+        tiles: list[Tile] = []
         if self.autofocus is not None:
             focused, corr = self.autofocus.flush()
-            out.tiles = self._image(focused, corr.t_ns)
+            tiles = self._image(focused, corr.t_ns)
         if self.prefilter is not None:
-            out.tiles += self._backproject(*self.prefilter.flush())
-        out.tiles += self.imager.close()
-        return out
+            tiles += self._backproject(*self.prefilter.flush())
+        return tiles + self.imager.close()
 
     def _along_track_time(self, t_ns: IntArray, vel_ned: FloatArray) -> IntArray:
         """Slow time of each pulse from its INS along-track position: t0 + x / v0, GPS ns.
@@ -244,3 +231,155 @@ class Focuser:
         if rc.shape[0] == 0:
             return []
         return self.imager.add(rc, t_ns, self.track.position_imaging(t_ns))
+
+
+def _beam_rad(cfg: Config) -> float:
+    """Beam the pixels take: the azimuth beamwidth plus the squint tolerance each side, rad."""
+    im = cfg.imaging
+    return math.radians(im.azimuth_beamwidth_deg + 2.0 * im.squint_tolerance_deg)
+
+
+def segment_limits(cfg: Config, v0_mps: float) -> SegmentLimits:
+    """Segmentation tolerances of the configuration for a platform at ``v0_mps``.
+
+    A turn is a change of the aperture-averaged heading by more than half the azimuth
+    beamwidth over one synthetic aperture (``center_slant_range_m`` × beamwidth / v0,
+    never shorter than an autofocus subaperture).
+    """
+    beam = math.radians(cfg.imaging.azimuth_beamwidth_deg)
+    aperture_s = cfg.geometry.center_slant_range_m * beam / v0_mps
+    return SegmentLimits(
+        deviation_m=cfg.mocomp.segment_tolerance_m,
+        turn_rad=beam / 2.0,
+        window_s=max(aperture_s, cfg.autofocus.subaperture_s),
+    )
+
+
+def _nan_motion(t_ns: IntArray) -> MocompSolution:
+    """Motion rows of pulses that were not compensated (turns): NaN, no shift."""
+    n = t_ns.shape[0]
+    nan = np.full(n, math.nan)
+    return MocompSolution(
+        t_ns=np.asarray(t_ns, dtype=np.int64),
+        disp_yz_m=np.full((n, 2), math.nan),
+        d_los_m=nan,
+        phase_rad=nan.copy(),
+        range_shift_m=np.zeros(n),
+    )
+
+
+def _join(parts: list[MocompSolution]) -> MocompSolution:
+    """One solution of consecutive pulses from several."""
+    return MocompSolution(
+        *(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(MocompSolution))
+    )
+
+
+class Focuser:
+    """Range compression, INS compensation, autofocus, azimuth pre-filter, tiled backprojection.
+
+    Parameters
+    ----------
+    cfg : Config
+        Daemon configuration (radar, geometry, mocomp, autofocus, imaging).
+    t0_ns : int
+        GPS time of the first pulse: the first reference track starts there, ns.
+    velocity_ned : ndarray, shape (3,)
+        Mean INS velocity at the start, NED, m/s: fixes the first track's heading and
+        speed v0.
+    """
+
+    def __init__(self, cfg: Config, t0_ns: int, velocity_ned: FloatArray) -> None:
+        self.cfg = cfg
+        self.radar = radar_params(cfg)
+        self.range_m = rangecomp.range_axis_m(self.radar)
+        self.window = None if cfg.imaging.window == "none" else cfg.imaging.window
+        look_side = cfg.geometry.look_side
+        track = ReferenceTrack.from_velocity(
+            np.zeros(3), np.asarray(velocity_ned, dtype=np.float64), t0_ns, look_side
+        )
+        self.segmenter = (
+            Segmenter(segment_limits(cfg, track.v0_mps), track, look_side)
+            if cfg.mocomp.segments
+            else None
+        )
+        self.segment: _Segment | None = _Segment(cfg, self.radar, track)
+        self._done = self.segment
+        """The segment closed last (what :attr:`track` and :attr:`autofocus` show after it)."""
+        self.segments = 1
+        """Segments started so far."""
+
+    @property
+    def track(self) -> ReferenceTrack:
+        """Reference track of the current (or last) segment."""
+        return self._last.track
+
+    @property
+    def autofocus(self) -> SlidingSubapertureAutofocus | None:
+        """Autofocus engine of the current (or last) segment."""
+        return self._last.autofocus
+
+    @property
+    def prefilter(self) -> AzimuthPrefilter | None:
+        """Azimuth pre-filter of the current (or last) segment."""
+        return self._last.prefilter
+
+    def push(self, raw: ComplexArray, t_ns: IntArray, vel_ned: FloatArray) -> FocusOutput:
+        """Process one block of aligned raw pulses.
+
+        Parameters
+        ----------
+        raw : ndarray of complex, shape (P, S)
+            Raw echoes (ADC counts).
+        t_ns : ndarray of int64, shape (P,)
+            Pulse times, GPS ns, increasing across calls.
+        vel_ned : ndarray, shape (P, 3)
+            Antenna phase centre velocity at the pulses (the aligner adds the lever
+            arm's rate to the IMU velocity), NED, m/s.
+        """
+        rc = rangecomp.compress(self.radar, raw, self.window)
+        n = t_ns.shape[0]
+        out = FocusOutput(turn=np.zeros(n, dtype=bool))
+        if self.segmenter is None:
+            assert self.segment is not None
+            out.motion, tiles = self.segment.push(rc, t_ns, vel_ned)
+            out.add_tiles(tiles, self.segment.track)
+            return out
+        plan = self.segmenter.plan(t_ns, vel_ned)
+        out.turn = plan.turn
+        new = dict(zip(plan.starts.tolist(), plan.tracks, strict=True))
+        cuts = np.flatnonzero(np.diff(plan.turn)) + 1
+        bounds = sorted({0, n, *cuts.tolist(), *new})
+        motion: list[MocompSolution] = []
+        for a, b in itertools.pairwise(bounds):
+            if a in new:
+                self._close(out)
+                self.segment = _Segment(self.cfg, self.radar, new[a])
+                self.segments += 1
+            if plan.turn[a]:
+                self._close(out)
+                motion.append(_nan_motion(t_ns[a:b]))
+                continue
+            assert self.segment is not None
+            m, tiles = self.segment.push(rc[a:b], t_ns[a:b], vel_ned[a:b])
+            motion.append(m)
+            out.add_tiles(tiles, self.segment.track)
+        out.motion = _join(motion) if motion else _nan_motion(t_ns)
+        return out
+
+    def finish(self) -> FocusOutput:
+        """Release what autofocus and the pre-filter still hold; close every tile (end of run)."""
+        out = FocusOutput()
+        self._close(out)
+        return out
+
+    def _close(self, out: FocusOutput) -> None:
+        """End the current segment (if one is open): its last tiles go into ``out``."""
+        if self.segment is not None:
+            out.add_tiles(self.segment.finish(), self.segment.track)
+            self._done = self.segment
+            self.segment = None
+
+    @property
+    def _last(self) -> _Segment:
+        return self.segment if self.segment is not None else self._done

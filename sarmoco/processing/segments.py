@@ -1,0 +1,192 @@
+"""Where a long strip is cut into straight reference-track segments, and which pulses are turns.
+
+INS-only compensation measures the APC deviation (ΔY, ΔZ) from one straight reference
+track (docs/methods.md §1-2). Over a survey flight (minutes of straight legs joined by turns)
+the deviation from any single line grows without bound, so the strip is cut into
+segments, each with its own straight track (from the INS velocity where it starts)
+and its own D_los starting at 0:
+
+- **Turn**: the heading of the INS velocity, averaged over the last ``window_s``
+  (a synthetic aperture), changed by more than ``turn_rad`` (half the azimuth beam)
+  against the same average one window earlier. A target's aperture then spans a
+  heading change that sweeps the beam by half its width: the pulse is flagged and not
+  imaged. Averaging over an aperture keeps turbulence (cross-track velocity wander of
+  a few tenths of m/s, i.e. about 1° of instantaneous ground-track heading at 17 m/s)
+  from being taken for a turn, while a coordinated turn (about 12°/s in the real
+  ArduPilot log) crosses the limit within a fraction of a second.
+- **New segment**: at the first pulse after a turn (the track is the mean velocity of
+  the window, by then all straight flight), and wherever the running deviation
+  ``hypot(ΔY, ΔZ)`` from the current track exceeds ``deviation_m``. A slow heading change
+  (drift of the track) shows as a deviation growing like ``v0 t δψ``; it is caught by
+  the same test before it reaches the beam tolerance at the ranges imaged.
+
+Everything here is a function of pulse times (GPS ns) and APC velocities (NED, m/s);
+the :class:`Segmenter` carries the state from one block to the next, so feeding a strip
+block by block gives the same plan as one call.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sarmoco.errors import ProcessingError
+from sarmoco.processing.geometry import LookSide, ReferenceTrack, vector_to_imaging
+from sarmoco.processing.mocomp import LosState, integrate_los
+from sarmoco.processing.types import BoolArray, FloatArray, IntArray
+
+
+@dataclass(frozen=True)
+class SegmentLimits:
+    """When a new reference track starts and which pulses are turns.
+
+    Parameters
+    ----------
+    deviation_m : float
+        A new segment starts where |(ΔY, ΔZ)| from the current track exceeds this, m.
+    turn_rad : float
+        Change of the window-averaged heading over one window above which a pulse is in
+        a turn, rad.
+    window_s : float
+        Averaging window of the heading (one synthetic aperture), s.
+    """
+
+    deviation_m: float
+    turn_rad: float
+    window_s: float
+
+    def __post_init__(self) -> None:
+        for name in ("deviation_m", "turn_rad", "window_s"):
+            value = getattr(self, name)
+            if not value > 0.0:
+                raise ProcessingError(f"SegmentLimits: {name} {value!r} is not > 0")
+
+
+@dataclass(frozen=True)
+class SegmentPlan:
+    """What :meth:`Segmenter.plan` decided for one block of pulses.
+
+    Attributes
+    ----------
+    turn : ndarray of bool, shape (P,)
+        Pulses in a turn (not to be imaged).
+    starts : ndarray of int64, shape (N,)
+        Rows where a new segment starts (increasing, never a turn row).
+    tracks : tuple of ReferenceTrack
+        The reference track of each new segment (origin: the APC at its first pulse,
+        NED relative to the APC at the Segmenter's first pulse, m).
+    """
+
+    turn: BoolArray
+    starts: IntArray
+    tracks: tuple[ReferenceTrack, ...]
+
+
+def _heading(vel_ned: FloatArray) -> FloatArray:
+    """Heading of horizontal velocities, rad from north toward east."""
+    return np.asarray(np.arctan2(vel_ned[:, 1], vel_ned[:, 0]), dtype=np.float64)
+
+
+def _wrap(angle: FloatArray) -> FloatArray:
+    """Angles wrapped to (-π, π], rad."""
+    return np.asarray(np.angle(np.exp(1j * angle)), dtype=np.float64)
+
+
+class Segmenter:
+    """Streaming segmentation of a strip (see the module docstring).
+
+    Parameters
+    ----------
+    limits : SegmentLimits
+        Tolerances.
+    track : ReferenceTrack
+        Track of the first segment (its ``t0_ns`` is the first pulse).
+    look_side : {"right", "left"}
+        Side the antenna looks to (for the new tracks).
+    """
+
+    def __init__(self, limits: SegmentLimits, track: ReferenceTrack, look_side: LookSide) -> None:
+        self.limits = limits
+        self.track = track
+        self.look_side: LookSide = look_side
+        self._disp = LosState()
+        self._pos = LosState(last_vel_yz=np.zeros(3), disp_yz_m=np.zeros(3))
+        self._restart = False
+        """A segment starts at the next pulse that is not in a turn."""
+        self._t = np.zeros(0, dtype=np.int64)
+        self._v = np.zeros((0, 3))
+        self._psi = np.zeros(0)
+
+    def plan(self, t_ns: IntArray, vel_ned: FloatArray) -> SegmentPlan:
+        """Decide turns and segment starts for the next block and advance the state.
+
+        Parameters
+        ----------
+        t_ns : ndarray of int64, shape (P,)
+            Pulse times, strictly increasing across calls, GPS ns.
+        vel_ned : ndarray of float64, shape (P, 3)
+            APC velocity at the pulses, NED, m/s.
+        """
+        t = np.asarray(t_ns, dtype=np.int64)
+        v = np.asarray(vel_ned, dtype=np.float64)
+        if v.shape != (t.shape[0], 3):
+            raise ProcessingError(f"Segmenter: t_ns {t.shape} and vel_ned {v.shape} disagree")
+        if t.size == 0:
+            return SegmentPlan(np.zeros(0, bool), np.zeros(0, np.int64), ())
+        pos, self._pos = integrate_los(t, v, self._pos)
+        mean_v, turn = self._windowed(t, v)
+        starts: list[int] = []
+        tracks: list[ReferenceTrack] = []
+        k, n = 0, t.size
+        while k < n:
+            if turn[k]:
+                self._restart = True
+                k += int(np.argmin(turn[k:])) if not turn[k:].all() else n - k
+                continue
+            if self._restart:
+                self._start(k, t, mean_v, pos, starts, tracks)
+            end = k + (int(np.argmax(turn[k:])) if turn[k:].any() else n - k)
+            vel_img = vector_to_imaging(v[k:end], self.track)[:, 1:3]
+            disp, state = integrate_los(t[k:end], vel_img, self._disp)
+            over = np.flatnonzero(np.hypot(disp[:, 0], disp[:, 1]) > self.limits.deviation_m)
+            if over.size:  # a segment starts there (its deviation restarts at 0)
+                k += int(over[0])
+                self._restart = True
+                continue
+            self._disp = state
+            k = end
+        return SegmentPlan(turn, np.asarray(starts, dtype=np.int64), tuple(tracks))
+
+    def _start(
+        self,
+        k: int,
+        t: IntArray,
+        mean_v: FloatArray,
+        pos: FloatArray,
+        starts: list[int],
+        tracks: list[ReferenceTrack],
+    ) -> None:
+        """Begin a segment at row ``k``: a track along the window-mean velocity there."""
+        self.track = ReferenceTrack.from_velocity(pos[k], mean_v[k], int(t[k]), self.look_side)
+        self._disp = LosState()
+        self._restart = False
+        starts.append(k)
+        tracks.append(self.track)
+
+    def _windowed(self, t: IntArray, v: FloatArray) -> tuple[FloatArray, BoolArray]:
+        """Window-mean velocity (P, 3) and the turn mask (P,) of the block; keeps the history."""
+        w_ns = round(self.limits.window_s * 1e9)
+        n_hist = self._t.size
+        t_all = np.concatenate([self._t, t])
+        v_all = np.concatenate([self._v, v])
+        cum = np.concatenate([np.zeros((1, 3)), np.cumsum(v_all, axis=0)])
+        rows = np.arange(n_hist, t_all.size)
+        first = np.searchsorted(t_all, t_all[rows] - w_ns, side="right")
+        mean_v = (cum[rows + 1] - cum[first]) / (rows + 1 - first)[:, None]
+        psi_all = np.concatenate([self._psi, _heading(mean_v)])
+        before = psi_all[np.maximum(first - 1, 0)]
+        turn = np.abs(_wrap(psi_all[rows] - before)) > self.limits.turn_rad
+        keep = t_all > t_all[-1] - 2 * w_ns - 1
+        self._t, self._v, self._psi = t_all[keep], v_all[keep], psi_all[keep]
+        return mean_v, np.asarray(turn, dtype=bool)

@@ -1,0 +1,83 @@
+"""Segmentation of a strip into straight reference tracks, and the turns between them."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sarmoco.errors import ProcessingError
+from sarmoco.processing.geometry import ReferenceTrack
+from sarmoco.processing.segments import Segmenter, SegmentLimits, SegmentPlan
+
+PRF_HZ = 100.0
+SPEED_MPS = 17.5
+TURN_RPS = np.radians(11.6)  # the real ArduPilot loiter's turn rate
+LIMITS = SegmentLimits(deviation_m=3.0, turn_rad=np.radians(1.45), window_s=2.6)
+
+
+def _racetrack(leg_s: float = 20.0) -> tuple[np.ndarray, np.ndarray, float, float]:
+    """North leg, a 180° left turn, south leg: times (s), APC velocity NED, turn start, end."""
+    t_turn = np.pi / TURN_RPS
+    t = np.arange(0.0, 2 * leg_s + t_turn, 1.0 / PRF_HZ)
+    psi = -np.clip(t - leg_s, 0.0, t_turn) * TURN_RPS
+    vel = SPEED_MPS * np.stack([np.cos(psi), np.sin(psi), np.zeros_like(t)], axis=1)
+    return t, vel, leg_s, leg_s + t_turn
+
+
+def _plan(t: np.ndarray, vel: np.ndarray, block: int) -> tuple[SegmentPlan, list[ReferenceTrack]]:
+    t_ns = (10**18 + np.round(t * 1e9)).astype(np.int64)
+    first = ReferenceTrack.from_velocity(np.zeros(3), vel[0], int(t_ns[0]))
+    seg = Segmenter(LIMITS, first, "right")
+    turns, starts, tracks = [], [], []
+    for a in range(0, t.size, block):
+        p = seg.plan(t_ns[a : a + block], vel[a : a + block])
+        turns.append(p.turn)
+        starts += (p.starts + a).tolist()
+        tracks += p.tracks
+    plan = SegmentPlan(np.concatenate(turns), np.asarray(starts), tuple(tracks))
+    return plan, tracks
+
+
+def test_a_turn_is_flagged_and_the_next_leg_gets_its_own_track() -> None:
+    t, vel, t_in, t_out = _racetrack()
+    plan, tracks = _plan(t, vel, 256)
+    flagged = t[plan.turn]
+    # flagged within an aperture of the turn's start, until the window is straight again
+    assert t_in < flagged[0] < t_in + 1.0
+    assert t_out < flagged[-1] < t_out + 2 * LIMITS.window_s
+    assert np.all(np.diff(np.flatnonzero(plan.turn)) == 1)  # one run of turn pulses
+    assert plan.starts.tolist() == [int(np.flatnonzero(plan.turn)[-1]) + 1]
+    south = tracks[0]
+    np.testing.assert_allclose(south.x_hat, [-1.0, 0.0, 0.0], atol=1e-9)
+    # the new track starts where the APC is: 2 turn radii west of the first leg
+    radius = SPEED_MPS / TURN_RPS
+    assert south.origin_ned[1] == pytest.approx(-2 * radius, rel=1e-3)
+
+
+def test_block_by_block_equals_one_call() -> None:
+    t, vel, _, _ = _racetrack(8.0)
+    whole, _ = _plan(t, vel, t.size)
+    for block in (1000, 256, 97):
+        cut, _ = _plan(t, vel, block)
+        np.testing.assert_array_equal(cut.turn, whole.turn)
+        np.testing.assert_array_equal(cut.starts, whole.starts)
+
+
+def test_a_drift_away_from_the_track_starts_segments_that_keep_it_within_tolerance() -> None:
+    """A 1° heading error never flagged as a turn: the deviation grows 0.3 m/s."""
+    t = np.arange(0.0, 60.0, 1.0 / PRF_HZ)
+    psi = np.radians(1.0)
+    vel = SPEED_MPS * np.tile([np.cos(psi), np.sin(psi), 0.0], (t.size, 1))
+    t_ns = (10**18 + np.round(t * 1e9)).astype(np.int64)
+    north = ReferenceTrack.from_velocity(np.zeros(3), np.array([SPEED_MPS, 0.0, 0.0]), t_ns[0])
+    plan = Segmenter(LIMITS, north, "right").plan(t_ns, vel)
+    assert not plan.turn.any()
+    # 3 m at 0.305 m/s: about 9.8 s after the start, then along the true heading
+    assert plan.starts.size == 1
+    assert t[plan.starts[0]] == pytest.approx(3.0 / (SPEED_MPS * np.sin(psi)), abs=0.02)
+    np.testing.assert_allclose(plan.tracks[0].x_hat[:2], [np.cos(psi), np.sin(psi)], atol=1e-9)
+
+
+def test_limits_must_be_positive() -> None:
+    with pytest.raises(ProcessingError, match="deviation_m"):
+        SegmentLimits(deviation_m=0.0, turn_rad=0.1, window_s=1.0)
