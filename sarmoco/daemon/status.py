@@ -11,6 +11,10 @@ interface only:
 - ``GET /metrics``: the same numbers in the Prometheus text format (0.0.4):
   counters as ``sarmoco_<name>_total``, gauges as ``sarmoco_<name>``, health as
   ``sarmoco_component_up{component="..."}``.
+
+The endpoint is read-only: any other method is answered 405. Each connection has its
+own thread, and one that does not finish its request within
+:data:`REQUEST_TIMEOUT_S` is closed, so a slow or stalled client holds nothing.
 """
 
 from __future__ import annotations
@@ -29,6 +33,9 @@ from sarmoco.errors import ConfigError
 
 LOOPBACK_HOSTS = ("127.0.0.1", "::1", "localhost")
 """The only addresses the status server binds to."""
+
+REQUEST_TIMEOUT_S = 5.0
+"""Longest a connection may take to send its request, s."""
 
 _NAME_BAD = re.compile(r"[^a-zA-Z0-9_]")
 
@@ -157,6 +164,8 @@ class StatusServer:
         ``127.0.0.1`` (default), ``::1`` or ``localhost``; anything else is refused.
     port : int
         TCP port; 0 picks a free one (see :attr:`port`).
+    request_timeout_s : float
+        A connection that sends no complete request for this long is closed, s.
 
     Raises
     ------
@@ -165,15 +174,20 @@ class StatusServer:
     """
 
     def __init__(
-        self, counters: Counters, health: Health, host: str = "127.0.0.1", port: int = 0
+        self,
+        counters: Counters,
+        health: Health,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        request_timeout_s: float = REQUEST_TIMEOUT_S,
     ) -> None:
         if host not in LOOPBACK_HOSTS:
             raise ConfigError(f"status.host: {host!r} is not one of {', '.join(LOOPBACK_HOSTS)}")
         self.counters = counters
         self.health = health
         self._started = time.monotonic()
-        server_class = _V6Server if host == "::1" else ThreadingHTTPServer
-        self._server = server_class((host, port), _handler_for(self))
+        server_class = _V6Server if host == "::1" else _Server
+        self._server = server_class((host, port), _handler_for(self, request_timeout_s))
         self._thread = threading.Thread(
             target=self._server.serve_forever, name="sarmoco-status", daemon=True
         )
@@ -207,12 +221,30 @@ class StatusServer:
         }
 
 
-class _V6Server(ThreadingHTTPServer):
+class _Server(ThreadingHTTPServer):
+    request_queue_size = 128  # connections waiting to be accepted (5 would turn a burst away)
+
+
+class _V6Server(_Server):
     address_family = socket.AF_INET6
 
 
-def _handler_for(server: StatusServer) -> type[BaseHTTPRequestHandler]:
+def _handler_for(server: StatusServer, timeout_s: float) -> type[BaseHTTPRequestHandler]:
     class Handler(BaseHTTPRequestHandler):
+        timeout = timeout_s  # the socket's: a stalled request ends the connection
+
+        def __getattr__(self, name: str) -> Any:
+            """``do_<METHOD>`` of every method but GET: 405 (the endpoint is read-only)."""
+            if name.startswith("do_"):
+                return self._not_allowed
+            raise AttributeError(name)
+
+        def _not_allowed(self) -> None:
+            self.send_response(405)
+            self.send_header("Allow", "GET")
+            self.send_header("Content-Length", "0")
+            self.end_headers()
+
         def do_GET(self) -> None:
             path = self.path.split("?", 1)[0]
             if path == "/status":

@@ -8,7 +8,9 @@ import logging
 import os
 import re
 import signal
+import socket
 import threading
+import time
 import urllib.error
 import urllib.request
 from collections.abc import Iterator
@@ -142,3 +144,48 @@ def test_sighup_reopens_the_log_file(tmp_path: Path, restore_logging: None) -> N
         signal.signal(signal.SIGHUP, previous)
     assert "before rotation" in (tmp_path / "sarmoco.log.1").read_text()
     assert "after rotation" in path.read_text()
+
+
+def _request(port: int, text: bytes) -> bytes:
+    """Send raw bytes to the status port; the whole answer."""
+    with socket.create_connection(("127.0.0.1", port), timeout=5) as sock:
+        sock.sendall(text)
+        chunks = []
+        while chunk := sock.recv(65536):
+            chunks.append(chunk)
+    return b"".join(chunks)
+
+
+def test_methods_other_than_get_are_405() -> None:
+    server = StatusServer(Counters(), Health(), "127.0.0.1", 0).start()
+    try:
+        for method in ("POST", "PUT", "DELETE", "PATCH", "HEAD", "OPTIONS", "BREW"):
+            request = f"{method} /status HTTP/1.1\r\nHost: x\r\n\r\n".encode()
+            answer = _request(server.port, request)
+            assert answer.startswith(b"HTTP/1.0 405 "), (method, answer)
+            assert b"\r\nAllow: GET\r\n" in answer
+    finally:
+        server.stop()
+
+
+def test_stalled_and_oversized_requests_do_not_stall_the_endpoint() -> None:
+    """40 clients that never finish their request: a GET is still answered at once, and
+    each stalled connection is closed after the request timeout."""
+    server = StatusServer(Counters(), Health(), "127.0.0.1", 0, request_timeout_s=1.0).start()
+    t0 = time.monotonic()
+    stalled = [socket.create_connection(("127.0.0.1", server.port)) for _ in range(40)]
+    try:
+        for k, sock in enumerate(stalled):
+            sock.sendall(b"GET /sta" if k % 2 else b"GET /status HTTP/1.1\r\nHost:")
+        assert _get(f"http://127.0.0.1:{server.port}/health")[0] == 503
+        assert time.monotonic() - t0 < 0.5  # no connection waited to be accepted
+        answer = _request(server.port, b"GET /status HTTP/1.1\r\nX: " + b"a" * 200_000)
+        assert answer.startswith(b"HTTP/1.0 431 ") or answer.startswith(b"HTTP/1.0 400 ")
+        stalled[0].settimeout(5.0)
+        t0 = time.monotonic()
+        assert stalled[0].recv(100) == b""  # closed by the server, unanswered
+        assert time.monotonic() - t0 < 1.5
+    finally:
+        for sock in stalled:
+            sock.close()
+        server.stop()
