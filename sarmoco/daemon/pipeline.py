@@ -115,6 +115,8 @@ class _Pulses:
         Antenna position (m, relative) and velocity (m/s) at the pulses, NED.
     quat : ndarray, shape (P, 4)
         Attitude at the pulses (body to NED, scalar first).
+    row : ndarray of int64, shape (P,)
+        Row of each pulse in the store's ``pulses`` table.
     """
 
     t_ns: IntArray
@@ -124,19 +126,22 @@ class _Pulses:
     pos_ned: FloatArray
     vel_ned: FloatArray
     quat: FloatArray
+    row: IntArray
 
     @classmethod
-    def join(cls, blocks: list[AlignedBlock]) -> _Pulses:
-        """The pulses of ``blocks``, one after the other."""
+    def join(cls, blocks: list[AlignedBlock], first_row: int) -> _Pulses:
+        """The pulses of ``blocks``, one after the other, stored from row ``first_row`` on."""
         flags = np.concatenate([b.echoes.flags for b in blocks])
+        t_ns = np.concatenate([b.echoes.t_ns for b in blocks])
         return cls(
-            t_ns=np.concatenate([b.echoes.t_ns for b in blocks]),
+            t_ns=t_ns,
             pulse_id=np.concatenate([b.echoes.pulse_id for b in blocks]),
             usable=(flags & NAV_UNUSABLE) == 0,
             raw=np.concatenate([b.echoes.complex_samples() for b in blocks]),
             pos_ned=np.concatenate([b.nav.pos_ned for b in blocks]),
             vel_ned=np.concatenate([b.nav.vel_ned for b in blocks]),
             quat=np.concatenate([b.nav.quat for b in blocks]),
+            row=np.arange(first_row, first_row + t_ns.size, dtype=np.int64),
         )
 
     def since(self, first: int) -> _Pulses:
@@ -188,6 +193,8 @@ class Pipeline:
         self._latest_pulse_mono_ns = 0
         self._pending: list[AlignedBlock] = []
         self._pending_n = 0
+        self._pending_row = 0
+        """Store row of the first pending pulse."""
         self._focused_ns: int | None = None
         """Time of the newest pulse given to the focuser, GPS ns."""
         self.out_of_order = 0
@@ -312,6 +319,8 @@ class Pipeline:
 
     def _accept(self, block: AlignedBlock) -> None:
         e = block.echoes
+        if not self._pending:
+            self._pending_row = self.recorder.pulses.committed
         self.recorder.append_pulses(e.t_ns, e.pulse_id, e.channel, e.flags, e.samples)
         self.summary.pulses_received += len(block)
         self._pending.append(block)
@@ -324,7 +333,7 @@ class Pipeline:
         if not self._pending:
             return
         blocks, self._pending, self._pending_n = self._pending, [], 0
-        p = _Pulses.join(blocks)
+        p = _Pulses.join(blocks, self._pending_row)
         fresh = _strictly_increasing(p.t_ns, self._focused_ns)
         if not fresh.all():
             self.out_of_order += int(np.count_nonzero(~fresh))
@@ -354,6 +363,8 @@ class Pipeline:
             m.range_shift_m,
         )  # fmt: skip
         self.summary.pulses_processed += int(np.count_nonzero(p.usable))
+        if out.turn.any():
+            self.recorder.flag_pulses(p.row[out.turn], PulseFlag.TURN)
         self._record(out)
 
     def _start_focusing(self, p: _Pulses) -> _Pulses | None:
@@ -404,12 +415,14 @@ class Pipeline:
     def _record(self, out: FocusOutput) -> None:
         """Record the autofocus estimates made so far and the tiles of ``out``."""
         self._record_autofocus()
-        for tile in out.tiles:
+        for tile, track in zip(out.tiles, out.tracks, strict=True):
             metrics = tile_metrics(tile.data) | {
                 "pulses": float(tile.n_pulses),
                 "index": float(tile.index),
             }
-            self.recorder.add_image(tile.image(), tile.t0_ns, tile.t1_ns, metrics)
+            self.recorder.add_image(
+                tile.image(), tile.t0_ns, tile.t1_ns, metrics, schema.encode_reference_track(track)
+            )
             self.summary.tiles += 1
             self.summary.tile_metrics.append(metrics)
 

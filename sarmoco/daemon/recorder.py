@@ -367,6 +367,7 @@ class Recorder(Closing):
         t0_ns: int,
         t1_ns: int,
         metrics: Mapping[str, float] | None = None,
+        reference_track: Mapping[str, Any] | None = None,
     ) -> int:
         """Record a focused tile with its grid; returns its index.
 
@@ -378,6 +379,9 @@ class Recorder(Closing):
             GPS time span of the pulses that formed it.
         metrics : mapping, optional
             Quality numbers of the tile (PSLR dB, entropy...), stored as attributes.
+        reference_track : mapping, optional
+            The track whose imaging frame the axes are in
+            (:func:`~sarmoco.daemon.schema.encode_reference_track`).
         """
         index = self.n_images
         group = self._images.create_group(schema.tile_name(index))
@@ -399,11 +403,34 @@ class Recorder(Closing):
                 "t1_ns": int(t1_ns),
                 "metrics": {k: float(v) for k, v in (metrics or {}).items()},
             }
+            | ({} if reference_track is None else {"reference_track": dict(reference_track)})
         )
         self.n_images = index + 1
         self._images.update_attributes({COMMITTED_ATTR: self.n_images})
         self._maybe_sync()
         return index
+
+    def flag_pulses(self, rows: npt.ArrayLike, flags: int) -> None:
+        """Set ``flags`` (:class:`~sarmoco.daemon.flags.PulseFlag` bits) on recorded pulses.
+
+        Parameters
+        ----------
+        rows : array_like of int, shape (K,)
+            Rows of the ``pulses`` table (committed ones).
+        flags : int
+            Bits OR-ed into their ``flags``.
+        """
+        r = np.asarray(rows, dtype=np.int64)
+        if r.size == 0:
+            return
+        lo, hi = int(r.min()), int(r.max()) + 1
+        if lo < 0 or hi > self.pulses.committed:
+            raise RecorderError(f"flag_pulses: rows {lo}..{hi - 1} not all recorded")
+        column = self.pulses.arrays["flags"]
+        span = np.asarray(column[lo:hi])
+        span[r - lo] |= np.asarray(flags, dtype=span.dtype)
+        column[lo:hi] = span
+        self._maybe_sync()
 
     def set_metrics(self, metrics: Mapping[str, Any]) -> None:
         """Store run-level metrics (JSON-able) in the root ``metrics`` attribute."""

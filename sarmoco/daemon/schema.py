@@ -28,7 +28,8 @@ dimension, plus a ``committed`` attribute counting the rows that are complete)::
       autofocus/  one row per subaperture estimate (:data:`AUTOFOCUS_COLUMNS`)
       images/     attrs committed = tiles complete; tile_000000/ ... each with
                   data (axis0, axis1) complex64, axis0_m (axis0), axis1_m (axis1),
-                  attrs frame, t0_ns, t1_ns, metrics
+                  attrs frame, t0_ns, t1_ns, metrics, reference_track (the segment's
+                  track, :func:`encode_reference_track`: the axes are in its frame)
 
 Names: times are integers in ns with the unit in the name (``t_ns``, ``rx_ns``);
 scalar physical columns carry their unit (``d_los_m``, ``a_y_mps2``); NED vectors
@@ -331,9 +332,12 @@ def encode_autofocus(subapertures: Sequence[SubapertureReport]) -> dict[str, npt
 
 
 def encode_reference_track(track: ReferenceTrack) -> dict[str, Any]:
-    """The root attribute :data:`REFERENCE_TRACK_ATTR` (start GPS ns, NED unit axes, v0 m/s)."""
+    """The root attribute :data:`REFERENCE_TRACK_ATTR` (the first segment's) and a tile's
+    ``reference_track``: start GPS ns, origin (NED m, from the first segment's), NED unit
+    axes, v0 m/s."""
     return {
         "t0_ns": track.t0_ns,
+        "origin_ned": track.origin_ned.tolist(),
         "x_hat_ned": track.x_hat.tolist(),
         "y_hat_ned": track.y_hat.tolist(),
         "v0_mps": track.v0_mps,
