@@ -167,26 +167,41 @@ class _Segment:
         t_ns = self._along_track_time(t_ns, vel_ned)
         if self.autofocus is None:
             return motion, self._image(rc, t_ns)
-        rc, t_ns = self._keep_slots(rc, t_ns)
-        focused, corr = self.autofocus.push(rc, t_ns)
-        return motion, self._image(focused, corr.t_ns)
+        return motion, self._autofocus_image(rc, t_ns)
 
-    def _keep_slots(self, rc: ComplexArray, t_ns: IntArray) -> tuple[ComplexArray, IntArray]:
-        """Zero rows in the PRF slots of missing pulses, for the autofocus.
+    def _autofocus_image(self, rc: ComplexArray, t_ns: IntArray) -> list[Tile]:
+        """Autofocus and image pulses, with zero rows in the PRF slots of missing ones.
 
         The autofocus estimates Doppler rates with FFTs over the pulses of a subaperture,
         taken as uniformly spaced: a lost datagram that left no hole would shift every
         later pulse of the subaperture by a PRI (2 % loss: -13.1 -> -10.4..-11.1 dB
         azimuth PSLR on ku-vehicle x0.1). Gaps up to a subaperture are filled; a longer
-        one leaves no subaperture to estimate across anyway.
+        one (an outage, an overload) ends the autofocus run: it is flushed and a new one
+        starts with the next pulse, so that no subaperture falls into the gap (it had no
+        pulse to estimate from).
         """
+        assert self.autofocus is not None
         if t_ns.size == 0:
-            return rc, t_ns
+            return []
         last = self._slot_ns if self._slot_ns is not None else int(t_ns[0]) - self._period_ns
         steps = slot_steps(t_ns, last, self._period_ns)
+        long_gaps = np.flatnonzero(steps > self._max_fill_slots)
+        if long_gaps.size:
+            g = int(long_gaps[0])
+            tiles = self._autofocus_image(rc[:g], t_ns[:g])
+            engine = self.autofocus
+            focused, corr = engine.flush()
+            tiles += self._image(focused, corr.t_ns)
+            self.autofocus = SlidingSubapertureAutofocus(
+                engine.geometry, engine.range_m, engine.config
+            )
+            self.autofocus.report = engine.take_report()  # estimates not recorded yet
+            self._slot_ns = None
+            return tiles + self._autofocus_image(rc[g:], t_ns[g:])
         self._slot_ns = int(t_ns[-1])
-        steps[(steps < 1) | (steps > self._max_fill_slots)] = 1
-        return fill_slots(rc, t_ns, steps, last)
+        steps[steps < 1] = 1
+        focused, corr = self.autofocus.push(*fill_slots(rc, t_ns, steps, last))
+        return self._image(focused, corr.t_ns)
 
     def finish(self) -> list[Tile]:
         """Release what autofocus and the pre-filter still hold; close every tile."""
