@@ -74,6 +74,7 @@ def run_loopback(
     radar: str = "udp",
     motion: str = "turbulence",
     platform: Sequence[str] = (),
+    faults: Sequence[str] = (),
     **sections: dict[str, Any],
 ) -> dict[str, Any]:
     """Play a scaled ku-vehicle scenario from ``sarmoco sim --serve`` into ``sarmoco run``.
@@ -100,6 +101,8 @@ def run_loopback(
     platform : sequence of str
         Extra ``sarmoco sim`` arguments of the platform (``--heading-deg``, ``--look-side``,
         ``--lever-arm``); the daemon's configuration follows them.
+    faults : sequence of str
+        Simulator fault switches (``sarmoco sim --fault``, e.g. ``"loss=0.02@radar"``).
     **sections : dict
         Extra configuration keys per section (e.g. ``autofocus={"enabled": False}``).
 
@@ -115,7 +118,7 @@ def run_loopback(
         [*py, "sim", "--preset", PRESET, "--scale", str(scale), "--motion", motion,
          "--motion-seed", "1", "--ins-grade", "tactical", "--serve", "--radar", radar_url,
          "--ins", f"{ins}:{INS_EMITTERS[ins].loopback.format(port=free_udp_port())}",
-         "--truth", str(out / "truth.json"), *platform],
+         "--truth", str(out / "truth.json"), *platform, *(f"--fault={f}" for f in faults)],
         stdout=subprocess.PIPE, text=True,
     )  # fmt: skip
     daemon: subprocess.Popen[str] | None = None

@@ -8,7 +8,7 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
@@ -23,7 +23,7 @@ from sarmoco.daemon.store import StoreNav, StorePulses, open_store
 from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource
 from sarmoco.drivers.samples import Sample
 from sarmoco.drivers.source import Source
-from sarmoco.errors import ConfigError, SarmocoError
+from sarmoco.errors import ConfigError, DataFileError, SarmocoError
 
 log = logging.getLogger(__name__)
 
@@ -400,8 +400,15 @@ def _replay(
     ----------
     done : callable or None
         Share of the input read so far, for a progress bar on stderr (None: no bar).
+
+    Raises
+    ------
+    DataFileError
+        When no pulse was focused (the store is still closed complete): the message
+        gives the time span each stream covered and what was rejected, and how often.
     """
     lead_ns = round(cfg.ins.max_gap_s * 1e9)
+    ins_span = _Span()
     with open_recorder(cfg, out) as recorder:
         pipe = Pipeline(cfg, recorder, Counters())
         record_ins_format(recorder, ins)
@@ -415,6 +422,7 @@ def _replay(
                 pipe.add_ins_raw(ins.take_raw(), None)
             due = len(ahead) if horizon is None else sum(s.t_gps_ns <= horizon for s in ahead)
             pipe.add_nav(ahead[:due], None)
+            ins_span.add(*(s.t_gps_ns for s in ahead[:due]))
             del ahead[:due]
             pipe.process(now)
             if done is not None:
@@ -422,7 +430,64 @@ def _replay(
         summary = pipe.finish()
     if done is not None:
         _progress(1.0, end=True)
+    if summary.pulses_processed == 0:
+        raise DataFileError(_nothing_focused(out, pipe, radar, ins, ins_span))
     return summary
+
+
+@dataclass
+class _Span:
+    """First and last time (GPS ns) of what a stream gave, and how many items."""
+
+    first: int | None = None
+    last: int | None = None
+    n: int = 0
+
+    def add(self, *t_ns: int | None) -> None:
+        """Count items at these times (GPS ns; None is skipped)."""
+        for t in t_ns:
+            if t is not None:
+                self.first = t if self.first is None else min(self.first, t)
+                self.last = t if self.last is None else max(self.last, t)
+                self.n += 1
+
+    def text(self) -> str:
+        """`` over GPS a .. b s``, or nothing when the stream gave nothing."""
+        if self.first is None or self.last is None:
+            return ""
+        return f" over GPS {self.first * 1e-9:.3f} .. {self.last * 1e-9:.3f} s"
+
+
+def _nothing_focused(
+    out: Path, pipe: Pipeline, radar: RadarSource | StorePulses, ins: Source, ins_span: _Span
+) -> str:
+    """Why a replay focused nothing: what each stream gave, over which time, what was refused."""
+    store = open_store(out)
+    n = store.committed("pulses")
+    radar_span = _Span()
+    if n:
+        radar_span.add(*store.read("pulses", ["t_ns"], 0, 1)["t_ns"].tolist())
+        radar_span.add(*store.read("pulses", ["t_ns"], n - 1, n)["t_ns"].tolist())
+    radar_counts = radar.decoder.counters.snapshot() if isinstance(radar, RadarSource) else {}
+    return (
+        f"replay focused no pulse: radar {n} pulses{radar_span.text()}"
+        f"{_nonzero(radar_counts)}; INS {ins_span.n} samples{ins_span.text()}"
+        f"{_nonzero(ins.counters.snapshot())}{_nonzero(pipe.nav.counts(), 'refused')}; "
+        f"{pipe.summary.pulses_nav_flagged} pulses without navigation (INS gap "
+        f"{pipe.aligner.nav_gap}, beyond the INS {pipe.aligner.nav_timeout}); store {out}"
+    )
+
+
+def _nonzero(counts: Mapping[str, float], what: str = "") -> str:
+    """`` (WHAT: name n, ...)``: the non-zero counts other than ``bytes``, ``frames`` and
+    ``*accepted``, those two alongside; nothing when none is non-zero."""
+    bad = {k for k, v in counts.items() if v and k not in ("bytes", "frames")}
+    bad -= {k for k in bad if k.endswith("accepted")}
+    if not bad:
+        return ""
+    shown = {k: v for k, v in counts.items() if v and (k in bad or k in ("bytes", "frames"))}
+    items = ", ".join(f"{k} {v:g}" for k, v in shown.items())
+    return f" ({what + ': ' if what else ''}{items})"
 
 
 def _progress(fraction: float, end: bool = False) -> None:
