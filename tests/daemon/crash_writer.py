@@ -16,7 +16,8 @@ import numpy as np
 import numpy.typing as npt
 
 from sarmoco.daemon.recorder import Recorder
-from sarmoco.daemon.schema import AUTOFOCUS
+from sarmoco.daemon.schema import AUTOFOCUS, encode_autofocus
+from sarmoco.processing.autofocus.report import SubapertureReport
 from sarmoco.processing.types import Image
 
 N_SAMPLES = 64
@@ -75,16 +76,22 @@ def raw_chunk(k: int) -> bytes:
 
 
 def autofocus_rows(ids: npt.NDArray[np.int64]) -> dict[str, npt.NDArray[np.generic]]:
-    """Autofocus estimate columns of subapertures ``ids`` (every column of the table)."""
-    x = ids.astype(np.float64)
-    return {
-        "t_center_s": x * 0.5,
-        "a_y_mps2": x * 0.01,
-        "a_z_mps2": -x * 0.02,
-        "accel_residual_hz_per_s": x * 0.1,
-        "kappa": np.stack([x * 0.25, x * 1e-3, x * 1e-6], axis=-1),
-        "kappa_residual_hz_per_s": x * 0.05,
-    }
+    """Autofocus table columns of subapertures ``ids`` (every column the schema declares)."""
+    x = ids.astype(np.float64).tolist()
+    reports = [
+        SubapertureReport(
+            index=j,
+            t_center_s=0.5 * v,
+            envelope_lines=None,
+            phase_lines=None,
+            accel_yz_mps2=(0.01 * v, -0.02 * v),
+            accel_residual_hz_per_s=0.1 * v,
+            kappa=np.array([0.25 * v, 1e-3 * v, 1e-6 * v]),
+            kappa_residual_hz_per_s=0.05 * v,
+        )
+        for j, v in zip(ids.tolist(), x, strict=True)
+    ]
+    return encode_autofocus(reports)
 
 
 def image_of(k: int) -> Image:
