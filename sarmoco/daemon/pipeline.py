@@ -333,22 +333,13 @@ class Pipeline:
         if not self._pending:
             return
         blocks, self._pending, self._pending_n = self._pending, [], 0
-        p = _Pulses.join(blocks, self._pending_row)
-        fresh = _strictly_increasing(p.t_ns, self._focused_ns)
-        if not fresh.all():
-            self.out_of_order += int(np.count_nonzero(~fresh))
-            log.warning("pulses out of time order kept from the focuser",
-                        extra={"pulses": int(np.count_nonzero(~fresh))})  # fmt: skip
-            p = p.rows(fresh)
-            if p.t_ns.size == 0:
-                return
-        self._focused_ns = int(p.t_ns[-1])
-        self.summary.pulses_nav_flagged += int(np.count_nonzero(~p.usable))
-        if self.focuser is None:
-            started = self._start_focusing(p)
-            if started is None:
-                return  # no navigation yet: the aperture has not begun
-            p = started
+        in_order = self._in_time_order(_Pulses.join(blocks, self._pending_row))
+        if in_order is None:
+            return
+        self.summary.pulses_nav_flagged += int(np.count_nonzero(~in_order.usable))
+        p = in_order if self.focuser is not None else self._start_focusing(in_order)
+        if p is None:
+            return  # no navigation yet: the aperture has not begun
         assert self.focuser is not None
         if not p.usable.all():
             p = self._blank_unusable(p)
@@ -356,16 +347,35 @@ class Pipeline:
             k = int(np.flatnonzero(p.usable)[-1])
             self._last_nav = (int(p.t_ns[k]), p.vel_ned[k], p.quat[k])
         out = self.focuser.push(p.raw, p.t_ns, p.vel_ned)
+        self.summary.pulses_processed += int(np.count_nonzero(p.usable))
+        self._record_motion(p, out)
+        self._record(out)
+
+    def _in_time_order(self, p: _Pulses) -> _Pulses | None:
+        """``p`` without the pulses not after every pulse focused before (counted in
+        :attr:`out_of_order`: the focuser needs strictly increasing times); None if none is
+        left."""
+        fresh = _strictly_increasing(p.t_ns, self._focused_ns)
+        if not fresh.all():
+            self.out_of_order += int(np.count_nonzero(~fresh))
+            log.warning("pulses out of time order kept from the focuser",
+                        extra={"pulses": int(np.count_nonzero(~fresh))})  # fmt: skip
+            p = p.rows(fresh)
+            if p.t_ns.size == 0:
+                return None
+        self._focused_ns = int(p.t_ns[-1])
+        return p
+
+    def _record_motion(self, p: _Pulses, out: FocusOutput) -> None:
+        """Record the motion solution of the pulses pushed, and flag the turn pulses."""
         assert out.motion is not None
         m = out.motion
         self.recorder.append_motion(
             p.pulse_id, p.t_ns, p.pos_ned, p.vel_ned, p.quat, m.d_los_m, m.phase_rad,
             m.range_shift_m,
         )  # fmt: skip
-        self.summary.pulses_processed += int(np.count_nonzero(p.usable))
         if out.turn.any():
             self.recorder.flag_pulses(p.row[out.turn], PulseFlag.TURN)
-        self._record(out)
 
     def _start_focusing(self, p: _Pulses) -> _Pulses | None:
         """Start the focuser at the first pulse with navigation; the pulses from there on.
