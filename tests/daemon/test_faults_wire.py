@@ -7,6 +7,10 @@
   their PRF slots for the autofocus; without that, 2 % loss cost 2-3 dB).
 - A radar gap longer than an autofocus subaperture (an outage, an overload) is focused
   around (the autofocus run ends there), not a processing error.
+- Overload: 1500 pulses thrown at the daemon's UDP port as fast as a socket sends them
+  (a hundred times the PRF), 200 of them missing in the middle: pulses are lost (the
+  pulse after the outage flagged LOST_BEFORE), the process stays up, and SIGTERM exits 0
+  with a complete store.
 - ``sarmoco replay`` of an INS log that ends before the radar starts, and of a radar file
   of random bytes: non-zero exit, and the message says what each stream gave, over which
   time, and what was refused.
@@ -15,8 +19,11 @@
 from __future__ import annotations
 
 import json
+import socket
 import subprocess
 import sys
+import time
+import tomllib
 from pathlib import Path
 from typing import Any
 
@@ -24,12 +31,20 @@ import numpy as np
 import pytest
 
 from sarmoco.app.demo import run_loopback
-from sarmoco.app.simconfig import scenario_config
+from sarmoco.app.simconfig import scenario_config, write_config
+from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.focuser import Focuser
 from sarmoco.daemon.store import open_store
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
 from sarmoco.sim.trajectory import MotionSpec
+from tests.daemon.test_daemon_process import (
+    Daemon,
+    free_port,
+    http_get,
+    simulate_files,
+    vita_packets,
+)
 from tests.daemon.test_end_to_end import assert_focused
 
 SCALE = 0.1
@@ -86,6 +101,57 @@ def test_a_radar_gap_longer_than_a_subaperture_is_focused_around() -> None:
     tiles += focuser.finish().tiles
     assert tiles and all(np.isfinite(t.data).all() for t in tiles)
     assert max(np.abs(t.data).max() for t in tiles) > 0
+
+
+def wait_idle(port: int, timeout_s: float = 60.0) -> dict[str, Any]:
+    """Poll /status until no pulse is waiting and none was received for 1 s; that document."""
+    deadline, last, since = time.monotonic() + timeout_s, -1.0, time.monotonic()
+    while True:
+        status: dict[str, Any] = json.loads(http_get(port, "/status")[1])
+        received = status["counters"]["pipeline_pulses_received"]
+        if received != last:
+            last, since = received, time.monotonic()
+        elif received > 0 and time.monotonic() - since > 1.0:
+            if status["gauges"].get("echo_backlog_pulses", 0) == 0:
+                return status
+        assert time.monotonic() < deadline, status
+        time.sleep(0.1)
+
+
+def test_overload_costs_pulses_not_the_process(tmp_path: Path) -> None:
+    n_pulses, outage = 1500, range(600, 800)  # 200 slots: over a subaperture (70)
+    simulate_files(tmp_path, n_pulses)
+    table = tomllib.loads((tmp_path / "sarmoco.toml").read_text())
+    radar_port, status_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_STREAM)
+    table["radar"]["link"] = f"udp://127.0.0.1:{radar_port}"
+    table["status"] = {"http_port": status_port}
+    config = write_config(tmp_path / "overload.toml", table)
+    packets = vita_packets(config, tmp_path / "radar.vrt")
+    daemon = Daemon(config, tmp_path / "overload.zarr")
+    try:
+        daemon.started()
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            t0 = time.monotonic()
+            for k, packet in enumerate(packets):
+                if k not in outage:
+                    tx.sendto(packet, ("127.0.0.1", radar_port))
+            rate = (n_pulses - len(outage)) / (time.monotonic() - t0)
+        status = wait_idle(status_port)
+        assert daemon.proc.poll() is None
+        assert daemon.stop() == 0, daemon.log.read_text()[-3000:]
+    finally:
+        daemon.kill_if_running()
+    assert rate > 50 * table["radar"]["prf_hz"]
+    store = open_store(tmp_path / "overload.zarr")
+    assert store.attrs["complete"]
+    got = store.read("pulses", ["t_ns", "flags"])
+    assert got["t_ns"].size < n_pulses - len(outage)  # more than the outage was lost
+    assert (np.diff(got["t_ns"]) > 0).all()
+    lost = np.uint32(PulseFlag.LOST_BEFORE | PulseFlag.DROPPED_BEFORE)
+    assert np.count_nonzero(got["flags"] & lost) > 0  # a pulse after lost ones is flagged
+    counters = status["counters"]
+    assert counters["radar_gaps"] > 0 and counters["radar_drops"] > 0  # and counted
+    assert store.attrs["metrics"]["pulses_received"] == got["t_ns"].size
 
 
 @pytest.fixture(scope="module")
