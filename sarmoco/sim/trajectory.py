@@ -34,6 +34,10 @@ Three kinds (:class:`MotionSpec`):
     position and acceleration, so the three are exact derivatives of one process; position
     deviation is zero at the first pulse. Roll and pitch are the logged ATTITUDE; yaw is the
     logged yaw minus the smoothed course (crab and heading wander).
+``survey``
+    Straight legs joined by banked 180° turns with the turn rate and the turbulence of the
+    real logs (:mod:`sarmoco.sim.survey`; ``legs``, ``leg_s``); the turbulence fields
+    above apply, rotated with the heading.
 
 Frames: NED, m, s; ``t_s`` is time since the first pulse. Quaternions are scalar-first and
 rotate body to NED (3-2-1 yaw, pitch, roll; docs/methods.md §1).
@@ -69,7 +73,7 @@ class MotionSpec:
 
     Parameters
     ----------
-    kind : {"ideal", "turbulence", "flightlog"}
+    kind : {"ideal", "turbulence", "flightlog", "survey"}
         See the module docstring.
     cross_track_rms_m, vertical_rms_m : float
         Rms displacement east / down, m (turbulence).
@@ -89,9 +93,13 @@ class MotionSpec:
         Length of the log window the deviations are fitted on, s (flightlog); the trajectory
         is defined from ``LOG_MARGIN_S`` before the first pulse to ``log_window_s`` plus that
         margin after it.
+    legs : int
+        Straight legs of the survey pattern (survey).
+    leg_s : float
+        Duration of each leg, s (survey).
     """
 
-    kind: Literal["ideal", "turbulence", "flightlog"] = "ideal"
+    kind: Literal["ideal", "turbulence", "flightlog", "survey"] = "ideal"
     cross_track_rms_m: float = 0.3
     vertical_rms_m: float = 0.3
     along_speed_rms_mps: float = 0.1
@@ -101,6 +109,8 @@ class MotionSpec:
     log_path: Path | None = None
     log_start_s: float = 10.0
     log_window_s: float = 20.0
+    legs: int = 2
+    leg_s: float = 20.0
 
 
 @dataclass(frozen=True)
@@ -381,7 +391,13 @@ def _deviation(scn: Scenario, spec: MotionSpec) -> Deviation | None:
         return TurbulenceDeviation(spec)
     if spec.kind == "flightlog":
         return FlightLogDeviation.from_spec(spec)
-    raise ConfigError(f"motion.kind: {spec.kind!r} is not 'ideal', 'turbulence' or 'flightlog'")
+    if spec.kind == "survey":
+        from sarmoco.sim.survey import SurveyDeviation  # survey builds on this module
+
+        return SurveyDeviation(scn, spec)
+    raise ConfigError(
+        f"motion.kind: {spec.kind!r} is not 'ideal', 'turbulence', 'flightlog' or 'survey'"
+    )
 
 
 def true_trajectory(scn: Scenario, t_s: npt.ArrayLike, spec: MotionSpec) -> Trajectory:

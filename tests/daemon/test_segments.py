@@ -1,0 +1,131 @@
+"""A survey flight through the daemon's Focuser: straight legs joined by a banked turn.
+
+ku-vehicle x0.1 flown as two 14 s legs joined by a 180° coordinated turn at the real
+log's 11.6 °/s (19.9° bank, 86 m radius, 15.5 s), with the log's turbulence along the
+legs and the 0.39 m lever arm (exact APC velocities, no noise, autofocus off, pulses at
+their INS along-track position), two point targets at broadside of each leg. With
+segments the south leg gets its own reference track: every target focuses, the turn's
+pulses are flagged, D_los stays within the segment tolerance. With one track for the
+whole run (``mocomp.segments = false``) the south leg's D_los reaches hundreds of metres
+and its targets, on the other side of the first leg's track, are not imaged at all.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from sarmoco.app.simconfig import scenario_config
+from sarmoco.daemon.focuser import Focuser
+from sarmoco.processing.geometry import ReferenceTrack
+from sarmoco.processing.imaging.tiles import Tile
+from sarmoco.processing.metrics import point_target_metrics
+from sarmoco.processing.types import Image
+from sarmoco.sim.run import SimRun, simulate
+from sarmoco.sim.scenario import load_preset
+from sarmoco.sim.survey import SurveyPattern, survey_scenario, survey_spec
+
+SPEC = survey_spec(legs=2, leg_s=14.0, seed=1)
+TOLERANCE_M = 3.0
+
+
+@pytest.fixture(scope="module")
+def run() -> SimRun:
+    scn = survey_scenario(load_preset("ku-vehicle", 0.1, snr_db=None), SPEC)
+    return simulate(scn, SPEC, "ideal")
+
+
+@dataclass
+class Focused:
+    tiles: list[tuple[Tile, ReferenceTrack]]
+    turn: np.ndarray
+    d_los_m: np.ndarray
+    segments: int
+
+
+def _focus(run: SimRun, segments: bool) -> Focused:
+    cfg = scenario_config(
+        run.scenario,
+        autofocus={"enabled": False},
+        imaging={"swath_m": 8.0},  # the targets lie at the scene-centre range
+        mocomp={"along_track": True, "segments": segments, "segment_tolerance_m": TOLERANCE_M},
+    )
+    n0 = cfg.imaging.block_pulses
+    focuser = Focuser(cfg, int(run.t_ns[0]), run.vel_ned[:n0].mean(axis=0))
+    tiles: list[tuple[Tile, ReferenceTrack]] = []
+    turn, d_los = [], []
+    for a in range(0, run.t_ns.size, n0):
+        b = slice(a, a + n0)
+        out = focuser.push(run.echo[b], run.t_ns[b], run.vel_ned[b])
+        assert out.motion is not None
+        tiles += zip(out.tiles, out.tracks, strict=True)
+        turn.append(out.turn)
+        d_los.append(out.motion.d_los_m)
+    end = focuser.finish()
+    tiles += zip(end.tiles, end.tracks, strict=True)
+    return Focused(tiles, np.concatenate(turn), np.concatenate(d_los), focuser.segments)
+
+
+def _target_image(f: Focused, run: SimRun, target: np.ndarray) -> Image | None:
+    """The 3 m x 3 m around ``target`` in the frame of the track whose tiles hold it best
+    (None: no tile holds it)."""
+    best: Image | None = None
+    for track in {id(tr): tr for _, tr in f.tiles}.values():
+        tiles = sorted((t for t, tr in f.tiles if tr is track), key=lambda t: t.index)
+        d = target - run.apc_ned[0] - track.origin_ned
+        x, y = float(d @ track.x_hat), float(d @ track.y_hat)
+        a0 = np.concatenate([t.grid.axis0_m for t in tiles])
+        data = np.concatenate([t.data for t in tiles])
+        a1 = tiles[0].grid.axis1_m
+        i = np.flatnonzero(np.abs(a0 - x) <= 1.5)
+        j = np.flatnonzero(np.abs(a1 - y) <= 1.5)
+        if i.size < 10 or j.size < 10:
+            continue
+        img = Image(data[i[0] : i[-1] + 1, j[0] : j[-1] + 1], a0[i], a1[j], "ground")
+        if best is None or np.abs(img.data).max() > np.abs(best.data).max():
+            best = img
+    return best
+
+
+def _azimuth(f: Focused, run: SimRun) -> list[tuple[float, float] | None]:
+    """Azimuth (PSLR dB, IRW m) of every target (None: not imaged)."""
+    out: list[tuple[float, float] | None] = []
+    for tgt in run.targets_ned:
+        img = _target_image(f, run, tgt)
+        m = None if img is None else point_target_metrics(img).axis0
+        out.append(None if m is None else (m.pslr_db, m.irw_m))
+    return out
+
+
+def test_every_leg_focuses_turn_flagged_d_los_bounded(run: SimRun) -> None:
+    f = _focus(run, segments=True)
+    scn = run.scenario
+    pattern = SurveyPattern.of(scn, SPEC)
+    t = (run.t_ns - run.t_ns[0]) * 1e-9
+    in_turn = (t > pattern.leg_s) & (t < pattern.leg_s + pattern.turn_s)
+    # the turn is flagged (from within 1 s of its start), the legs' targets are not
+    assert f.turn[in_turn & (t > pattern.leg_s + 1.0)].all()
+    assert not f.turn[t < pattern.leg_s].any()
+    assert f.segments == 2
+    assert np.all(np.isnan(f.d_los_m[f.turn]))
+    # bounded: at most the tolerance plus one pulse's growth
+    assert np.nanmax(np.abs(f.d_los_m)) < TOLERANCE_M + 0.1
+    irw_theory = 0.886 * scn.radar.wavelength_m / (4 * math.sin(scn.integration_angle_rad / 2))
+    for az in _azimuth(f, run):
+        assert az is not None
+        assert az[0] <= -12.5
+        assert az[1] <= 1.1 * irw_theory
+
+
+def test_one_track_for_the_whole_survey_does_not_focus_the_second_leg(run: SimRun) -> None:
+    f = _focus(run, segments=False)
+    assert not f.turn.any() and f.segments == 1
+    assert np.nanmax(np.abs(f.d_los_m)) > 100.0
+    az = _azimuth(f, run)
+    first, second = az[:2], az[2:]
+    assert all(az is not None and az[0] <= -12.5 for az in first)  # the one track's leg
+    # the second leg's targets are on the far side of the first leg's track: not imaged
+    assert all(az is None or az[0] > -10.0 for az in second)
