@@ -248,7 +248,7 @@ def test_ins_only_compensation_focuses_the_thz_target(
         f" azimuth PSLR {tac[ins1].axis0.pslr_db:.2f} dB (raw {tac['raw'].axis0.pslr_db:.2f});"
         f" GPS position range PSLR {tac['GPS position'].axis1.pslr_db:.2f} dB"
     )
-    # tactical INS (2 mm/s white velocity noise per sample): measured -9.83 dB against raw
-    # -2.27 dB; the remaining random-walk phase is the autofocus' to remove (README)
-    assert tac[ins1].axis0.pslr_db < tac["raw"].axis0.pslr_db - 5.0
+    # tactical INS (sim.ins GRADES["tactical"], a STIM300-class unit): measured -13.04 dB
+    # against raw -2.27 dB
+    assert tac[ins1].axis0.pslr_db <= bar < tac["raw"].axis0.pslr_db
     assert tac[ins1].axis1.pslr_db < tac["GPS position"].axis1.pslr_db - 1.0
