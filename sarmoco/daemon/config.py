@@ -162,7 +162,7 @@ class GeometryConfig:
 
 @dataclass(frozen=True)
 class MocompConfig:
-    """INS-only per-pulse motion compensation (METHODS §2)."""
+    """INS-only per-pulse motion compensation (docs/methods.md §2)."""
 
     order: Literal[1, 2] = _key(
         2, "1: scene-centre look angle for every bin; 2: look angle per range bin + eq. 29 term"
@@ -197,7 +197,7 @@ class MocompConfig:
 
 @dataclass(frozen=True)
 class AutofocusConfig:
-    """Sliding-subaperture two-step autofocus (METHODS §3)."""
+    """Sliding-subaperture two-step autofocus (docs/methods.md §3)."""
 
     enabled: bool = _key(True, "Run the two-step autofocus after INS compensation")
     subaperture_s: float = _key(0.4, "Subaperture length", unit="s", gt=0)

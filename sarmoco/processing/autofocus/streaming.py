@@ -1,4 +1,4 @@
-"""Sliding-subaperture two-step autofocus (METHODS §3), streaming and offline.
+"""Sliding-subaperture two-step autofocus (docs/methods.md §3), streaming and offline.
 
 Input: range-compressed pulses already compensated with the navigation solution, on a uniform
 slant-range axis, with the nominal geometry (straight reference track at speed v0, flat ground
@@ -224,9 +224,10 @@ def _line_rates(
 
     A line's weight is its peak-to-median power ratio minus one, an estimate of the signal
     to noise (and clutter) ratio of its dominant scatterer, to which the inverse variance of a
-    rate estimate is proportional. METHODS eq. 13 weights by the mean compressed magnitude;
-    measured on a few-target scene at 0 dB per-pulse SNR, that leaves noise and range-sidelobe
-    lines (a fifth of a target's weight each) enough weight to defocus the image. A line gets
+    rate estimate is proportional. The UAV paper's eq. 13 (docs/methods.md §3) weights by the
+    mean compressed magnitude; measured on a few-target scene at 0 dB per-pulse SNR, that
+    leaves noise and range-sidelobe lines (a fifth of a target's weight each) enough weight
+    to defocus the image. A line gets
     zero weight if its estimator quality is under ``config.min_quality`` or its compressed
     peak stands less than ``config.min_peak_db`` over its median; if fewer than
     ``config.min_lines`` lines are left, every weight is zero (no correction).
