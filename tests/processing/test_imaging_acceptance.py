@@ -121,7 +121,8 @@ def _check(m: PointTargetMetrics, irw_theory: tuple[float, float], label: str) -
 def test_range_doppler_point_target(stripmap: Compressed) -> None:
     d = stripmap
     tgt = d.targets_ned[0]
-    r0 = float(np.hypot(tgt[1], d.scn.altitude_m))  # track at east 0, depth -altitude
+    # closest approach of the straight APC track (the antenna sits a lever arm off the INS point)
+    r0 = float(np.hypot(*(tgt[1:] - d.apc_ned[:, 1:].mean(axis=0))))
     img = range_doppler(d.rc, d.range_axis_m, d.apc_ned[:, 0], d.scn.radar.wavelength_m)
     assert img.frame == "slant"
     m = point_target_metrics(img, (float(tgt[0]), r0), search_radius_m=1.0)
