@@ -8,9 +8,10 @@
 - A radar gap longer than an autofocus subaperture (an outage, an overload) is focused
   around (the autofocus run ends there), not a processing error.
 - Overload: 1500 pulses thrown at the daemon's UDP port as fast as a socket sends them
-  (a hundred times the PRF), 200 of them missing in the middle: pulses are lost (the
-  pulse after the outage flagged LOST_BEFORE), the process stays up, and SIGTERM exits 0
-  with a complete store.
+  (a hundred times the PRF), 200 of them missing in the middle, some sent twice: pulses
+  are lost (flagged on the pulse after them, counted by the radar link), duplicates are
+  counted in /status and /metrics, the process stays up, and SIGTERM exits 0 with a
+  complete store.
 - ``sarmoco replay`` of an INS log that ends before the radar starts, and of a radar file
   of random bytes: non-zero exit, and the message says what each stream gave, over which
   time, and what was refused.
@@ -120,6 +121,7 @@ def wait_idle(port: int, timeout_s: float = 60.0) -> dict[str, Any]:
 
 def test_overload_costs_pulses_not_the_process(tmp_path: Path) -> None:
     n_pulses, outage = 1500, range(600, 800)  # 200 slots: over a subaperture (70)
+    twice = range(0, n_pulses, 100)  # sent twice: duplicates, unless the kernel drops one
     simulate_files(tmp_path, n_pulses)
     table = tomllib.loads((tmp_path / "sarmoco.toml").read_text())
     radar_port, status_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_STREAM)
@@ -134,9 +136,11 @@ def test_overload_costs_pulses_not_the_process(tmp_path: Path) -> None:
             t0 = time.monotonic()
             for k, packet in enumerate(packets):
                 if k not in outage:
-                    tx.sendto(packet, ("127.0.0.1", radar_port))
+                    for _ in range(2 if k in twice else 1):
+                        tx.sendto(packet, ("127.0.0.1", radar_port))
             rate = (n_pulses - len(outage)) / (time.monotonic() - t0)
         status = wait_idle(status_port)
+        metrics = http_get(status_port, "/metrics")[1]
         assert daemon.proc.poll() is None
         assert daemon.stop() == 0, daemon.log.read_text()[-3000:]
     finally:
@@ -151,6 +155,11 @@ def test_overload_costs_pulses_not_the_process(tmp_path: Path) -> None:
     assert np.count_nonzero(got["flags"] & lost) > 0  # a pulse after lost ones is flagged
     counters = status["counters"]
     assert counters["radar_gaps"] > 0 and counters["radar_drops"] > 0  # and counted
+    assert 0 < counters["pipeline_pulses_duplicate"] <= len(twice) - 2  # 2 in the outage
+    assert (
+        f"sarmoco_pipeline_pulses_duplicate_total {counters['pipeline_pulses_duplicate']:.0f}\n"
+        in metrics
+    )
     assert store.attrs["metrics"]["pulses_received"] == got["t_ns"].size
 
 
