@@ -226,6 +226,21 @@ class AutofocusConfig:
         unit="s",
         gt=0,
     )
+    pga: bool = _key(
+        False,
+        "Refine every finished stripmap tile with phase gradient autofocus (image-domain "
+        "stripmap PGA on the tile and its two neighbours; with or without the sliding "
+        "autofocus): removes phase errors shorter than a subaperture; tiles come out one "
+        "tile later",
+    )
+    pga_iterations: int = _key(6, "Tile PGA iterations at most", gt=0)
+    pga_window_m: float = _key(
+        12.0,
+        "Along-track width of tile PGA's first window around each target; it must hold the "
+        "paired echoes (lambda R f / (2 v) from the peak) of the fastest phase error to remove",
+        unit="m",
+        gt=0,
+    )
 
 
 @dataclass(frozen=True)

@@ -33,6 +33,7 @@ from sarmoco.processing.autofocus import (
 )
 from sarmoco.processing.geometry import ReferenceTrack, vector_to_imaging
 from sarmoco.processing.imaging.presum import AzimuthPrefilter, fill_slots, slot_steps
+from sarmoco.processing.imaging.tile_pga import StripPga, TilePga
 from sarmoco.processing.imaging.tiles import Tile, TileImager, TileLayout
 from sarmoco.processing.mocomp import (
     InsMotionCompensator,
@@ -158,6 +159,20 @@ class _Segment:
             if im.prefilter and doppler_hz > 0
             else None
         )
+        self.tile_pga = (
+            TilePga(
+                StripPga(
+                    geo.height_m,
+                    radar.wavelength_m,
+                    beam_rad / 2.0,
+                    window_m=af.pga_window_m,
+                    max_iter=af.pga_iterations,
+                    guard_m=10.0 * radar.range_resolution_m,
+                )
+            )
+            if af.pga
+            else None
+        )
 
     def push(
         self, rc: ComplexArray, t_ns: IntArray, vel_ned: FloatArray
@@ -211,7 +226,7 @@ class _Segment:
             tiles = self._image(focused, corr.t_ns)
         if self.prefilter is not None:
             tiles += self._backproject(*self.prefilter.flush())
-        return tiles + self.imager.close()
+        return tiles + self._refine(self.imager.close(), last=True)
 
     def _along_track_time(self, t_ns: IntArray, vel_ned: FloatArray) -> IntArray:
         """Slow time of each pulse from its INS along-track position: t0 + x / v0, GPS ns.
@@ -245,7 +260,13 @@ class _Segment:
     def _backproject(self, rc: ComplexArray, t_ns: IntArray) -> list[Tile]:
         if rc.shape[0] == 0:
             return []
-        return self.imager.add(rc, t_ns, self.track.position_imaging(t_ns))
+        return self._refine(self.imager.add(rc, t_ns, self.track.position_imaging(t_ns)))
+
+    def _refine(self, tiles: list[Tile], last: bool = False) -> list[Tile]:
+        """Finished tiles through tile PGA when configured (``last``: hand out all it holds)."""
+        if self.tile_pga is None:
+            return tiles
+        return self.tile_pga.push(tiles) + (self.tile_pga.flush() if last else [])
 
 
 def _beam_rad(cfg: Config) -> float:
