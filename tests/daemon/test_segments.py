@@ -14,12 +14,15 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from sarmoco.app.simconfig import scenario_config
+from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.focuser import Focuser
+from sarmoco.daemon.store import open_store
 from sarmoco.processing.geometry import ReferenceTrack
 from sarmoco.processing.imaging.tiles import Tile
 from sarmoco.processing.metrics import point_target_metrics
@@ -27,6 +30,7 @@ from sarmoco.processing.types import Image
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
 from sarmoco.sim.survey import SurveyPattern, survey_scenario, survey_spec
+from tests.daemon.test_pipeline import feed
 
 SPEC = survey_spec(legs=2, leg_s=14.0, seed=1)
 TOLERANCE_M = 3.0
@@ -129,3 +133,37 @@ def test_one_track_for_the_whole_survey_does_not_focus_the_second_leg(run: SimRu
     assert all(az is not None and az[0] <= -12.5 for az in first)  # the one track's leg
     # the second leg's targets are on the far side of the first leg's track: not imaged
     assert all(az is None or az[0] > -10.0 for az in second)
+
+
+def test_the_store_flags_the_turn_and_names_each_tiles_track(tmp_path: Path) -> None:
+    """Through the pipeline: the recorded flags carry TURN on the focuser's turn pulses
+    only, and every tile names its segment's track (two tracks, legs 2 turn radii apart)."""
+    spec = survey_spec(legs=2, leg_s=8.0, seed=2)
+    base = load_preset("ku-vehicle", 0.1, snr_db=None)
+    run = simulate(survey_scenario(base, spec, per_leg=1, margin_s=3.0), spec, "ideal")
+    cfg = scenario_config(
+        run.scenario,
+        radar={"sample_format": "float32"},
+        autofocus={"enabled": False},
+        imaging={"swath_m": 8.0},
+    )
+    feed(run, cfg, tmp_path / "run.zarr")
+    store = open_store(tmp_path / "run.zarr")
+    pulses = store.read("pulses", ["t_ns", "flags"])
+    turn = (pulses["flags"] & PulseFlag.TURN) != 0
+    pattern = SurveyPattern.of(run.scenario, spec)
+    t = (pulses["t_ns"] - run.t_ns[0]) * 1e-9
+    assert turn[(t > pattern.leg_s + 1.0) & (t < pattern.leg_s + pattern.turn_s)].all()
+    assert not turn[t < pattern.leg_s].any()
+    assert not turn[t > pattern.leg_s + pattern.turn_s + 2 * 2.6].any()
+    motion = store.read("motion", ["t_ns", "d_los_m"])
+    assert np.array_equal(np.isnan(motion["d_los_m"]), turn)
+    tracks = {}
+    for i in range(store.n_images):
+        track = store.image(i)[1]["reference_track"]
+        tracks[track["t0_ns"]] = track
+    assert len(tracks) == 2
+    first, second = (tracks[k] for k in sorted(tracks))
+    assert np.dot(first["x_hat_ned"], second["x_hat_ned"]) == pytest.approx(-1.0, abs=1e-3)
+    apart = np.subtract(second["origin_ned"], first["origin_ned"]) @ first["y_hat_ned"]
+    assert apart == pytest.approx(-2 * pattern.radius_m, rel=0.01)
