@@ -87,7 +87,15 @@ def scenario(case: Case) -> Scenario:
     base = load_preset("ku-vehicle", case.scale, **dict(case.preset_overrides))
     gc = base.scene_center_ned[1]
     targets = tuple(Target((0.0, gc + f * base.swath_m, 0.0)) for f in EAST_FRAC)
-    return load_preset("ku-vehicle", case.scale, targets=targets, **dict(case.preset_overrides))
+    # No lever arm: the table feeds the navigation straight to the focusing core, which takes
+    # the antenna phase centre's velocity (the daemon's aligner adds the arm).
+    return load_preset(
+        "ku-vehicle",
+        case.scale,
+        targets=targets,
+        lever_arm_m=(0.0, 0.0, 0.0),
+        **dict(case.preset_overrides),
+    )
 
 
 PhaseFn = Callable[[float], FloatArray]

@@ -187,12 +187,15 @@ AUTOFOCUS_COLUMNS: Mapping[str, tuple[Column, Callable[[SubapertureReport], Any]
     "accel_residual_hz_per_s": (_col(np.float64), lambda s: s.accel_residual_hz_per_s),
     "kappa": (_col(np.float64, (3,), ("kappa_order",)), lambda s: s.kappa),
     "kappa_residual_hz_per_s": (_col(np.float64), lambda s: s.kappa_residual_hz_per_s),
+    "applied": (_col(np.bool_), lambda s: s.applied),
 }
 """Columns of the ``autofocus`` table, each with the field of a
 :class:`~sarmoco.processing.autofocus.report.SubapertureReport` it records: centre time
 (s on the autofocus time axis), cross-track accelerations a_y, a_z (m/s²) and the
 residual of their fit (Hz/s), the rate model κ0, κ1, κ2 (Hz/s, Hz/s/m, Hz/s/m²) and
-its residual (Hz/s). A new column is one entry here."""
+its residual (Hz/s), and whether the corrections were applied (False where they would
+have lowered the focus of the block released with them: the autofocus never makes it
+worse). A new column is one entry here."""
 AUTOFOCUS = TableSpec(
     "autofocus", "subaperture", {name: col for name, (col, _) in AUTOFOCUS_COLUMNS.items()}
 )

@@ -161,6 +161,28 @@ def _contrast(bands: ComplexArray, tc: FloatArray, rate: FloatArray, n_fft: int)
     return np.asarray(np.mean(power**2, axis=-1) / np.mean(power, axis=-1) ** 2, dtype=float)
 
 
+def line_contrast(bands: ComplexArray, t_s: FloatArray, rate: FloatArray) -> FloatArray:
+    """Image contrast (mean I² over mean² I) of each band azimuth-compressed at ``rate``.
+
+    Parameters
+    ----------
+    bands : ndarray of complex, shape (N, B, M)
+        Lines (bands of B range bins) over the M pulses of a subaperture.
+    t_s : ndarray, shape (M,)
+        Pulse times, s.
+    rate : ndarray, shape (N,)
+        Doppler rate each band is compressed with, Hz/s.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        Contrast (1 for noise, larger for a focused point).
+    """
+    _check(bands, t_s, rate)
+    n_fft = 4 * int(2 ** np.ceil(np.log2(t_s.shape[0])))
+    return _contrast(bands, t_s - 0.5 * (t_s[0] + t_s[-1]), rate, n_fft)
+
+
 def contrast_optimisation(
     bands: ComplexArray,
     t_s: FloatArray,

@@ -69,6 +69,9 @@ class SubapertureReport:
         unused orders are zero.
     kappa_residual_hz_per_s : float
         Weighted RMS residual of the κ fit, Hz/s.
+    applied : bool
+        Whether the corrections were applied to the pulses released with this estimate
+        (False: they lowered the focus of that block, which left uncorrected).
     """
 
     index: int
@@ -79,6 +82,7 @@ class SubapertureReport:
     accel_residual_hz_per_s: float
     kappa: FloatArray
     kappa_residual_hz_per_s: float
+    applied: bool = True
 
 
 @dataclass

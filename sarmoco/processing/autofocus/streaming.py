@@ -30,6 +30,7 @@ from sarmoco.processing.autofocus.doppler_rate import (
     compressed_magnitude,
     contrast_optimisation,
     gather_bands,
+    line_contrast,
     map_drift,
     nominal_rate,
     select_lines,
@@ -272,6 +273,33 @@ def _fit_kappa(
     return fit_range_polynomial(
         lines.range_m, lines.rate_hz_per_s, lines.weight, geometry.ref_range_m, order
     )
+
+
+CONTRAST_MARGIN = 0.97
+"""A released block keeps its autofocus corrections unless they leave the contrast of its
+strongest lines below this fraction of the contrast without them (estimation noise moves
+the contrast of a block that the corrections focus by a percent or two)."""
+
+GUARD_LINES = 8
+"""Strongest range lines of a released block whose contrast decides whether it is corrected."""
+
+
+def block_contrast(
+    data: ComplexArray,
+    t_s: FloatArray,
+    bins: IntArray,
+    range_m: FloatArray,
+    geometry: AutofocusGeometry,
+) -> float:
+    """Summed azimuth-compressed contrast of the range lines ``bins`` of a block of pulses.
+
+    Each line is compressed with the nominal Doppler rate of its range over the whole
+    block (:func:`~sarmoco.processing.autofocus.doppler_rate.line_contrast`): the sharper
+    the targets on those lines, the larger the contrast. Needs at least 8 pulses.
+    """
+    bands = gather_bands(data, bins, 0)
+    ref = nominal_rate(range_m[bins], geometry.speed_mps, geometry.wavelength_m)
+    return float(np.sum(line_contrast(bands, t_s, ref)))
 
 
 def _los_accel(accel_yz: FloatArray, geometry: AutofocusGeometry) -> FloatArray:
@@ -698,13 +726,43 @@ class SlidingSubapertureAutofocus:
         return report
 
     def _release(self, flushing: bool) -> tuple[ComplexArray, Corrections]:
-        shifted, corr = self.corrections(flushing)
-        return remove_phase(shifted, corr.phase_cycles, self.range_m - corr.ref_range_m), corr
+        """Release the pulses whose corrections are final, corrected if that is no worse.
+
+        The block is measured with and without its corrections (:func:`block_contrast` on
+        its :data:`GUARD_LINES` strongest lines); where the corrections lower the contrast
+        below :data:`CONTRAST_MARGIN` of the input's (the estimator was fed an error it
+        cannot follow), the block leaves as it came in, with zero corrections, and the
+        subaperture estimates made in this call are marked not applied.
+        """
+        shifted, original, corr = self._take(flushing)
+        focused = remove_phase(shifted, corr.phase_cycles, self.range_m - corr.ref_range_m)
+        if corr.t_ns.size < 8 or self._t0_ns is None:
+            return focused, corr
+        t = _seconds(corr.t_ns, self._t0_ns)
+        bins = select_lines(original, GUARD_LINES, self.config.guard_bins)
+        before = block_contrast(original, t, bins, self.range_m, self.geometry)
+        after = block_contrast(focused, t, bins, self.range_m, self.geometry)
+        if after >= CONTRAST_MARGIN * before:
+            return focused, corr
+        self.report.subapertures = [
+            dataclasses.replace(sub, applied=False) if t[0] <= sub.t_center_s <= t[-1] else sub
+            for sub in self.report.subapertures
+        ]
+        zero = Corrections(
+            corr.t_ns, np.zeros_like(corr.los_m), np.zeros_like(corr.phase_cycles), corr.ref_range_m
+        )
+        return original.copy(), zero
 
     def corrections(self, flushing: bool) -> tuple[ComplexArray, Corrections]:
         """Take the pulses whose corrections are final (every one when ``flushing``) out of the
         buffer; returns them with the envelope already corrected, and their
         :class:`Corrections` (the phase is still to be removed)."""
+        shifted, _, corr = self._take(flushing)
+        return shifted, corr
+
+    def _take(self, flushing: bool) -> tuple[ComplexArray, ComplexArray, Corrections]:
+        """:meth:`corrections`, with the same pulses as they came in (views valid until the
+        next push)."""
         if flushing:
             self._estimate(flushing=True)
         final = self._kappa[-1]
@@ -729,7 +787,7 @@ class SlidingSubapertureAutofocus:
         )
         cyc, cyc_slope = self._cycles()
         corr = Corrections(self._t_ns[sel].copy(), los[sel], cyc[sel], self.geometry.ref_range_m)
-        data = self._shifted.rows[sel]
+        data, original = self._shifted.rows[sel], self._data.rows[sel]
         if upto > first:
             self._released_s = float(self._t[upto - 1])
         # Drop pulses that are released and not needed by a pending subaperture, carrying the
@@ -744,7 +802,7 @@ class SlidingSubapertureAutofocus:
             if self._shifted is not self._data:
                 self._shifted.drop(cut)
             self._forget()
-        return data, corr
+        return data, original, corr
 
     def _pin_window(self, n_known: int) -> slice:
         """Buffered pulses from the first to the ``n_known``-th subaperture centre (all
