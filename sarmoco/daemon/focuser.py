@@ -115,6 +115,11 @@ class _Segment:
             else None
         )
         self._last_tau_ns: int | None = None
+        self._eq29 = cfg.mocomp.order == 2
+        """Whether the imager removes each pixel's squint residual (eq. 29) of the compensation."""
+        self._dy_t_ns = np.zeros(0, np.int64)
+        self._dy_m = np.zeros(0)
+        """Imaging time (GPS ns) and compensated ΔY (m) of the pulses not yet imaged (eq. 29)."""
         self._slot_ns: int | None = None
         """Time of the last pulse given to the autofocus, GPS ns."""
         self._period_ns = round(1e9 / radar.prf_hz)
@@ -180,6 +185,9 @@ class _Segment:
         """Compensate, autofocus and image range-compressed pulses of this segment."""
         rc, motion = self.mocomp.compensate(rc, t_ns, vel_ned)
         t_ns = self._along_track_time(t_ns, vel_ned)
+        if self._eq29:
+            self._dy_t_ns = np.concatenate([self._dy_t_ns, t_ns])
+            self._dy_m = np.concatenate([self._dy_m, motion.disp_yz_m[:, 0]])
         if self.autofocus is None:
             return motion, self._image(rc, t_ns)
         return motion, self._autofocus_image(rc, t_ns)
@@ -260,7 +268,24 @@ class _Segment:
     def _backproject(self, rc: ComplexArray, t_ns: IntArray) -> list[Tile]:
         if rc.shape[0] == 0:
             return []
-        return self._refine(self.imager.add(rc, t_ns, self.track.position_imaging(t_ns)))
+        apc = self.track.position_imaging(t_ns)
+        return self._refine(self.imager.add(rc, t_ns, apc, self._compensated_dy(t_ns)))
+
+    def _compensated_dy(self, t_ns: IntArray) -> FloatArray | None:
+        """ΔY the pulses imaged at ``t_ns`` were compensated for, m (None: no eq. 29 term).
+
+        The autofocus fills lost PRF slots and the pre-filter puts its outputs on slot
+        centres, so ΔY (smooth) is interpolated to these times from the compensated
+        pulses' (held beyond the ends); the pulses before the last time asked for are
+        then dropped (imaging times only increase).
+        """
+        if not self._eq29:
+            return None
+        base = self.track.t0_ns
+        dy = np.interp(t_ns - base, self._dy_t_ns - base, self._dy_m)
+        keep = max(0, int(np.searchsorted(self._dy_t_ns, t_ns[-1], side="right")) - 1)
+        self._dy_t_ns, self._dy_m = self._dy_t_ns[keep:], self._dy_m[keep:]
+        return dy
 
     def _refine(self, tiles: list[Tile], last: bool = False) -> list[Tile]:
         """Finished tiles through tile PGA when configured (``last``: hand out all it holds)."""

@@ -13,6 +13,16 @@ point (AFRL GOTCHA). Pixels whose range falls outside the range axis get no
 contribution from that pulse. Optionally a pulse contributes only to the pixels
 it sees within an azimuth half-angle of broadside (beam culling, below).
 
+Squint residual of the per-bin motion compensation (eq. 29, docs/methods.md §2):
+when the pulses were compensated per range bin for an APC displacement ``ΔY_p``
+along the grid's axis 1 as a broadside point at that range sees it (projection
+``ΔY_p sqrt(R^2 - h^2) / R``, ``h`` the APC's height over the plane), a pixel seen
+under squint at ``(dx, dy)`` from the APC sees ``ΔY_p dy / R`` instead. Given
+``ΔY_p``, the phase ``4 pi ΔY_p (dy - sqrt(dx^2 + dy^2)) / (lambda R)`` is added to
+the pixel's, removing that residual (it is ``-4 pi ΔY_p psi^2 / (2 lambda sin beta)`` to
+second order in the squint ``psi``). A displacement normal to the plane needs no such
+term: its projection ``h / R`` is the same for every point at range ``R``.
+
 Kernel: numba-compiled, parallel over the rows (axis 0) of the grid, GIL
 released. The grid is separable (``R^2 = dx^2 + dy^2 + h^2`` in the grid's own
 axes), so for each row and pulse the pixels that the range axis and the beam
@@ -141,12 +151,15 @@ def _bp_kernel(
     ax1: FloatArray,
     k: float,
     inv_tan2: float,
+    squint: bool,
     out: FloatArray,
 ) -> None:  # pragma: no cover - compiled
     """Accumulate the pulses ``rows`` of ``line`` into ``out`` (float32 view, re/im interleaved).
 
-    ``geo[p]`` is pulse ``p``'s APC in grid coordinates ``(u, w, h^2, R_ref)``:
-    along axis 0, along axis 1, squared height over the plane, reference range.
+    ``geo[p]`` is pulse ``p``'s APC in grid coordinates ``(u, w, h^2, R_ref, k ΔY)``:
+    along axis 0, along axis 1, squared height over the plane, reference range, and
+    the compensated displacement along axis 1 times ``k`` (rad/m; used when ``squint``,
+    loop-invariant, so the compiler keeps a loop without the term).
     A pixel ``(a0, a1)`` takes the pulse when its range is inside the range axis
     and ``dx^2 <= tan^2(half angle) (dy^2 + h^2)`` (``inv_tan2 = 0``: no culling).
     Per row and pulse, a first loop computes range, fractional bin and phase for
@@ -164,10 +177,11 @@ def _bp_kernel(
         sin_ph = np.empty(n1, np.float32)
         for q in range(rows.shape[0]):
             p = rows[q]
-            w, h2, rref = geo[p, 1], geo[p, 2], geo[p, 3]
+            w, h2, rref, k_dy = geo[p, 1], geo[p, 2], geo[p, 3], geo[p, 4]
             dx = ax0[i] - geo[p, 0]
-            base = dx * dx + h2
-            lo2 = dx * dx * inv_tan2 - h2  # beam: dy^2 >= dx^2 / tan^2 - h^2
+            dx2 = dx * dx
+            base = dx2 + h2
+            lo2 = dx2 * inv_tan2 - h2  # beam: dy^2 >= dx^2 / tan^2 - h^2
             r_min = rref + r_first
             if r_min > 0.0:
                 lo2 = max(lo2, r_min * r_min - base)
@@ -187,9 +201,13 @@ def _bp_kernel(
                 js, je = (s0, e0) if seg == 0 else (s1, e1)
                 for j in range(js, je):
                     dy = ax1[j] - w
-                    d_rel = np.sqrt(base + dy * dy) - rref
+                    r = np.sqrt(base + dy * dy)
+                    d_rel = r - rref
                     pos[j] = min(max((d_rel - r_first) / dr, 0.0), top)
-                    c, s = _sincos(k * d_rel)
+                    ph = k * d_rel
+                    if squint:
+                        ph += k_dy * (np.sqrt(dx2 + dy * dy) - dy) / r
+                    c, s = _sincos(ph)
                     cos_ph[j] = c
                     sin_ph[j] = s
                 for j in range(js, je):
@@ -212,6 +230,7 @@ def backproject_into(
     ref_range_m: FloatArray | None = None,
     pulses: IntArray | None = None,
     beam_half_angle_rad: float | None = None,
+    compensated_dy_m: FloatArray | None = None,
 ) -> None:
     """Add the backprojection of upsampled pulses to ``out`` in place.
 
@@ -235,6 +254,11 @@ def backproject_into(
         Beam culling: a pixel takes a pulse only when its squint, the angle
         between the APC-to-pixel line and the plane normal to the grid's axis 0,
         is at most this, rad (axis 0 is then the direction of flight). None: no culling.
+    compensated_dy_m : ndarray of float64, shape (P,), optional
+        APC displacement along the grid's axis 1 that each pulse was compensated for
+        per range bin, as a broadside point sees it (docs/methods.md §2, second order),
+        m. Given, every pixel gets its squint residual removed (eq. 29, module
+        docstring); None: no such term.
     """
     n_p = lines.data.shape[0]
     shape = (grid.axis0_m.size, grid.axis1_m.size)
@@ -253,9 +277,17 @@ def backproject_into(
         if not 0.0 < beam_half_angle_rad < np.pi / 2:
             raise ProcessingError(f"backproject: beam half-angle {beam_half_angle_rad!r} rad")
         inv_tan2 = float(np.tan(beam_half_angle_rad) ** -2)
+    k = 4.0 * np.pi / wavelength_m
+    k_dy = np.zeros(n_p)
+    if compensated_dy_m is not None:
+        k_dy = k * np.asarray(compensated_dy_m, dtype=np.float64)
+        if k_dy.shape != (n_p,) or not np.all(np.isfinite(k_dy)):
+            raise ProcessingError(
+                f"backproject: compensated_dy_m shape {k_dy.shape} is not ({n_p},) or not finite"
+            )
     e0, e1 = grid.unit_vectors
     d = np.asarray(apc_m, dtype=np.float64) - np.asarray(grid.origin_m, dtype=np.float64)
-    geo = np.column_stack([d @ e0, d @ e1, d[:, 2] ** 2, ref])
+    geo = np.column_stack([d @ e0, d @ e1, d[:, 2] ** 2, ref, k_dy])
     _bp_kernel(
         lines.data,
         rows,
@@ -264,8 +296,9 @@ def backproject_into(
         geo,
         np.asarray(grid.axis0_m, dtype=np.float64),
         np.asarray(grid.axis1_m, dtype=np.float64),
-        4.0 * np.pi / wavelength_m,
+        k,
         inv_tan2,
+        compensated_dy_m is not None,
         out.view(np.float32),
     )
 

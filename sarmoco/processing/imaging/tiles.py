@@ -120,7 +120,13 @@ class TileImager:
         self._first_open = -(2**62)
         """Tiles below this index were handed out and are never reopened."""
 
-    def add(self, rc: ComplexArray, t_ns: IntArray, apc_m: FloatArray) -> list[Tile]:
+    def add(
+        self,
+        rc: ComplexArray,
+        t_ns: IntArray,
+        apc_m: FloatArray,
+        compensated_dy_m: FloatArray | None = None,
+    ) -> list[Tile]:
         """Backproject a block and return the tiles it finished.
 
         Parameters
@@ -131,6 +137,11 @@ class TileImager:
             Pulse times, GPS ns, increasing across calls.
         apc_m : ndarray, shape (P, 3)
             APC of each pulse in the imaging frame (the reference track), m.
+        compensated_dy_m : ndarray, shape (P,), optional
+            Cross-track APC displacement ΔY (imaging y) the pulses were compensated for
+            per range bin (second order, docs/methods.md §2), m: each pixel then gets the
+            squint residual of eq. 29 removed
+            (:func:`~sarmoco.processing.imaging.backprojection.backproject_into`).
         """
         if rc.shape[0] == 0:
             return []
@@ -145,10 +156,17 @@ class TileImager:
                 self._open[k] = Tile(k, grid, np.zeros(shape, np.complex64), int(t_ns[0]), 0)
         for start in range(0, rc.shape[0], CHUNK_PULSES):
             chunk = slice(start, start + CHUNK_PULSES)
-            self._backproject(rc[chunk], t_ns[chunk], apc_m[chunk])
+            dy = None if compensated_dy_m is None else compensated_dy_m[chunk]
+            self._backproject(rc[chunk], t_ns[chunk], apc_m[chunk], dy)
         return self._pop_below(math.floor((float(x[-1]) - half) / length))
 
-    def _backproject(self, rc: ComplexArray, t_ns: IntArray, apc_m: FloatArray) -> None:
+    def _backproject(
+        self,
+        rc: ComplexArray,
+        t_ns: IntArray,
+        apc_m: FloatArray,
+        compensated_dy_m: FloatArray | None,
+    ) -> None:
         x = apc_m[:, 0]
         half = self.layout.half_footprint_m
         length = self.layout.tile_length_m
@@ -167,6 +185,7 @@ class TileImager:
                 tile.grid,
                 pulses=sel,
                 beam_half_angle_rad=self.layout.beamwidth_rad / 2.0,
+                compensated_dy_m=compensated_dy_m,
             )
             tile.n_pulses += sel.size
             tile.t1_ns = int(t_ns[sel[-1]])
