@@ -17,11 +17,16 @@ Squint residual of the per-bin motion compensation (eq. 29, docs/methods.md §2)
 when the pulses were compensated per range bin for an APC displacement ``ΔY_p``
 along the grid's axis 1 as a broadside point at that range sees it (projection
 ``ΔY_p sqrt(R^2 - h^2) / R``, ``h`` the APC's height over the plane), a pixel seen
-under squint at ``(dx, dy)`` from the APC sees ``ΔY_p dy / R`` instead. Given
-``ΔY_p``, the phase ``4 pi ΔY_p (dy - sqrt(dx^2 + dy^2)) / (lambda R)`` is added to
-the pixel's, removing that residual (it is ``-4 pi ΔY_p psi^2 / (2 lambda sin beta)`` to
-second order in the squint ``psi``). A displacement normal to the plane needs no such
-term: its projection ``h / R`` is the same for every point at range ``R``.
+under squint at ``(dx, dy)`` from the APC sees ``ΔY_p dy / R`` instead, so its echo
+keeps ``exp(-j 4 pi ΔY_p (sqrt(dx^2 + dy^2) - dy) / (lambda R))`` after the compensation.
+Given ``ΔY_p``, that phase is removed with the echo phase:
+
+    I(x) = sum_p  rc_p(R - R_ref,p) * exp(+j 4 pi (R - R_ref,p + e_p) / lambda),
+    e_p = ΔY_p (sqrt(dx^2 + dy^2) - dy) / R
+
+(``4 pi ΔY_p psi^2 / (2 lambda sin beta)`` to second order in the squint ``psi``, beta the
+look angle). A displacement normal to the plane needs no such term: its projection
+``h / R`` is the same for every point at range ``R``.
 
 Kernel: numba-compiled, parallel over the rows (axis 0) of the grid, GIL
 released. The grid is separable (``R^2 = dx^2 + dy^2 + h^2`` in the grid's own
