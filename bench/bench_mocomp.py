@@ -74,9 +74,7 @@ def run(n_pulses: int, repeat: int) -> list[tuple[str, float, float, float]]:
             axis,
             scn.altitude_m,
             scn.center_slant_range_m,
-            track.v0_mps,
             order=order,  # type: ignore[arg-type]
-            t_center_ns=int(t_ns[n_pulses // 2]),
             envelope_fraction=fraction,
         )
 
@@ -93,7 +91,7 @@ def run(n_pulses: int, repeat: int) -> list[tuple[str, float, float, float]]:
         ("D_los 1st order, phase only", geometry(1, None)),
         ("D_los 1st order, envelope > 0.25 cell", geometry(1, 0.25)),
         ("D_los 1st order, envelope every pulse", geometry(1, 0.0)),
-        ("D_los 2nd order (beta(r), eq. 29), env > 0.25", geometry(2, 0.25)),
+        ("D_los 2nd order (beta(r)), env > 0.25", geometry(2, 0.25)),
     ]
     for name, geom in cases:
         _, sol = InsMotionCompensator(track, geom).compensate(rc, t_ns, traj.vel_ned)

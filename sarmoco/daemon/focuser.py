@@ -104,7 +104,6 @@ class _Segment:
             range_m,
             geo.height_m,
             geo.center_slant_range_m,
-            track.v0_mps,
             order=cfg.mocomp.order,
             envelope_fraction=cfg.mocomp.envelope_fraction,
         )

@@ -11,11 +11,12 @@ by exp(-j 4π d_los(k) / λ). Because d_los is linear in (sin β, cos β) the
 running state is the pair (ΔY, ΔZ), which also serves every range bin.
 
 - ``order=1``: one β, the scene centre's, for all range bins.
-- ``order=2``: β per range bin, cos β = H / r, and the range-variant term of
-  eq. 29: the displacement is seen by a target at range r under the squint
-  ``v0 τ / r`` (τ = t - t_center), so its range error is
-  ``-d_los cos(squint) ≈ -d_los (1 - v0² τ² / (2 r²))``; the extra phase
-  ``2π v0² τ² d_los / (λ r²)`` of eq. 29 is applied with that physical sign.
+- ``order=2``: β per range bin, cos β = H / r (r the bin's slant range): the
+  displacement as a broadside point at that range sees it. Points seen under
+  squint at the same range see the cross-track part differently (eq. 29); that
+  residual is azimuth-variant in a stripmap, so the image former removes it per
+  pixel (``compensated_dy_m`` of
+  :func:`~sarmoco.processing.imaging.backprojection.backproject_into`).
 - Envelope: where |d_los| at the scene centre exceeds ``envelope_fraction``
   of the range resolution cell, the pulse is resampled in range (linear phase
   in range frequency, sub-sample, zero-padded: what leaves the window is lost,
@@ -63,13 +64,8 @@ class LosGeometry:
         Look angle of each range bin (``order=2``; NaN-free), rad.
     scene_range_m : float
         Slant range of the scene centre, m.
-    v0_mps : float
-        Reference along-track speed, m/s.
-    t_center_ns : int or None
-        Broadside time of the scene centre (τ = 0 of eq. 29), GPS ns; None
-        leaves the range-variant term out.
     order : {1, 2}
-        Scene-centre β (1) or β per bin plus the eq. 29 term (2).
+        Scene-centre β (1) or β per bin (2).
     envelope_fraction : float or None
         Fraction of a range cell above which a pulse is shifted in range;
         None never shifts.
@@ -81,8 +77,6 @@ class LosGeometry:
     beta_c_rad: float
     beta_bins_rad: FloatArray
     scene_range_m: float
-    v0_mps: float
-    t_center_ns: int | None
     order: Literal[1, 2]
     envelope_fraction: float | None
 
@@ -93,10 +87,8 @@ class LosGeometry:
         range_axis_m: FloatArray,
         ground_depth_m: float,
         scene_range_m: float,
-        v0_mps: float,
         *,
         order: Literal[1, 2] = 1,
-        t_center_ns: int | None = None,
         envelope_fraction: float | None = 0.25,
     ) -> LosGeometry:
         """Derive the look angles from flat ground at ``ground_depth_m`` below the track.
@@ -111,9 +103,7 @@ class LosGeometry:
             Depth H of the flat ground below the reference track, m.
         scene_range_m : float
             Slant range of the scene centre, m.
-        v0_mps : float
-            Reference along-track speed, m/s.
-        order, t_center_ns, envelope_fraction
+        order, envelope_fraction
             See the class parameters.
         """
         axis = np.asarray(range_axis_m, dtype=np.float64)
@@ -134,8 +124,6 @@ class LosGeometry:
             beta_c_rad=float(look_angle(scene_range_m, ground_depth_m)),
             beta_bins_rad=beta_bins,
             scene_range_m=float(scene_range_m),
-            v0_mps=float(v0_mps),
-            t_center_ns=t_center_ns,
             order=order,
             envelope_fraction=envelope_fraction,
         )
@@ -263,35 +251,19 @@ def _padded_length(n: int) -> int:
     return m
 
 
-def _squint_coef(geom: LosGeometry, t_ns: IntArray) -> FloatArray:
-    """v0² τ² / 2 per pulse, m² (eq. 29: cos(squint) ≈ 1 - v0² τ² / (2 r²)); 0 without t_center."""
-    if geom.t_center_ns is None:
-        return np.zeros(t_ns.shape[0])
-    tau = (t_ns.astype(np.int64) - geom.t_center_ns) * 1e-9
-    return np.asarray(0.5 * (geom.v0_mps * tau) ** 2, dtype=np.float64)
-
-
-def _bin_rotation(
-    geom: LosGeometry, dy: FloatArray, dz: FloatArray, d_c: FloatArray, sq: FloatArray
-) -> ComplexArray:
+def _bin_rotation(geom: LosGeometry, dy: FloatArray, dz: FloatArray) -> ComplexArray:
     """exp(-j (φ(p, r) - φ_c(p))) per pulse and bin (second order), (P, S) complex64.
 
-    φ(p, r) = k d(p, r) (1 - sq_p / r²) with d(p, r) = ΔY_p sin β(r) + ΔZ_p cos β(r); the
+    φ(p, r) = k d(p, r) with d(p, r) = ΔY_p sin β(r) + ΔZ_p cos β(r); the
     scene-centre part φ_c is applied per pulse in float64, so the per-bin difference is
     small (hundreds of rad at most) and float32 keeps it to ~1e-5 rad at a fraction of
     the cost of a float64 complex exponential.
     """
     k = 4.0 * np.pi / geom.wavelength_m
     sin_b, cos_b = np.sin(geom.beta_bins_rad), np.cos(geom.beta_bins_rad)
-    r2 = geom.range_axis_m**2
     f32 = np.float32
     dphi = dy.astype(f32)[:, None] * (k * (sin_b - np.sin(geom.beta_c_rad))).astype(f32)
     dphi += dz.astype(f32)[:, None] * (k * (cos_b - np.cos(geom.beta_c_rad))).astype(f32)
-    if np.any(sq):
-        ks = k * sq
-        dphi -= (ks * dy).astype(f32)[:, None] * (sin_b / r2).astype(f32)
-        dphi -= (ks * dz).astype(f32)[:, None] * (cos_b / r2).astype(f32)
-        dphi += (ks * d_c / geom.scene_range_m**2).astype(f32)[:, None]
     rot = np.empty(dphi.shape, dtype=np.complex64)
     rot.real = np.cos(dphi)
     rot.imag = np.sin(dphi)
@@ -339,14 +311,11 @@ def correct_los(
             shift_m[rows] = d_c[rows]
             out = out.copy() if out is echo else out  # never write into the caller's array
             out[rows] = shift_range(out[rows], d_c[rows] / geom.bin_spacing_m)
-    k = 4.0 * np.pi / geom.wavelength_m
+    phase_c = 4.0 * np.pi / geom.wavelength_m * d_c
     if geom.order == 1:
-        phase_c = k * d_c
         out = out * np.exp(-1j * phase_c).astype(np.complex64)[:, None]
     else:
-        sq = _squint_coef(geom, t_ns)
-        phase_c = k * d_c * (1.0 - sq / geom.scene_range_m**2)
-        rot = _bin_rotation(geom, dy, dz, d_c, sq)
+        rot = _bin_rotation(geom, dy, dz)
         rot *= np.exp(-1j * phase_c).astype(np.complex64)[:, None]
         out = out * rot
     solution = MocompSolution(

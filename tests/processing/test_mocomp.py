@@ -86,7 +86,7 @@ def test_phase_and_envelope_bring_every_pulse_back_to_the_reference_track() -> N
     echo = _gauss_peaks(n, (r_k - axis[0]) / dr) * np.exp(-4j * np.pi * r_k / lam)[:, None]
     ref = _gauss_peaks(n, np.array([(SCENE_R_M - axis[0]) / dr]))[0]
     ref = ref * np.exp(-4j * np.pi * SCENE_R_M / lam)
-    geom = LosGeometry.build(RADAR, axis, DEPTH_M, SCENE_R_M, 60.0, envelope_fraction=0.0)
+    geom = LosGeometry.build(RADAR, axis, DEPTH_M, SCENE_R_M, envelope_fraction=0.0)
     t_ns = _pulse_times(rng, p)
     out, sol = correct_los(echo.astype(np.complex64), t_ns, disp, geom)
     assert np.max(np.abs(out - ref[None, :])) < 2e-5
@@ -94,13 +94,13 @@ def test_phase_and_envelope_bring_every_pulse_back_to_the_reference_track() -> N
     np.testing.assert_allclose(sol.range_shift_m, d, atol=1e-15)
     np.testing.assert_allclose(sol.phase_rad, 4 * np.pi * d / lam, rtol=1e-14)
     # without the envelope step only the phase at the (moved) peak is right
-    geom_no = LosGeometry.build(RADAR, axis, DEPTH_M, SCENE_R_M, 60.0, envelope_fraction=None)
+    geom_no = LosGeometry.build(RADAR, axis, DEPTH_M, SCENE_R_M, envelope_fraction=None)
     out_no, sol_no = correct_los(echo.astype(np.complex64), t_ns, disp, geom_no)
     assert np.all(sol_no.range_shift_m == 0.0)
     peak = np.argmax(np.abs(out_no), axis=1)
     assert np.ptp(peak) >= 4  # the envelope wanders over several bins
     # the threshold: only pulses with |d_los| above 0.25 cell are shifted
-    geom_q = LosGeometry.build(RADAR, axis, DEPTH_M, SCENE_R_M, 60.0, envelope_fraction=0.25)
+    geom_q = LosGeometry.build(RADAR, axis, DEPTH_M, SCENE_R_M, envelope_fraction=0.25)
     _, sol_q = correct_los(echo.astype(np.complex64), t_ns, disp, geom_q)
     moved = np.abs(d) > 0.25 * RADAR.range_resolution_m
     np.testing.assert_array_equal(sol_q.range_shift_m != 0.0, moved)
@@ -144,9 +144,7 @@ def test_block_by_block_equals_whole_aperture(order: int) -> None:
         _axis(n, 0.12),
         DEPTH_M,
         SCENE_R_M,
-        60.0,
         order=order,  # type: ignore[arg-type]
-        t_center_ns=int(t_ns[p // 2]),
         envelope_fraction=0.3,
     )
     whole, sol = compensate_aperture(echo, t_ns, vel, NORTH, geom)
@@ -169,35 +167,32 @@ def test_block_by_block_equals_whole_aperture(order: int) -> None:
 
 def test_geometry_rejects_bad_inputs() -> None:
     with pytest.raises(ProcessingError):
-        LosGeometry.build(RADAR, np.array([1500.0, 1500.1, 1500.3]), DEPTH_M, SCENE_R_M, 60.0)
+        LosGeometry.build(RADAR, np.array([1500.0, 1500.1, 1500.3]), DEPTH_M, SCENE_R_M)
     with pytest.raises(ProcessingError):
-        LosGeometry.build(RADAR, _axis(), DEPTH_M, SCENE_R_M, 60.0, order=3)  # type: ignore[arg-type]
-    geom = LosGeometry.build(RADAR, _axis(), DEPTH_M, SCENE_R_M, 60.0)
+        LosGeometry.build(RADAR, _axis(), DEPTH_M, SCENE_R_M, order=3)  # type: ignore[arg-type]
+    geom = LosGeometry.build(RADAR, _axis(), DEPTH_M, SCENE_R_M)
     with pytest.raises(ProcessingError):
         correct_los(np.zeros((3, 10), np.complex64), np.arange(3), np.zeros((3, 2)), geom)
 
 
 def test_second_order_phase_matches_the_direct_per_bin_formula() -> None:
-    """β(r) per bin and the eq. 29 squint factor, against a float64 evaluation."""
+    """β(r) per bin against a float64 evaluation (its squint residual, eq. 29, is the image
+    former's: tests/daemon/test_eq29.py)."""
     rng = np.random.default_rng(11)
     p, n = 300, 512
     axis = _axis(n, 0.25)  # ±64 m of slant range about the scene centre
     t_ns = _pulse_times(rng, p)
     disp = np.cumsum(rng.normal(scale=2e-3, size=(p, 2)), axis=0)
     echo = (rng.normal(size=(p, n)) + 1j * rng.normal(size=(p, n))).astype(np.complex64)
-    t_c = int(t_ns[0]) - 2_000_000_000  # far from broadside: a large squint term
-    geom = LosGeometry.build(
-        RADAR, axis, DEPTH_M, SCENE_R_M, 60.0, order=2, t_center_ns=t_c, envelope_fraction=None
-    )
+    geom = LosGeometry.build(RADAR, axis, DEPTH_M, SCENE_R_M, order=2, envelope_fraction=None)
     out, sol = correct_los(echo, t_ns, disp, geom)
     beta = look_angle(axis, DEPTH_M)
     d = disp[:, :1] * np.sin(beta) + disp[:, 1:] * np.cos(beta)
-    tau = (t_ns - t_c)[:, None] * 1e-9
-    phase = 4 * np.pi / RADAR.wavelength_m * d * (1 - (60.0 * tau) ** 2 / (2 * axis**2))
+    phase = 4 * np.pi / RADAR.wavelength_m * d
     np.testing.assert_allclose(out, echo * np.exp(-1j * phase), rtol=0, atol=2e-5 * 6)
     i_c = int(np.argmin(np.abs(axis - SCENE_R_M)))
     np.testing.assert_allclose(sol.phase_rad, phase[:, i_c], rtol=1e-6)
-    first = LosGeometry.build(RADAR, axis, DEPTH_M, SCENE_R_M, 60.0, envelope_fraction=None)
+    first = LosGeometry.build(RADAR, axis, DEPTH_M, SCENE_R_M, envelope_fraction=None)
     out1, _ = correct_los(echo, t_ns, disp, first)
     assert np.max(np.abs(np.angle(out1[:, -1] / out[:, -1]))) > 1.0  # β(r) matters at the edge
 
