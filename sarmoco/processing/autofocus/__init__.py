@@ -5,14 +5,11 @@ Public entry points: :class:`SlidingSubapertureAutofocus` (streaming),
 :mod:`.report`.
 """
 
+from sarmoco.processing.autofocus.corrections import Corrections
+from sarmoco.processing.autofocus.offline import autofocus_offline
 from sarmoco.processing.autofocus.report import AutofocusReport, LineRates, SubapertureReport
-from sarmoco.processing.autofocus.streaming import (
-    AutofocusConfig,
-    AutofocusGeometry,
-    Corrections,
-    SlidingSubapertureAutofocus,
-    autofocus_offline,
-)
+from sarmoco.processing.autofocus.settings import AutofocusConfig, AutofocusGeometry
+from sarmoco.processing.autofocus.streaming import SlidingSubapertureAutofocus
 
 __all__ = [
     "AutofocusConfig",

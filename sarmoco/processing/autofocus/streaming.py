@@ -20,27 +20,29 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from dataclasses import dataclass
-from typing import Any, Generic, Literal, TypeVar
+from typing import Any
 
 import numpy as np
 
 from sarmoco.errors import ProcessingError
+from sarmoco.processing.autofocus.buffers import History, RowBuffer
+from sarmoco.processing.autofocus.corrections import Corrections
 from sarmoco.processing.autofocus.doppler_rate import (
-    compressed_magnitude,
-    contrast_optimisation,
-    gather_bands,
-    line_contrast,
-    map_drift,
-    nominal_rate,
     select_lines,
 )
-from sarmoco.processing.autofocus.report import AutofocusReport, LineRates, SubapertureReport
-from sarmoco.processing.autofocus.separation import (
-    fit_accelerations,
-    fit_range_polynomial,
-    look_angle,
+from sarmoco.processing.autofocus.lines import (
+    CONTRAST_MARGIN,
+    GUARD_LINES,
+    Bands,
+    block_contrast,
+    fit_accel,
+    fit_kappa,
+    los_accel,
+    measure_line_rates,
+    select_bands,
 )
+from sarmoco.processing.autofocus.report import AutofocusReport, LineRates, SubapertureReport
+from sarmoco.processing.autofocus.settings import AutofocusConfig, AutofocusGeometry
 from sarmoco.processing.autofocus.splice import (
     integrate_twice,
     phase_screen,
@@ -52,378 +54,14 @@ from sarmoco.processing.autofocus.splice import (
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 
 
-@dataclass(frozen=True)
-class AutofocusGeometry:
-    """Nominal geometry the data were compensated to.
-
-    Parameters
-    ----------
-    wavelength_m : float
-        Carrier wavelength, m.
-    speed_mps : float
-        Speed v0 of the straight reference track, m/s.
-    depth_m : float
-        Height H of the reference track above the flat ground, m (cos β = H / r).
-    ref_range_m : float
-        Scene-centre slant range R_c, m (envelope look angle β_c and Δd = R - R_c).
-    """
-
-    wavelength_m: float
-    speed_mps: float
-    depth_m: float
-    ref_range_m: float
-
-
-@dataclass(frozen=True)
-class AutofocusConfig:
-    """Settings of the two-step autofocus.
-
-    Parameters
-    ----------
-    subaperture_s, hop_s : float
-        Subaperture length and hop, s (overlap 1 - hop/subaperture, at least 50 % advised).
-    n_lines : int
-        Range lines used per subaperture.
-    guard_bins : int
-        Minimum spacing of two lines, bins.
-    half_band : int
-        Each line is a band of 2 half_band + 1 bins (magnitudes summed for map drift).
-    estimator : {"map_drift", "contrast"}
-        Doppler-rate estimator.
-    envelope_step : bool
-        Run step 1 (False: the paper's phase-only baseline).
-    range_order : int
-        Order of the κ range model of step 2 (0, 1, 2).
-    min_quality : float
-        Lines of lower estimator quality get zero weight.
-    min_peak_db : float
-        Lines whose azimuth-compressed peak stands less than this above the line's median
-        power get zero weight (noise-only lines: the peak of ~M exponential samples is about
-        8 dB over their median, so 15 dB rejects them with a margin), dB.
-    max_below_strongest_db : float
-        Lines whose compressed peak is more than this below the strongest line's get zero
-        weight, dB.
-    min_lines : int
-        A subaperture with fewer usable lines makes no correction (rate error 0) rather than
-        a fit through noise.
-    rate_span_hz_per_s : float
-        Search half-width of contrast optimisation, Hz/s.
-    phase_passes : int
-        The phase step is repeated on its own output this many times in all (the residual
-        rates shrink, so the looks are sharper and the rate change inside a subaperture no
-        longer biases them); κ of the passes add up. Offline a pass covers the whole
-        aperture; streaming, pass p of a subaperture waits until pass p - 1 is known on
-        all of its pulses (latency grows by about 2 hops a pass at 75 % overlap).
-    pin_window_s : float
-        Streaming: the constant and linear terms of the corrections (not observable from
-        Doppler rates; a linear phase moves targets along track) get zero mean and zero
-        trend from the first subaperture centre of a run to ``pin_window_s`` later, and the
-        first pulses are released once that is covered, s. Offline (``inf``) the window
-        runs to the last centre.
-    """
-
-    subaperture_s: float = 0.4
-    hop_s: float = 0.1
-    n_lines: int = 16
-    guard_bins: int = 6
-    half_band: int = 1
-    estimator: Literal["map_drift", "contrast"] = "map_drift"
-    envelope_step: bool = True
-    range_order: int = 2
-    min_quality: float = 0.3
-    min_peak_db: float = 15.0
-    max_below_strongest_db: float = 20.0
-    min_lines: int = 2
-    rate_span_hz_per_s: float = 150.0
-    phase_passes: int = 3
-    pin_window_s: float = 2.0
-
-    def __post_init__(self) -> None:
-        if not 0 < self.hop_s <= self.subaperture_s:
-            raise ProcessingError(
-                f"AutofocusConfig: hop_s {self.hop_s} must be in (0, subaperture_s "
-                f"{self.subaperture_s}]"
-            )
-        if self.min_lines < 1 or self.phase_passes < 1:
-            raise ProcessingError(
-                f"AutofocusConfig: min_lines {self.min_lines} and phase_passes "
-                f"{self.phase_passes} must be at least 1"
-            )
-        if not self.pin_window_s > 0:
-            raise ProcessingError(
-                f"AutofocusConfig.pin_window_s: {self.pin_window_s} must be positive"
-            )
-        if self.estimator not in ("map_drift", "contrast"):
-            raise ProcessingError(f"AutofocusConfig.estimator: {self.estimator!r} is unknown")
-
-
-@dataclass(frozen=True)
-class Corrections:
-    """Autofocus corrections of a run of pulses.
-
-    Parameters
-    ----------
-    t_ns : ndarray of int64, shape (P,)
-        Pulse times, GPS ns.
-    los_m : ndarray, shape (P,)
-        Estimated LOS displacement at the scene-centre look angle (toward the scene), m;
-        the envelope is shifted by this much (a peak at R - d_los goes back to R).
-    phase_cycles : ndarray, shape (P, 3)
-        Double integrals of κ0, κ1, κ2 (cycles, cycles/m, cycles/m²).
-    ref_range_m : float
-        R_c of the κ model, m.
-    """
-
-    t_ns: IntArray
-    los_m: FloatArray
-    phase_cycles: FloatArray
-    ref_range_m: float
-
-    def phase_rad(self, range_m: FloatArray) -> FloatArray:
-        """Phase error of every pulse and range bin, rad, shape (P, S)."""
-        return phase_screen(self.phase_cycles, np.asarray(range_m) - self.ref_range_m)
-
-    def apply(self, rc: ComplexArray, range_m: FloatArray) -> ComplexArray:
-        """Shift the envelopes and remove the phase error: returns corrected (P, S) data."""
-        shifted = shift_range(rc, self.los_m, float(range_m[1] - range_m[0]))
-        return remove_phase(shifted, self.phase_cycles, np.asarray(range_m) - self.ref_range_m)
-
-
 def _seconds(t_ns: IntArray, t0_ns: int) -> FloatArray:
     return np.asarray(t_ns - t0_ns, dtype=float) * 1e-9
-
-
-@dataclass(frozen=True)
-class _Bands:
-    """The selected lines of one subaperture: bins (N,), bands (N, B, M) and the slant
-    range of every band bin (N * B,), m."""
-
-    bins: IntArray
-    bands: ComplexArray
-    band_range_m: FloatArray
-
-
-def _select(sub: ComplexArray, range_m: FloatArray, config: AutofocusConfig) -> _Bands:
-    """Select the lines of a subaperture (pulses x bins) and gather their bands."""
-    bins = select_lines(sub, config.n_lines, config.guard_bins)
-    idx = np.clip(
-        bins[:, None] + np.arange(-config.half_band, config.half_band + 1)[None, :],
-        0,
-        sub.shape[1] - 1,
-    )
-    return _Bands(bins, gather_bands(sub, bins, config.half_band), range_m[idx].ravel())
-
-
-def _line_rates(
-    lines: _Bands,
-    t_s: FloatArray,
-    range_m: FloatArray,
-    geometry: AutofocusGeometry,
-    config: AutofocusConfig,
-) -> LineRates:
-    """Measure the Doppler-rate errors of the selected lines of one subaperture.
-
-    A line's weight is its peak-to-median power ratio minus one, an estimate of the signal
-    to noise (and clutter) ratio of its dominant scatterer, to which the inverse variance of a
-    rate estimate is proportional. The UAV paper's eq. 13 (docs/methods.md §3) weights by the
-    mean compressed magnitude; measured on a few-target scene at 0 dB per-pulse SNR, that
-    leaves noise and range-sidelobe lines (a fifth of a target's weight each) enough weight
-    to defocus the image. A line gets
-    zero weight if its estimator quality is under ``config.min_quality`` or its compressed
-    peak stands less than ``config.min_peak_db`` over its median; if fewer than
-    ``config.min_lines`` lines are left, every weight is zero (no correction).
-    """
-    bins, bands = lines.bins, lines.bands
-    if bins.size == 0:
-        empty = np.zeros(0)
-        return LineRates(empty, empty, empty, empty, empty)
-    ref = nominal_rate(range_m[bins], geometry.speed_mps, geometry.wavelength_m)
-    if config.estimator == "map_drift":
-        delta, quality = map_drift(bands, t_s, ref)
-    else:
-        delta, quality = contrast_optimisation(bands, t_s, ref, config.rate_span_hz_per_s)
-    n_fft = 4 * int(2 ** np.ceil(np.log2(t_s.shape[0])))
-    mag = compressed_magnitude(bands, t_s, ref + delta, n_fft)
-    power = mag**2
-    peak_db = 10.0 * np.log10(power.max(axis=1) / np.maximum(np.median(power, axis=1), 1e-30))
-    peak = power.max(axis=1)
-    # a line far weaker than the strongest is a range sidelobe of a bright target (the
-    # target walks through the sidelobes' nulls as it migrates in range) or clutter
-    strong = peak >= peak.max() * 10.0 ** (-config.max_below_strongest_db / 10.0)
-    good = (quality >= config.min_quality) & (peak_db >= config.min_peak_db) & strong
-    if np.count_nonzero(good) < config.min_lines:
-        good[:] = False
-    weight = np.where(good, 10.0 ** (peak_db / 10.0) - 1.0, 0.0)
-    return LineRates(range_m[bins], delta, weight, quality, peak_db)
-
-
-def _fit_accel(lines: LineRates, geometry: AutofocusGeometry) -> tuple[tuple[float, float], float]:
-    if lines.n_used < 2:
-        return (0.0, 0.0), float("nan")
-    return fit_accelerations(
-        lines.range_m, lines.rate_hz_per_s, lines.weight, geometry.depth_m, geometry.wavelength_m
-    )
-
-
-def _fit_kappa(
-    lines: LineRates, geometry: AutofocusGeometry, order: int
-) -> tuple[FloatArray, float]:
-    if lines.n_used < 1:
-        return np.zeros(3), float("nan")
-    return fit_range_polynomial(
-        lines.range_m, lines.rate_hz_per_s, lines.weight, geometry.ref_range_m, order
-    )
-
-
-CONTRAST_MARGIN = 0.97
-"""A released block keeps its autofocus corrections unless they leave the contrast of its
-strongest lines below this fraction of the contrast without them (estimation noise moves
-the contrast of a block that the corrections focus by a percent or two)."""
-
-GUARD_LINES = 8
-"""Strongest range lines of a released block whose contrast decides whether it is corrected."""
-
-
-def block_contrast(
-    data: ComplexArray,
-    t_s: FloatArray,
-    bins: IntArray,
-    range_m: FloatArray,
-    geometry: AutofocusGeometry,
-) -> float:
-    """Summed azimuth-compressed contrast of the range lines ``bins`` of a block of pulses.
-
-    Each line is compressed with the nominal Doppler rate of its range over the whole
-    block (:func:`~sarmoco.processing.autofocus.doppler_rate.line_contrast`): the sharper
-    the targets on those lines, the larger the contrast. Needs at least 8 pulses.
-    """
-    bands = gather_bands(data, bins, 0)
-    ref = nominal_rate(range_m[bins], geometry.speed_mps, geometry.wavelength_m)
-    return float(np.sum(line_contrast(bands, t_s, ref)))
-
-
-def _los_accel(accel_yz: FloatArray, geometry: AutofocusGeometry) -> FloatArray:
-    """LOS acceleration at the scene-centre look angle from (a_y, a_z) rows, m/s²."""
-    beta_c = float(look_angle(np.array([geometry.ref_range_m]), geometry.depth_m)[0])
-    return np.asarray(accel_yz @ np.array([np.sin(beta_c), np.cos(beta_c)]), dtype=float)
 
 
 def _members(t_s: FloatArray, start_s: float, config: AutofocusConfig) -> slice:
     i0 = int(np.searchsorted(t_s, start_s - 1e-9))
     i1 = int(np.searchsorted(t_s, start_s + config.subaperture_s - 1e-9))
     return slice(i0, i1)
-
-
-def autofocus_offline(
-    rc: ComplexArray,
-    t_ns: IntArray,
-    range_m: FloatArray,
-    geometry: AutofocusGeometry,
-    config: AutofocusConfig,
-) -> tuple[Corrections, AutofocusReport]:
-    """Two-step autofocus of a whole aperture (constant and linear terms pinned to zero mean
-    and zero trend between the first and the last subaperture centre).
-
-    The streaming engine fed the whole aperture at once with an unbounded pin window: the
-    estimates are the streaming ones by construction, and the pin window is the aperture's.
-
-    Parameters
-    ----------
-    rc : ndarray, shape (P, S)
-        Navigation-compensated range-compressed pulses.
-    t_ns : ndarray of int64, shape (P,)
-        Pulse times, GPS ns.
-    range_m : ndarray, shape (S,)
-        Uniform slant-range axis, m.
-    geometry, config
-        See :class:`AutofocusGeometry`, :class:`AutofocusConfig`.
-
-    Returns
-    -------
-    Corrections, AutofocusReport
-    """
-    engine = SlidingSubapertureAutofocus(
-        geometry, range_m, dataclasses.replace(config, pin_window_s=math.inf)
-    )
-    engine.extend(rc, t_ns)
-    corr = engine.corrections(flushing=True)[1]
-    if not engine.report.subapertures:
-        raise ProcessingError(
-            f"autofocus_offline: {(int(t_ns[-1]) - int(t_ns[0])) * 1e-9:.3f} s of data is "
-            f"shorter than a subaperture ({config.subaperture_s} s)"
-        )
-    return corr, engine.report
-
-
-class _Rows:
-    """Pulses (rows) appended at the end and dropped from the front; the kept rows are copied
-    only when the storage grows (to twice what is kept), not on every append."""
-
-    def __init__(self, n_cols: int) -> None:
-        self._buf: ComplexArray = np.zeros((0, n_cols), dtype=np.complex64)
-        self._start = 0
-        self._stop = 0
-
-    @property
-    def rows(self) -> ComplexArray:
-        """The kept rows (a view)."""
-        return self._buf[self._start : self._stop]
-
-    def __len__(self) -> int:
-        return self._stop - self._start
-
-    def append(self, rows: ComplexArray) -> None:
-        n = rows.shape[0]
-        if self._stop + n > self._buf.shape[0]:
-            kept = len(self)
-            grown = np.empty((max(2 * (kept + n), 256), self._buf.shape[1]), dtype=np.complex64)
-            grown[:kept] = self.rows
-            self._buf, self._start, self._stop = grown, 0, kept
-        self._buf[self._stop : self._stop + n] = rows
-        self._stop += n
-
-    def drop(self, n: int) -> None:
-        self._start += min(n, len(self))
-
-
-T = TypeVar("T")
-
-
-class _History(Generic[T]):
-    """Per-subaperture values by absolute subaperture number j; the oldest can be forgotten
-    (a run of hours keeps only those the buffered pulses still need, not one per hop)."""
-
-    def __init__(self) -> None:
-        self.first = 0
-        """Number of the oldest value kept."""
-        self._items: list[T] = []
-
-    def __len__(self) -> int:
-        """Number of values ever appended (one past the newest j)."""
-        return self.first + len(self._items)
-
-    def __getitem__(self, j: int) -> T:
-        if j < 0:
-            return self._items[j]
-        if j < self.first:
-            raise ProcessingError(f"autofocus history: subaperture {j} was forgotten")
-        return self._items[j - self.first]
-
-    def append(self, value: T) -> None:
-        self._items.append(value)
-
-    def since(self, j0: int, j1: int | None = None) -> list[T]:
-        """Values j0 .. j1 - 1 (to the newest when j1 is None); j0 at least :attr:`first`."""
-        if j0 < self.first:
-            raise ProcessingError(f"autofocus history: subaperture {j0} was forgotten")
-        stop = None if j1 is None else j1 - self.first
-        return self._items[j0 - self.first : stop]
-
-    def forget_before(self, j: int) -> None:
-        """Drop the values of subapertures before j."""
-        n = max(0, min(j - self.first, len(self._items)))
-        del self._items[:n]
-        self.first += n
 
 
 class SlidingSubapertureAutofocus:
@@ -474,21 +112,21 @@ class SlidingSubapertureAutofocus:
         self._t0_ns: int | None = None
         self._t = np.zeros(0)
         self._t_ns = np.zeros(0, dtype=np.int64)
-        self._data = _Rows(self.range_m.size)
+        self._data = RowBuffer(self.range_m.size)
         # envelope-corrected pulses (the first rows of the buffer), and the integrators'
         # start (value, slope) at the first buffered pulse once pinned: LOS displacement (2,)
         # and phase (2, 3)
-        self._shifted = _Rows(self.range_m.size)
+        self._shifted = RowBuffer(self.range_m.size)
         self._los0: FloatArray | None = None
         self._cycles0: FloatArray | None = None
-        self._centres: _History[float] = _History()
-        self._a_los: _History[float] = _History()
-        self._accel: _History[tuple[float, float]] = _History()
-        self._accel_res: _History[float] = _History()
-        self._env_lines: _History[LineRates | None] = _History()
-        self._kappa: list[_History[FloatArray]] = [_History() for _ in range(config.phase_passes)]
+        self._centres: History[float] = History()
+        self._a_los: History[float] = History()
+        self._accel: History[tuple[float, float]] = History()
+        self._accel_res: History[float] = History()
+        self._env_lines: History[LineRates | None] = History()
+        self._kappa: list[History[FloatArray]] = [History() for _ in range(config.phase_passes)]
         self._pin_end_s: float | None = None
-        self._bands: dict[int, _Bands] = {}
+        self._bands: dict[int, Bands] = {}
         self._released_s = -np.inf
 
     @property
@@ -515,9 +153,7 @@ class SlidingSubapertureAutofocus:
     def _complete(self, j: int) -> bool:
         return self._t.size > 0 and self._t[-1] >= self._start(j) + self.config.subaperture_s - 1e-9
 
-    def _spliced(
-        self, values: _History[FloatArray] | _History[float], t_s: FloatArray
-    ) -> FloatArray:
+    def _spliced(self, values: History[FloatArray] | History[float], t_s: FloatArray) -> FloatArray:
         """Splice the first ``len(values)`` subaperture estimates onto ``t_s`` (only the
         estimates whose centres reach ``t_s`` and the three before them are used: the same
         interpolation and end fits as the whole list)."""
@@ -536,7 +172,7 @@ class SlidingSubapertureAutofocus:
         before the first centre at or after the first buffered pulse (four when a series ends
         there); eight are kept."""
         j = self._first_needed(self._t) - 8
-        histories: list[_History[Any]] = [
+        histories: list[History[Any]] = [
             self._centres,
             self._a_los,
             self._accel,
@@ -551,18 +187,18 @@ class SlidingSubapertureAutofocus:
         self._centres.append(self._start(j) + 0.5 * self.config.subaperture_s)
         if self.config.envelope_step:
             sub = self._data.rows[m]
-            lines = _line_rates(
-                _select(sub, self.range_m, self.config),
+            lines = measure_line_rates(
+                select_bands(sub, self.range_m, self.config),
                 self._t[m],
                 self.range_m,
                 self.geometry,
                 self.config,
             )
-            (ay, az), res = _fit_accel(lines, self.geometry)
+            (ay, az), res = fit_accel(lines, self.geometry)
             self._env_lines.append(lines)
             self._accel.append((ay, az))
             self._accel_res.append(res)
-            self._a_los.append(float(_los_accel(np.array([ay, az]), self.geometry)))
+            self._a_los.append(float(los_accel(np.array([ay, az]), self.geometry)))
         else:
             self._env_lines.append(None)
             self._accel.append((float("nan"), float("nan")))
@@ -638,7 +274,7 @@ class SlidingSubapertureAutofocus:
         m = _members(self._t, self._start(j), self.config)
         t = self._t[m]
         if p == 0:
-            self._bands[j] = _select(self._shifted.rows[m], self.range_m, self.config)
+            self._bands[j] = select_bands(self._shifted.rows[m], self.range_m, self.config)
         lines = self._bands[j]
         base = np.zeros(3)
         if p > 0 and lines.bins.size:
@@ -648,9 +284,9 @@ class SlidingSubapertureAutofocus:
             cyc = integrate_twice(t, self._spliced(prev, t), zero, zero)[0]
             phase = phase_screen(cyc, lines.band_range_m - self.geometry.ref_range_m)
             rot = np.exp(-1j * phase.T.reshape(lines.bands.shape)).astype(np.complex64)
-            lines = _Bands(lines.bins, lines.bands * rot, lines.band_range_m)
-        rates = _line_rates(lines, t, self.range_m, self.geometry, self.config)
-        step, kres = _fit_kappa(rates, self.geometry, self.config.range_order)
+            lines = Bands(lines.bins, lines.bands * rot, lines.band_range_m)
+        rates = measure_line_rates(lines, t, self.range_m, self.geometry, self.config)
+        step, kres = fit_kappa(rates, self.geometry, self.config.range_order)
         kappa = base + step
         self._kappa[p].append(kappa)
         if p == len(self._kappa) - 1:
@@ -753,7 +389,7 @@ class SlidingSubapertureAutofocus:
         )
         return original.copy(), zero
 
-    def corrections(self, flushing: bool) -> tuple[ComplexArray, Corrections]:
+    def take_corrections(self, flushing: bool) -> tuple[ComplexArray, Corrections]:
         """Take the pulses whose corrections are final (every one when ``flushing``) out of the
         buffer; returns them with the envelope already corrected, and their
         :class:`Corrections` (the phase is still to be removed)."""
@@ -761,7 +397,7 @@ class SlidingSubapertureAutofocus:
         return shifted, corr
 
     def _take(self, flushing: bool) -> tuple[ComplexArray, ComplexArray, Corrections]:
-        """:meth:`corrections`, with the same pulses as they came in (views valid until the
+        """:meth:`take_corrections`, with the same pulses as they came in (views valid until the
         next push)."""
         if flushing:
             self._estimate(flushing=True)
