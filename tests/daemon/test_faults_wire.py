@@ -35,6 +35,7 @@ from sarmoco.app.demo import run_loopback
 from sarmoco.app.simconfig import scenario_config, write_config
 from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.focuser import Focuser
+from sarmoco.daemon.pipeline import _strictly_increasing
 from sarmoco.daemon.store import open_store
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
@@ -203,3 +204,13 @@ def test_replay_of_random_bytes_says_why_and_fails(sim_files: Path, tmp_path: Pa
     msg = done.stderr
     assert "replay focused no pulse: radar 0 pulses (bytes " in msg, msg
     assert "parse_errors " in msg, msg
+
+
+def test_only_strictly_increasing_pulse_times_reach_the_focuser() -> None:
+    """The pipeline's guard behind the ring: a pulse not newer than every one before it
+    (or than the last focused, 4 here) is kept from the focuser."""
+    t = np.array([5, 3, 6, 6, 7, 4, 8], dtype=np.int64)
+    np.testing.assert_array_equal(
+        _strictly_increasing(t, 4), [True, False, True, False, True, False, True]
+    )
+    assert _strictly_increasing(t[:1], None).all()
