@@ -6,6 +6,7 @@ numbers from the same run, each the best of ``--repeat`` after a warm-up:
 
 - the whole :func:`backproject` call (FFT upsampling of the lines + kernel);
 - the compiled kernel alone on already upsampled lines;
+- the same with the per-pixel eq. 29 squint residual (``compensated_dy_m``, 0.3 m rms ΔY);
 - the FFT upsampling alone.
 
 The content of the lines does not change the cost (random samples are used).
@@ -47,7 +48,7 @@ def _best_time(fn: Callable[[], object], repeat: int) -> float:
 
 
 def run(n_pulses: int, n_pix: int, repeat: int) -> list[tuple[str, float, float]]:
-    """Rows (name, seconds, pixel*pulses/s) for the whole call, the kernel and the upsampling."""
+    """Rows (name, seconds, pixel*pulses/s): whole call, kernel, kernel + eq. 29, upsampling."""
     scn = load_preset("thz-spotlight")
     radar = scn.radar
     rng = np.random.default_rng(0)
@@ -61,14 +62,20 @@ def run(n_pulses: int, n_pix: int, repeat: int) -> list[tuple[str, float, float]
     lines = RangeLines.upsample(rc, axis, DEFAULT_UPSAMPLE)
     out = np.zeros((n_pix, n_pix), dtype=np.complex64)
 
+    dy = rng.normal(0.0, 0.3, n_pulses)
+
     def kernel() -> None:
         backproject_into(out, lines, apc, lam, grid)
+
+    def kernel_eq29() -> None:
+        backproject_into(out, lines, apc, lam, grid, compensated_dy_m=dy)
 
     work = float(n_pulses) * n_pix * n_pix
     rows = []
     for name, fn in (
         ("backproject() total", lambda: backproject(rc, axis, apc, lam, grid)),
         ("kernel only", kernel),
+        ("kernel + eq. 29 term", kernel_eq29),
         ("FFT upsampling only", lambda: fft_upsample(rc, DEFAULT_UPSAMPLE)),
     ):
         sec = _best_time(fn, repeat)
