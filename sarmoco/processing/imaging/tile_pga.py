@@ -298,8 +298,9 @@ def _bright_columns(power: FloatArray, n_lines: int, guard: int) -> IntArray:
 
 
 def _sharpness(lines: ComplexArray) -> float:
-    """Sharpness ``Σ |I|⁴`` of image lines (Fienup & Miller); grows as they focus."""
-    return float(np.sum(np.abs(lines) ** 4))
+    """Normalised sharpness ``Σ |I|⁴ / (Σ |I|²)²`` of image lines; grows as they focus."""
+    power = np.abs(lines) ** 2
+    return float(np.sum(power**2) / np.sum(power) ** 2)
 
 
 def _window_width(img: ComplexArray, peaks: np.ndarray) -> int:
