@@ -165,7 +165,9 @@ class MocompConfig:
     """INS-only per-pulse motion compensation (docs/methods.md §2)."""
 
     order: Literal[1, 2] = _key(
-        2, "1: scene-centre look angle for every bin; 2: look angle per range bin + eq. 29 term"
+        2,
+        "1: scene-centre look angle for every bin; 2: look angle per range bin, and with the "
+        "autofocus off the image former removes the eq. 29 squint residual per pixel",
     )
     envelope_fraction: float = _key(
         0.25,
