@@ -37,16 +37,31 @@ magnitude (noise and clutter peaks, whose PSLR means nothing, stand ~10 dB above
 
 
 def strip(store: RunStore) -> Image | None:
-    """The recorded tiles joined along track (axis 0) in index order; None without tiles."""
-    tiles = [store.image(k)[0] for k in range(store.n_images)]
-    if not tiles:
+    """The recorded tiles joined along track (axis 0); None without tiles.
+
+    Tiles of one reference-track segment are in that track's frame; segments follow each
+    other in time, each shifted along axis 0 to start where the one before ended (so the
+    first segment keeps its own coordinates, and a single-segment run is unchanged).
+    """
+    segments: dict[int, list[Image]] = {}
+    for k in range(store.n_images):
+        image, attrs = store.image(k)
+        segments.setdefault(int(attrs.get("reference_track", {}).get("t0_ns", 0)), []).append(image)
+    if not segments:
         return None
-    tiles.sort(key=lambda im: float(im.axis0_m[0]))
+    parts: list[tuple[Image, float]] = []
+    end = -np.inf
+    for t0 in sorted(segments):
+        tiles = sorted(segments[t0], key=lambda im: float(im.axis0_m[0]))
+        first = float(tiles[0].axis0_m[0])
+        shift = 0.0 if not parts else end - first + abs(float(np.diff(tiles[0].axis0_m[:2])[0]))
+        parts += [(t, shift) for t in tiles]
+        end = float(tiles[-1].axis0_m[-1]) + shift
     return Image(
-        np.concatenate([t.data for t in tiles], axis=0),
-        np.concatenate([t.axis0_m for t in tiles]),
-        tiles[0].axis1_m,
-        tiles[0].frame,
+        np.concatenate([t.data for t, _ in parts], axis=0),
+        np.concatenate([t.axis0_m + s for t, s in parts]),
+        parts[0][0].axis1_m,
+        parts[0][0].frame,
     )
 
 

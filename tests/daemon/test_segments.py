@@ -22,6 +22,7 @@ import pytest
 from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.focuser import Focuser
+from sarmoco.daemon.report import bright_points, strip
 from sarmoco.daemon.store import open_store
 from sarmoco.processing.geometry import ReferenceTrack
 from sarmoco.processing.imaging.tiles import Tile
@@ -167,3 +168,8 @@ def test_the_store_flags_the_turn_and_names_each_tiles_track(tmp_path: Path) -> 
     assert np.dot(first["x_hat_ned"], second["x_hat_ned"]) == pytest.approx(-1.0, abs=1e-3)
     apart = np.subtract(second["origin_ned"], first["origin_ned"]) @ first["y_hat_ned"]
     assert apart == pytest.approx(-2 * pattern.radius_m, rel=0.01)
+    # the report's strip puts the second segment after the first: both targets, apart
+    image = strip(store)
+    assert image is not None and np.all(np.diff(image.axis0_m) > 0)
+    points = sorted(bright_points(image, n=2), key=lambda p: p["x_m"])
+    assert len(points) == 2 and points[1]["x_m"] - points[0]["x_m"] > 20.0
