@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench clean install uninstall
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -24,3 +24,49 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) demo-out
+
+# Onboard install (README "Installing on the payload computer"). DESTDIR stages the tree
+# for a package; the virtual environment's scripts are then rewritten to run from PREFIX.
+PREFIX ?= /opt/sarmoco
+SYSCONFDIR ?= /etc
+UNITDIR ?= $(SYSCONFDIR)/systemd/system
+SYSCTLDIR ?= $(SYSCONFDIR)/sysctl.d
+DOCDIR = $(PREFIX)/share/doc/sarmoco
+VENV_ARGS ?=
+PIP_ARGS ?=
+INSTALL_MARK := share/sarmoco/installed-by-make
+
+install:
+	test ! -e '$(DESTDIR)$(PREFIX)' -o -e '$(DESTDIR)$(PREFIX)/$(INSTALL_MARK)' \
+	  || { echo '$(DESTDIR)$(PREFIX) exists and was not installed by make install' >&2; exit 1; }
+	$(PYTHON) -m venv $(VENV_ARGS) '$(DESTDIR)$(PREFIX)'
+	'$(DESTDIR)$(PREFIX)/bin/python' -m pip install --quiet $(PIP_ARGS) .
+	if [ -n '$(DESTDIR)' ]; then \
+	  grep -rlI --null -F '$(DESTDIR)$(PREFIX)' '$(DESTDIR)$(PREFIX)/bin' '$(DESTDIR)$(PREFIX)/pyvenv.cfg' \
+	    | xargs -0 -r sed -i 's|$(DESTDIR)$(PREFIX)|$(PREFIX)|g'; fi
+	install -d '$(DESTDIR)$(PREFIX)/share/sarmoco'
+	touch '$(DESTDIR)$(PREFIX)/$(INSTALL_MARK)'
+	install -D -m 0644 README.md '$(DESTDIR)$(DOCDIR)/README.md'
+	install -D -m 0644 systemd/sarmoco.toml '$(DESTDIR)$(DOCDIR)/sarmoco.toml.example'
+	install -d '$(DESTDIR)$(UNITDIR)'
+	sed -e 's|/etc/sarmoco|$(SYSCONFDIR)/sarmoco|g' -e 's|/opt/sarmoco|$(PREFIX)|g' \
+	    systemd/sarmoco.service > '$(DESTDIR)$(UNITDIR)/sarmoco.service'
+	chmod 0644 '$(DESTDIR)$(UNITDIR)/sarmoco.service'
+	install -D -m 0644 systemd/sarmoco-sysctl.conf '$(DESTDIR)$(SYSCTLDIR)/90-sarmoco.conf'
+	if [ -e '$(DESTDIR)$(SYSCONFDIR)/sarmoco/sarmoco.toml' ]; then \
+	  echo 'kept $(DESTDIR)$(SYSCONFDIR)/sarmoco/sarmoco.toml (the example is in $(DOCDIR))'; \
+	else install -D -m 0640 systemd/sarmoco.toml '$(DESTDIR)$(SYSCONFDIR)/sarmoco/sarmoco.toml'; fi
+	@echo 'installed; then: sysctl --system; systemctl daemon-reload; systemctl enable --now sarmoco'
+
+# Removes what install put; the configuration only if unchanged from the example, and
+# never the recordings (/var/lib/sarmoco).
+uninstall:
+	test ! -e '$(DESTDIR)$(PREFIX)' -o -e '$(DESTDIR)$(PREFIX)/$(INSTALL_MARK)' \
+	  || { echo '$(DESTDIR)$(PREFIX) was not installed by make install: left alone' >&2; exit 1; }
+	rm -f '$(DESTDIR)$(UNITDIR)/sarmoco.service' '$(DESTDIR)$(SYSCTLDIR)/90-sarmoco.conf'
+	if cmp -s systemd/sarmoco.toml '$(DESTDIR)$(SYSCONFDIR)/sarmoco/sarmoco.toml'; then \
+	  rm -f '$(DESTDIR)$(SYSCONFDIR)/sarmoco/sarmoco.toml'; \
+	  rmdir '$(DESTDIR)$(SYSCONFDIR)/sarmoco' 2>/dev/null || true; \
+	elif [ -e '$(DESTDIR)$(SYSCONFDIR)/sarmoco/sarmoco.toml' ]; then \
+	  echo 'kept the edited $(DESTDIR)$(SYSCONFDIR)/sarmoco/sarmoco.toml'; fi
+	rm -rf '$(DESTDIR)$(PREFIX)'

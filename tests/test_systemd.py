@@ -29,9 +29,9 @@ def unit(tmp_path: Path, repo_root: Path) -> Path:
     exe = Path(sys.executable).with_name("sarmoco")
     assert exe.exists(), f"sarmoco console script not installed next to {sys.executable}"
     text = (repo_root / "systemd" / "sarmoco.service").read_text()
-    assert "ExecStart=/usr/local/bin/sarmoco run --config" in text
+    assert "ExecStart=/opt/sarmoco/bin/sarmoco run --config" in text
     out = tmp_path / "sarmoco.service"
-    out.write_text(text.replace("/usr/local/bin/sarmoco", str(exe)))
+    out.write_text(text.replace("/opt/sarmoco/bin/sarmoco", str(exe)))
     return out
 
 
