@@ -163,10 +163,8 @@ def test_a_header_claiming_64k_words_allocates_nothing() -> None:
 
 
 @settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(packet_set(min_size=BATCH_MIN_PACKETS, max_size=BATCH_MIN_PACKETS + 8), st.data())
-def test_batch_decode_equals_packet_by_packet(
-    case: tuple[int, str, list[bytes]], data: Any
-) -> None:
+@given(packet_set(min_size=BATCH_MIN_PACKETS, max_size=BATCH_MIN_PACKETS + 8))
+def test_batch_decode_equals_packet_by_packet(case: tuple[int, str, list[bytes]]) -> None:
     """The vectorised batch path gives what :meth:`VitaDecoder.decode_into` gives, packet by
     packet, on damaged batches too: the same pulses, rows, counters."""
     n_samples, payload, packets = case
