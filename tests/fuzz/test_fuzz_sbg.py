@@ -117,14 +117,17 @@ def test_sbgecom_stream_never_raises(chunks_in: list[bytes], reads: list[int]) -
 
 
 def test_a_frame_claiming_64k_is_not_waited_for() -> None:
-    """A header announcing 0xFFFF payload bytes is refused at once (never buffered for)."""
+    """Headers announcing 0xFFFF payload bytes (a known log, and a message of another
+    class whose size the sniffer does not know) are refused at once, not buffered for:
+    the frames after them come out before any more bytes arrive."""
     dec = SbgDecoder()
-    bad = bytearray(codec.encode_message(codec.Event(1, 0, (0, 0, 0, 0))))
-    bad[4:6] = b"\xff\xff"
-    good = codec.encode_message(codec.Event(2, 0, (0, 0, 0, 0)))
+    known = bytearray(codec.encode_message(codec.Event(1, 0, (0, 0, 0, 0))))
+    known[4:6] = b"\xff\xff"
+    unknown = codec.SYNC + bytes([0x63, 0x01, 0xFF, 0xFF])
+    good = b"".join(codec.encode_message(codec.Event(k, 0, (0, 0, 0, 0))) for k in (2, 3))
     with bounded_allocation(64 << 10):
-        dec.feed(bytes(bad) + good)
-    assert dec.counters.frames == 1 and dec.counters.parse_errors >= 1
+        dec.feed(bytes(known) + good + unknown + good)
+    assert dec.counters.frames == 4 and dec.counters.parse_errors >= 2
 
 
 def _dbc() -> Any:
