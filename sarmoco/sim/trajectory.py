@@ -403,6 +403,11 @@ def _deviation(scn: Scenario, spec: MotionSpec) -> Deviation | None:
 def true_trajectory(scn: Scenario, t_s: npt.ArrayLike, spec: MotionSpec) -> Trajectory:
     """True kinematics of the INS point at ``t_s`` (seconds since the first pulse).
 
+    The scenario's nominal line is the antenna phase centre's at level attitude: the INS
+    point flies it offset by minus the lever arm turned by the heading, so that the APC
+    (:func:`apc_trajectory`) is on the nominal line whenever the attitude is level, and the
+    scenario's altitude and slant ranges stay those of the antenna.
+
     The same ``spec`` gives the same continuous trajectory for any choice of ``t_s``.
 
     Returns
@@ -411,6 +416,7 @@ def true_trajectory(scn: Scenario, t_s: npt.ArrayLike, spec: MotionSpec) -> Traj
     """
     t = np.asarray(t_s, dtype=np.float64).reshape(-1)
     pos, vel = scn.ideal_track(t)
+    pos = pos - scn.heading_to_ned @ np.asarray(scn.lever_arm_m, dtype=np.float64)
     acc = np.zeros_like(pos)
     euler = np.zeros_like(pos)
     dev = _deviation(scn, spec)

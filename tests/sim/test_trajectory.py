@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import itertools
+import math
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy.signal import welch
+from scipy.spatial.transform import Rotation
 
 from sarmoco.errors import ConfigError, NavigationError
 from sarmoco.sim.scenario import load_preset
@@ -15,6 +17,7 @@ from sarmoco.sim.trajectory import (
     BAND_RATIO,
     MotionSpec,
     Trajectory,
+    apc_trajectory,
     euler_to_quat,
     lowpass2_psd,
     true_trajectory,
@@ -76,7 +79,7 @@ def test_turbulence_rms_and_spectrum() -> None:
         along_speed_rms_mps=0.15,
         attitude_rms_rad=0.02,
     )
-    scn = load_preset("ku-vehicle", scale=0.1)
+    scn = load_preset("ku-vehicle", scale=0.1, lever_arm_m=(0.0, 0.0, 0.0))
     fs = 10.0
     t = np.arange(0.0, 1500.0, 1.0 / fs)
     tr = true_trajectory(scn, t, spec)
@@ -108,8 +111,8 @@ def test_turbulence_rms_and_spectrum() -> None:
 
 
 def test_flightlog_is_real_motion() -> None:
-    tr = _traj("flightlog", np.arange(0.0, 10.0, 0.01))
-    scn = load_preset("ku-vehicle", scale=0.1)
+    scn = load_preset("ku-vehicle", scale=0.1, lever_arm_m=(0.0, 0.0, 0.0))
+    tr = true_trajectory(scn, np.arange(0.0, 10.0, 0.01), SPECS["flightlog"])
     ideal, _ = scn.ideal_track(tr.t_s)
     dev = tr.pos_ned - ideal
     assert np.allclose(dev[0], 0.0)
@@ -131,3 +134,24 @@ def test_euler_to_quat_convention() -> None:
     w, x, y, z = q
     rot_x = np.array([1 - 2 * (y * y + z * z), 2 * (x * y + w * z), 2 * (x * z - w * y)])
     np.testing.assert_allclose(rot_x, [0.0, 1.0, 0.0], atol=1e-12)
+
+
+@pytest.mark.parametrize("heading_deg", [0.0, 130.0])
+def test_the_antenna_sits_the_rotated_lever_arm_from_the_ins(heading_deg: float) -> None:
+    """APC = INS point + R(q) l, its velocity the INS's plus the arm's rate; at level
+    attitude the APC flies the nominal line (the scenario's altitude is the antenna's)."""
+    arm = (0.3, -0.2, 0.25)
+    scn = load_preset("ku-vehicle", 0.1, lever_arm_m=arm, heading_rad=math.radians(heading_deg))
+    t = np.linspace(0.0, 3.0, 301)
+    level = apc_trajectory(scn, t, MotionSpec())
+    ideal, ideal_vel = scn.ideal_track(t)
+    np.testing.assert_allclose(level.pos_ned, ideal, atol=1e-9)
+    np.testing.assert_allclose(level.vel_ned, ideal_vel, atol=1e-6)
+    spec = MotionSpec(kind="turbulence", seed=3, attitude_rms_rad=0.05)
+    imu, apc = true_trajectory(scn, t, spec), apc_trajectory(scn, t, spec)
+    r = Rotation.from_quat(imu.quat[:, [1, 2, 3, 0]])
+    np.testing.assert_allclose(apc.pos_ned - imu.pos_ned, r.apply(arm), atol=1e-12)
+    rate = np.gradient(r.apply(arm), t, axis=0)
+    inner = slice(1, -1)
+    np.testing.assert_allclose((apc.vel_ned - imu.vel_ned)[inner], rate[inner], atol=2e-4)
+    assert np.ptp(np.linalg.norm(apc.pos_ned - imu.pos_ned - r.apply(arm), axis=1)) < 1e-12
