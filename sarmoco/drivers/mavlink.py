@@ -26,6 +26,7 @@ import time; this module sets it (to MAVLink 2) unless the caller already did.
 from __future__ import annotations
 
 import logging
+import math
 import os
 import struct
 import time
@@ -68,6 +69,8 @@ DEFAULT_RATES_HZ: dict[str, float] = {
 """Message rates the source asks for, Hz."""
 UNIX_USEC_THRESHOLD = 10**15
 """MAVLink ``time_usec`` above this is UNIX time, below it time since boot, µs."""
+MAX_UNIX_USEC = (2**63 - 1) // 1000 - 10**9
+"""Latest UNIX time accepted, µs (year 2262: its GPS ns still fit an int64 column)."""
 _ALL_VALID = Validity.ATTITUDE | Validity.HEADING | Validity.VELOCITY | Validity.POSITION
 _SYSTIME_OUTLIER_NS = 50_000_000
 _SYSTIME_JITTER_NS = 1_000_000
@@ -173,6 +176,10 @@ class MavlinkDecoder:
         pos: tuple[float, float, float] | None = None,
         lla: tuple[float, float, float] | None = None,
     ) -> None:
+        if not all(map(math.isfinite, vel)):  # would reach the motion compensation as NaN
+            self.counters.parse_errors += 1
+            return
+        pos = pos if pos is not None and all(map(math.isfinite, pos)) else None
         sample = VelocitySample(
             0, vel, self.valid & ~Validity.ATTITUDE & ~Validity.HEADING, source, dev_ns,
             pos_ned_m=pos, lat_lon_alt=lla,
@@ -202,6 +209,9 @@ class MavlinkDecoder:
         else:
             self.counters.rejected += 1
             return
+        if m.time_usec > MAX_UNIX_USEC:
+            self.counters.parse_errors += 1
+            return
         if m.time_usec >= UNIX_USEC_THRESHOLD:
             t = unix_ns_to_gps_ns(m.time_usec * 1000, self.model.leap_s)
             out.append(VelocitySample(t, vel, self.valid, "mavlink.ODOMETRY", t, (m.x, m.y, m.z)))
@@ -219,7 +229,8 @@ class MavlinkDecoder:
         self.clock.stamp(AttitudeSample(0, q, valid, "mavlink.ATTITUDE_QUATERNION", dev), out)
 
     def _attitude(self, m: Any, out: list[Sample]) -> None:
-        q = normalized(euler_to_quat(m.roll, m.pitch, m.yaw))
+        angles = (m.roll, m.pitch, m.yaw)
+        q = normalized(euler_to_quat(*angles)) if all(map(math.isfinite, angles)) else None
         if q is None:
             self.counters.parse_errors += 1
             return
@@ -229,6 +240,9 @@ class MavlinkDecoder:
 
     def _system_time(self, m: Any, out: list[Sample]) -> None:
         if not m.time_unix_usec:
+            return
+        if not UNIX_USEC_THRESHOLD <= m.time_unix_usec <= MAX_UNIX_USEC:
+            self.counters.parse_errors += 1
             return
         dev = self._boot(m.time_boot_ms)
         gps = unix_ns_to_gps_ns(m.time_unix_usec * 1000, self.model.leap_s)

@@ -145,7 +145,10 @@ class LinearClockFit:
 
     def _refit(self) -> None:
         d0, r0 = self._dev[-1], self._ref[-1]
-        if len(self._dev) < self._min_pairs or d0 - min(self._dev) < self._min_span_ns:
+        lo = min(self._dev)
+        # offset only until the pairs span device time (all at one device time, e.g. a
+        # datagram repeated, the slope is undefined and the least squares fail)
+        if len(self._dev) < self._min_pairs or d0 - lo < self._min_span_ns or lo == max(self._dev):
             offsets = sorted(r - d for d, r in zip(self._dev, self._ref, strict=True))
             self._coef = (d0, d0 + offsets[len(offsets) // 2], 0.0)
             self.residual_ns = float(np.std(np.array(offsets) - offsets[0]))
