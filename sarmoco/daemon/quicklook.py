@@ -111,3 +111,87 @@ def plot_series(
     fig.tight_layout()
     fig.savefig(path)
     return path
+
+
+def _db(data: npt.NDArray[np.generic], reference: float) -> npt.NDArray[np.float64]:
+    """Intensity of ``data`` in dB re the power ``reference``, floored at -DYNAMIC_RANGE_DB."""
+    power = np.abs(np.asarray(data)) ** 2 / reference
+    return np.asarray(10.0 * np.log10(np.maximum(power, 10 ** (-DYNAMIC_RANGE_DB / 10))))
+
+
+def plot_panels(
+    panels: Mapping[str, npt.NDArray[np.generic]],
+    axis0_m: npt.NDArray[np.float64],
+    axis1_m: npt.NDArray[np.float64],
+    path: Path,
+    title: str,
+) -> Path:
+    """Write images of one grid side by side on one dB scale (re the brightest pixel of all).
+
+    Parameters
+    ----------
+    panels : mapping of str to ndarray, each shape (n0, n1)
+        Panel title to complex (or magnitude) image; axis 0 (along track) is vertical.
+    axis0_m, axis1_m : ndarray
+        Pixel-centre coordinates shared by the panels, m.
+    path : Path
+        PNG to write.
+    title : str
+        Figure title.
+    """
+    peak = max(float(np.max(np.abs(p)) ** 2) for p in panels.values()) or 1.0
+    fig = Figure(figsize=(3.2 * len(panels) + 1.2, 4.2), dpi=110)
+    axes = fig.subplots(1, len(panels), squeeze=False)[0]
+    extent = (float(axis1_m[0]), float(axis1_m[-1]), float(axis0_m[0]), float(axis0_m[-1]))
+    im = None
+    for ax, (name, data) in zip(axes, panels.items(), strict=True):
+        im = ax.imshow(_db(data, peak), origin="lower", extent=extent, cmap="gray",
+                       vmin=-DYNAMIC_RANGE_DB, vmax=0.0, aspect="equal",
+                       interpolation="nearest")  # fmt: skip
+        ax.set_title(name)
+        ax.set_xlabel("ground range y (m)")
+    axes[0].set_ylabel("along-track x (m)")
+    if im is not None:
+        fig.colorbar(im, ax=list(axes), label="intensity (dB re brightest panel)")
+    fig.suptitle(title)
+    fig.savefig(path)
+    return path
+
+
+def plot_cuts(
+    cuts: Mapping[str, Mapping[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.generic]]]],
+    ideal: Mapping[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]],
+    path: Path,
+    title: str,
+) -> Path:
+    """Cuts through a point target, one panel per direction, against the ideal response.
+
+    Parameters
+    ----------
+    cuts : mapping of str to mapping of str to (ndarray, ndarray)
+        Direction (panel title, e.g. ``"azimuth x (m)"``) to curve name to (coordinate m,
+        complex or magnitude samples).
+    ideal : mapping of str to (ndarray, ndarray)
+        Direction to (coordinate m, amplitude re peak) of the ideal response.
+    path : Path
+        PNG to write.
+    title : str
+        Figure title.
+    """
+    fig = Figure(figsize=(10, 3.8), dpi=100)
+    axes = fig.subplots(1, len(cuts), squeeze=False)[0]
+    for ax, (direction, curves) in zip(axes, cuts.items(), strict=True):
+        peak = max(float(np.max(np.abs(v)) ** 2) for _, v in curves.values()) or 1.0
+        for name, (x, v) in curves.items():
+            ax.plot(x, _db(v, peak), linewidth=1.0, label=name)
+        x, amp = ideal[direction]
+        ax.plot(x, _db(amp, 1.0), "k--", linewidth=0.9, label="ideal sinc")
+        ax.set_xlabel(direction)
+        ax.set_ylim(-DYNAMIC_RANGE_DB, 1.0)
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("intensity (dB re peak)")
+    axes[0].legend(fontsize=8)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path)
+    return path

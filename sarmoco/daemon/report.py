@@ -6,6 +6,12 @@ Writes into the output folder:
   scale bar;
 - ``motion.png``: the INS motion solution per pulse (d_los, phase, range shift);
 - ``autofocus.png``: autofocus estimates per subaperture (a_y, a_z, κ0), when recorded;
+- ``compare.png``: a window around the brightest target focused three ways, side by side
+  on one dB scale: raw (the recorded raw echoes backprojected along the straight
+  reference track), INS only (the same echoes backprojected along the track the INS
+  velocities give) and INS + autofocus (the recorded tile); ``cuts.png``: azimuth and
+  range cuts of the three through the target against the ideal sinc;
+- ``index.html``: the pictures and the tables of ``report.txt`` in one page;
 - ``report.json`` and ``report.txt``: run totals, per-tile entropy and contrast, and the
   point-target measures (PSLR, ISLR, IRW) of the brightest isolated scatterers (corner
   reflectors, or the simulator's targets).
@@ -13,16 +19,32 @@ Writes into the output folder:
 
 from __future__ import annotations
 
+import html
 import json
+import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
-from sarmoco.daemon.quicklook import plot_image, plot_series
+from sarmoco.daemon.config import Config, parse_config
+from sarmoco.daemon.echoring import to_complex64
+from sarmoco.daemon.focuser import _beam_rad, radar_params
+from sarmoco.daemon.quicklook import plot_cuts, plot_image, plot_panels, plot_series
 from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.errors import ProcessingError, RecorderError
-from sarmoco.processing.metrics import image_contrast, image_entropy, point_target_metrics
+from sarmoco.processing import rangecomp
+from sarmoco.processing.geometry import ReferenceTrack, vector_to_imaging
+from sarmoco.processing.imaging.backprojection import backproject
+from sarmoco.processing.imaging.grid import PlaneGrid
+from sarmoco.processing.metrics import (
+    image_contrast,
+    image_entropy,
+    point_target_metrics,
+    upsample_cut,
+)
+from sarmoco.processing.mocomp import LosState, integrate_los
 from sarmoco.processing.types import Image
 
 BRIGHT_POINTS = 5
@@ -30,6 +52,16 @@ BRIGHT_POINTS = 5
 
 POINT_SEPARATION_M = 5.0
 """Minimum distance between two measured scatterers, m."""
+
+COMPARE_HALF_M = 4.0
+"""Half size of the window re-focused around the brightest target for the comparison, m."""
+
+COMPARE_OVERSAMPLING = 1.5
+"""The comparison keeps every k-th pulse, k the largest that leaves the pulse rate at least
+this many times the Doppler bandwidth of the processed beam."""
+
+PANELS = ("raw (no motion compensation)", "INS only", "INS + autofocus")
+"""Titles of the comparison panels, in order."""
 
 POINT_CONTRAST_DB = 20.0
 """A scatterer is measured only if its peak stands this far above the image's median
@@ -115,6 +147,188 @@ def bright_points(image: Image, n: int = BRIGHT_POINTS) -> list[dict[str, float]
     return found
 
 
+def _track(attrs: dict[str, Any]) -> ReferenceTrack:
+    """The reference track of a tile's ``reference_track`` attribute."""
+    return ReferenceTrack(
+        origin_ned=np.asarray(attrs["origin_ned"], dtype=np.float64),
+        x_hat=np.asarray(attrs["x_hat_ned"], dtype=np.float64),
+        y_hat=np.asarray(attrs["y_hat_ned"], dtype=np.float64),
+        v0_mps=float(attrs["v0_mps"]),
+        t0_ns=int(attrs["t0_ns"]),
+    )
+
+
+def _brightest_window(store: RunStore) -> tuple[Image, ReferenceTrack]:
+    """The window of ``COMPARE_HALF_M`` around the brightest pixel of all tiles, and its track.
+
+    Raises
+    ------
+    RecorderError
+        The store has no tiles, or its tiles carry no reference track.
+    """
+    best: tuple[float, int] | None = None
+    for k in range(store.n_images):
+        peak = float(np.abs(store.image(k)[0].data).max())
+        if best is None or peak > best[0]:
+            best = (peak, k)
+    if best is None:
+        raise RecorderError(f"{store.path}: no image tiles to compare")
+    tile, attrs = store.image(best[1])
+    if "reference_track" not in attrs:
+        raise RecorderError(f"{store.path}: tile {best[1]} has no reference_track attribute")
+    i, j = np.unravel_index(int(np.argmax(np.abs(tile.data))), tile.data.shape)
+    h0 = round(COMPARE_HALF_M / abs(tile.spacing_m[0]))
+    h1 = round(COMPARE_HALF_M / abs(tile.spacing_m[1]))
+    rows = slice(max(int(i) - h0, 0), int(i) + h0 + 1)
+    cols = slice(max(int(j) - h1, 0), int(j) + h1 + 1)
+    window = Image(tile.data[rows, cols], tile.axis0_m[rows], tile.axis1_m[cols], tile.frame)
+    return window, _track(attrs["reference_track"])
+
+
+def focus_comparison(store: RunStore) -> tuple[dict[str, Image], int]:
+    """The brightest target's window focused three ways (:data:`PANELS`), on one grid.
+
+    Raw: the recorded raw echoes, range-compressed and backprojected with the antenna on
+    the straight reference track (``ReferenceTrack.position_imaging``). INS only: the same
+    echoes backprojected with the antenna where the recorded INS velocities (motion table,
+    NED m/s, integrated by the trapezoid rule in the imaging frame from the segment's
+    first pulse, as the daemon's LOS compensation does for ΔY, ΔZ) put it. INS + autofocus:
+    the recorded tile. Only the pulses whose beam (``imaging.azimuth_beamwidth_deg`` plus
+    the squint tolerance) covers the window are used, every k-th (``COMPARE_OVERSAMPLING``).
+    The two re-focused windows are scaled to the recorded one's energy, so that on one dB
+    scale a defocused target shows as a lower, wider peak.
+
+    Returns
+    -------
+    panels : dict of str to Image
+        :data:`PANELS` to the window, ground plane of the segment's imaging frame (m).
+    decimation : int
+        k, the pulse decimation of the re-focused windows.
+
+    Raises
+    ------
+    RecorderError
+        No raw echoes or no motion recorded, no tiles, or no pulse sees the window.
+    """
+    window, track = _brightest_window(store)
+    try:
+        store.read("pulses", ["echo"], 0, 0)
+    except RecorderError as exc:
+        raise RecorderError(f"{store.path}: no raw echoes recorded (recorder.raw_echoes)") from exc
+    cfg: Config = parse_config(store.attrs["config"])
+    radar = radar_params(cfg)
+    motion = store.read("motion", ["pulse_id", "t_ns", "vel_ned", "d_los_m"])
+    pulses = store.read("pulses", ["pulse_id"])
+    # the segment: pulses from the track's start on, up to the first not compensated (turn)
+    seg = np.flatnonzero(motion["t_ns"] >= track.t0_ns)
+    bad = seg[~np.isfinite(motion["d_los_m"][seg])]
+    seg = seg[: int(np.searchsorted(seg, bad[0])) if bad.size else seg.size]
+    if seg.size < 2:
+        raise RecorderError(f"{store.path}: no compensated pulses in the target's segment")
+    t_ns = motion["t_ns"][seg]
+    vel = vector_to_imaging(motion["vel_ned"][seg], track)
+    disp, _ = integrate_los(t_ns, vel, LosState(last_vel_yz=np.zeros(3), disp_yz_m=np.zeros(3)))
+    nominal = track.position_imaging(t_ns)
+    ins = nominal[0] + disp
+    # pulses whose beam sees the window, every k-th
+    beam = _beam_rad(cfg)
+    y_c = float(np.mean(window.axis1_m))
+    half_aperture = math.hypot(y_c, cfg.geometry.height_m) * math.tan(beam / 2.0)
+    x_lo, x_hi = float(window.axis0_m[0]), float(window.axis0_m[-1])
+    near = np.flatnonzero(
+        (nominal[:, 0] >= x_lo - half_aperture) & (nominal[:, 0] <= x_hi + half_aperture)
+    )
+    if near.size < 4:
+        raise RecorderError(f"{store.path}: no recorded pulse sees the brightest target")
+    doppler_hz = 4.0 * track.v0_mps * math.sin(beam / 2.0) / radar.wavelength_m
+    k = max(1, int(radar.prf_hz / (COMPARE_OVERSAMPLING * doppler_hz)))
+    near = near[::k]
+    rows = np.searchsorted(pulses["pulse_id"], motion["pulse_id"][seg][near])
+    a, b = int(rows.min()), int(rows.max()) + 1
+    echo = to_complex64(store.read("pulses", ["echo"], a, b)["echo"][rows - a])
+    window_type = None if cfg.imaging.window == "none" else cfg.imaging.window
+    rc = rangecomp.compress(radar, echo, window_type)
+    grid = PlaneGrid(window.axis0_m, window.axis1_m, (0.0, 0.0, cfg.geometry.height_m))
+    range_m = rangecomp.range_axis_m(radar)
+    energy = float(np.sum(np.abs(window.data) ** 2))
+    panels: dict[str, Image] = {}
+    for name, apc in zip(PANELS[:2], (nominal[near], ins[near]), strict=True):
+        im = backproject(rc, range_m, apc, radar.wavelength_m, grid)
+        scale = math.sqrt(energy / max(float(np.sum(np.abs(im.data) ** 2)), 1e-30))
+        panels[name] = Image(im.data * scale, window.axis0_m, window.axis1_m, window.frame)
+    panels[PANELS[2]] = window
+    return panels, k
+
+
+def _ideal_resolution_m(cfg: Config, slant_m: float, ground_m: float) -> tuple[float, float]:
+    """Azimuth λ / (4 sin(θ/2)) of the antenna beam θ and ground-range c / (2 B) · R / y, m.
+
+    ``slant_m``, ``ground_m``: the target's slant and ground range, m.
+    """
+    radar = radar_params(cfg)
+    beam = math.radians(cfg.imaging.azimuth_beamwidth_deg)
+    azimuth = radar.wavelength_m / (4.0 * math.sin(beam / 2.0))
+    return azimuth, radar.range_resolution_m * slant_m / ground_m
+
+
+def write_comparison(store: RunStore, out_dir: Path) -> dict[str, Any]:
+    """Write ``compare.png`` and ``cuts.png``; the panels' point-target measures.
+
+    Returns
+    -------
+    dict
+        ``{"decimation": k, "panels": {title: {"pslr_az_db", "irw_az_m", "pslr_rg_db",
+        "irw_rg_m", "peak_db"}}}``; a measure the panel's response does not allow (no -3 dB
+        point or no sidelobe inside the window) is None. ``peak_db``: the panel's peak re
+        the brightest panel's.
+    """
+    panels, k = focus_comparison(store)
+    ref = next(iter(panels.values()))
+    title = "brightest target, the same echoes focused 3 ways"
+    data = {n: im.data for n, im in panels.items()}
+    plot_panels(data, ref.axis0_m, ref.axis1_m, out_dir / "compare.png", title)
+    cfg = parse_config(store.attrs["config"])
+    top = max(float(np.abs(im.data).max()) for im in panels.values())
+    stats: dict[str, dict[str, float | None]] = {}
+    up = 8
+    cuts: dict[str, dict[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.generic]]]] = {
+        "azimuth x (m)": {},
+        "ground range y (m)": {},
+    }
+    for name, im in panels.items():
+        i, j = np.unravel_index(int(np.argmax(np.abs(im.data))), im.data.shape)
+        entry: dict[str, float | None] = {
+            "peak_db": float(20 * np.log10(np.abs(im.data).max() / top))
+        }
+        try:
+            m = point_target_metrics(im)
+            entry.update(pslr_az_db=m.axis0.pslr_db, irw_az_m=m.axis0.irw_m,
+                         pslr_rg_db=m.axis1.pslr_db, irw_rg_m=m.axis1.irw_m)  # fmt: skip
+        except ProcessingError:
+            entry.update(pslr_az_db=None, irw_az_m=None, pslr_rg_db=None, irw_rg_m=None)
+        stats[name] = entry
+        for direction, axis, cut in (
+            ("azimuth x (m)", im.axis0_m, im.data[:, j]),
+            ("ground range y (m)", im.axis1_m, im.data[i, :]),
+        ):
+            fine = axis[0] + np.arange(axis.size * up) * (axis[1] - axis[0]) / up
+            cuts[direction][name] = (fine, upsample_cut(cut, up) * np.abs(cut).max() / top)
+    af = panels[PANELS[2]]
+    i, j = np.unravel_index(int(np.argmax(np.abs(af.data))), af.data.shape)
+    x0, y0 = float(af.axis0_m[i]), float(af.axis1_m[j])
+    res_az, res_rg = _ideal_resolution_m(cfg, math.hypot(y0, cfg.geometry.height_m), y0)
+    ideal = {}
+    for (direction, curves), centre, res in zip(
+        cuts.items(), (x0, y0), (res_az, res_rg), strict=True
+    ):
+        x = curves[PANELS[2]][0]
+        ideal[direction] = (x, np.abs(np.sinc((x - centre) / res)))
+    plot_cuts(cuts, ideal, out_dir / "cuts.png",
+              f"cuts through the brightest target (ideal sinc: {res_az:.3f} m azimuth, "
+              f"{res_rg:.3f} m ground range resolution)")  # fmt: skip
+    return {"decimation": k, "ideal_resolution_m": [res_az, res_rg], "panels": stats}
+
+
 def write_report(store_path: Path, out_dir: Path) -> dict[str, Any]:
     """Write the quicklooks and the summary of a store; returns the summary.
 
@@ -163,9 +377,49 @@ def write_report(store_path: Path, out_dir: Path) -> dict[str, Any]:
                                        "κ0 (Hz/s)": a["kappa"][:, 0]},
                     out_dir / "autofocus.png", "autofocus estimates per subaperture")  # fmt: skip
         summary["autofocus"] = {"subapertures": int(a["t_center_s"].shape[0])}
+    if image is not None and store.committed("motion") and _has_echoes(store):
+        summary["comparison"] = write_comparison(store, out_dir)
     (out_dir / "report.json").write_text(json.dumps(summary, indent=2, default=float))
-    (out_dir / "report.txt").write_text(_text(summary))
+    text = _text(summary)
+    (out_dir / "report.txt").write_text(text)
+    (out_dir / "index.html").write_text(_html(summary, text, out_dir))
     return summary
+
+
+def _has_echoes(store: RunStore) -> bool:
+    try:
+        store.read("pulses", ["echo"], 0, 0)
+    except RecorderError:
+        return False
+    return True
+
+
+PICTURES = (
+    ("image.png", "Focused strip (INS + autofocus)"),
+    ("compare.png", "Before and after: raw, INS only, INS + autofocus"),
+    ("cuts.png", "Point-target cuts against the ideal sinc"),
+    ("motion.png", "INS motion solution"),
+    ("autofocus.png", "Autofocus estimates"),
+)
+"""The report's pictures, in page order, with their headings."""
+
+
+def _html(summary: dict[str, Any], text: str, out_dir: Path) -> str:
+    """``index.html``: report.txt's tables and the pictures present (relative links)."""
+    parts = [
+        "<!DOCTYPE html>",
+        '<html lang="en"><head><meta charset="utf-8">',
+        f"<title>sarmoco report: {html.escape(Path(summary['store']).name)}</title>",
+        "<style>body{font-family:sans-serif;margin:1em 2em}img{max-width:100%}"
+        "pre{background:#f4f4f4;padding:.5em}</style></head><body>",
+        f"<h1>sarmoco report: {html.escape(Path(summary['store']).name)}</h1>",
+        f"<pre>{html.escape(text)}</pre>",
+    ]
+    for name, heading in PICTURES:
+        if (out_dir / name).exists():
+            parts.append(f'<h2>{html.escape(heading)}</h2><img src="{name}" alt="{heading}">')
+    parts.append("</body></html>")
+    return "\n".join(parts) + "\n"
 
 
 def _text(summary: dict[str, Any]) -> str:
@@ -192,4 +446,18 @@ def _text(summary: dict[str, Any]) -> str:
                 f"                 {p['x_m']:7.2f} {p['y_m']:8.2f}   {p['pslr_az_db']:6.2f} "
                 f"{p['pslr_rg_db']:6.2f}     {p['irw_az_m']:.3f} {p['irw_rg_m']:.3f}"
             )
+    if "comparison" in summary:
+        comp = summary["comparison"]
+        lines.append(f"comparison       brightest target (pulses 1 in {comp['decimation']})")
+        lines.append("                               peak (dB)  PSLR az/rg (dB)   IRW az/rg (m)")
+        for name, s in comp["panels"].items():
+            keys = (("pslr_az_db", "6.2f"), ("pslr_rg_db", "6.2f"), ("irw_az_m", ".3f"),
+                    ("irw_rg_m", ".3f"))  # fmt: skip
+            cells = [_cell(s.get(k), f) for k, f in keys]
+            lines.append(f"  {name:<29}{s['peak_db']:6.1f}     {cells[0]} {cells[1]}"
+                         f"     {cells[2]} {cells[3]}")  # fmt: skip
     return "\n".join(lines) + "\n"
+
+
+def _cell(value: float | None, fmt: str) -> str:
+    return "     -" if value is None else format(value, fmt)
