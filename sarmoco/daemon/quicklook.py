@@ -1,11 +1,14 @@
 """Quicklook PNGs for an operator: the image in dB, the motion solution, autofocus estimates.
 
-Drawn with matplotlib's object API (``Figure``, no pyplot state, no display).
+Drawn with matplotlib's object API (``Figure``, no pyplot state, no display); the live
+page's tile strip is encoded directly (:func:`gray_db`, :func:`png_gray`), a few ms a tile.
 Axes are in metres and seconds.
 """
 
 from __future__ import annotations
 
+import struct
+import zlib
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -195,3 +198,38 @@ def plot_cuts(
     fig.tight_layout()
     fig.savefig(path)
     return path
+
+
+def gray_db(data: npt.NDArray[np.generic], max_px: int = 600) -> npt.NDArray[np.uint8]:
+    """An image's intensity as 8-bit gray, ``DYNAMIC_RANGE_DB`` below its peak to 255.
+
+    Axis 0 of ``data`` (along track) becomes the horizontal axis of the picture and axis 1
+    (ground range) the vertical one, far range at the top. Each axis is decimated (peak of
+    each block of pixels) to at most ``max_px`` pixels.
+    """
+    mag = np.abs(np.asarray(data)).T[::-1]
+    k0, k1 = (max(1, -(-n // max_px)) for n in mag.shape)
+    n0, n1 = mag.shape[0] // k0 * k0, mag.shape[1] // k1 * k1
+    mag = mag[:n0, :n1].reshape(n0 // k0, k0, n1 // k1, k1).max(axis=(1, 3))
+    peak = float(mag.max()) if mag.size else 0.0
+    db = _db(mag, peak**2 if peak > 0 else 1.0)
+    return np.asarray(np.round((db / DYNAMIC_RANGE_DB + 1.0) * 255.0), dtype=np.uint8)
+
+
+def png_gray(pixels: npt.NDArray[np.uint8]) -> bytes:
+    """Encode 8-bit gray pixels (rows top to bottom) as a PNG file (no dependency)."""
+    height, width = pixels.shape
+
+    def chunk(kind: bytes, body: bytes) -> bytes:
+        crc = zlib.crc32(kind + body) & 0xFFFFFFFF
+        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", crc)
+
+    rows = np.zeros((height, width + 1), dtype=np.uint8)  # filter byte 0 (none) per row
+    rows[:, 1:] = pixels
+    header = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + chunk(b"IHDR", header)
+        + chunk(b"IDAT", zlib.compress(rows.tobytes(), 6))
+        + chunk(b"IEND", b"")
+    )

@@ -18,7 +18,7 @@ from sarmoco.daemon.links import open_ins, open_radar
 from sarmoco.daemon.pipeline import Pipeline, RunSummary, ring_format
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.sdnotify import Notifier
-from sarmoco.daemon.status import Counters, Health, StatusServer
+from sarmoco.daemon.status import Counters, Health, LiveView, StatusServer
 from sarmoco.daemon.store import StoreNav, StorePulses, open_store
 from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource
 from sarmoco.drivers.samples import Sample
@@ -126,8 +126,10 @@ def _finished_text(names: list[str]) -> str:
     return "; ".join(f"{name}: finished (end of file)" for name in names)
 
 
-def _start_status(counters: Counters, health: Health, port: int) -> StatusServer | None:
-    """The status endpoint on 127.0.0.1:``port`` (None when ``port`` is 0).
+def _start_status(
+    counters: Counters, health: Health, port: int, store: Path
+) -> StatusServer | None:
+    """The status endpoint on 127.0.0.1:``port`` with the live page of ``store`` (None: port 0).
 
     Raises
     ------
@@ -137,7 +139,7 @@ def _start_status(counters: Counters, health: Health, port: int) -> StatusServer
     if not port:
         return None
     try:
-        return StatusServer(counters, health, port=port).start()
+        return StatusServer(counters, health, port=port, live=LiveView(store)).start()
     except OSError as exc:
         raise ConfigError(f"status.http_port: {port} cannot be bound: {exc.strerror}") from exc
 
@@ -202,7 +204,7 @@ class _LiveRun:
         self.notifier = Notifier()
         self.counters, self.health = Counters(), Health()
         self.st = _LiveState(stop)
-        self.status = _start_status(self.counters, self.health, cfg.status.http_port)
+        self.status = _start_status(self.counters, self.health, cfg.status.http_port, path)
         self.recorder = open_recorder(cfg, path)
         radar = open_radar(cfg)
         ins = open_ins(cfg, keep_raw=cfg.recorder.raw_ins)

@@ -8,6 +8,9 @@ interface only:
 
 - ``GET /status``: JSON ``{"healthy", "uptime_s", "components", "counters", "gauges"}``;
 - ``GET /health``: 200 ``ok`` when every component is healthy, else 503 and the failing ones;
+- ``GET /``: the operator's live page (:data:`LIVE_PAGE`), with ``GET /tiles/latest.png``
+  (the newest tiles, :class:`LiveView`) and ``GET /live.json`` (tiles, autofocus
+  estimates, disk left), when the server is given the run's store;
 - ``GET /metrics``: the same numbers in the Prometheus text format (0.0.4):
   counters as ``sarmoco_<name>_total``, gauges as ``sarmoco_<name>``, health as
   ``sarmoco_component_up{component="..."}``.
@@ -22,14 +25,20 @@ from __future__ import annotations
 import json
 import math
 import re
+import shutil
 import socket
 import threading
 import time
 from collections.abc import Callable, Mapping
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
 from typing import Any
 
-from sarmoco.errors import ConfigError
+import numpy as np
+
+from sarmoco.daemon.quicklook import gray_db, png_gray
+from sarmoco.daemon.store import RunStore, open_store
+from sarmoco.errors import ConfigError, RecorderError
 
 LOOPBACK_HOSTS = ("127.0.0.1", "::1", "localhost")
 """The only addresses the status server binds to."""
@@ -151,6 +160,177 @@ def _number(value: float) -> str:
     return repr(int(value)) if float(value).is_integer() else repr(float(value))
 
 
+LIVE_TILES = 4
+"""Newest tiles the live page's strip shows."""
+
+LIVE_AUTOFOCUS_ROWS = 300
+"""Newest autofocus estimates the live page plots."""
+
+
+class LiveView:
+    """The live page's data, read from the store the run writes (never from the pipeline).
+
+    The newest finished tiles are rendered to one PNG strip in the HTTP thread that asks
+    for it, at most once per ``min_interval_s`` and only when a tile was added since (the
+    processing thread never renders); other requests get the last PNG.
+
+    Parameters
+    ----------
+    store_path : Path
+        The run's store (it may not exist yet).
+    min_interval_s : float
+        Shortest time between two renderings, s.
+    """
+
+    def __init__(self, store_path: Path, min_interval_s: float = 1.0) -> None:
+        self.store_path = store_path
+        self.min_interval_s = min_interval_s
+        self._lock = threading.Lock()
+        self._png: bytes | None = None
+        self._tiles_drawn = 0
+        self._last_render = -math.inf
+        self.renders = 0
+        """PNG strips rendered so far."""
+        self.render_s = 0.0
+        """Thread CPU time spent rendering them, s."""
+
+    def _store(self) -> RunStore | None:
+        try:
+            return open_store(self.store_path)
+        except (RecorderError, OSError, ValueError, KeyError):
+            return None  # not created yet, or its metadata is being written
+
+    def png(self) -> bytes | None:
+        """The newest tiles as one PNG strip (along track left to right); None before any."""
+        with self._lock:
+            now = time.monotonic()
+            if now - self._last_render < self.min_interval_s:
+                return self._png
+            store = self._store()
+            if store is None:
+                return self._png
+            try:
+                n = store.n_images
+                if n == self._tiles_drawn:
+                    return self._png
+                t0 = time.thread_time()
+                tiles = [store.image(k)[0] for k in range(max(0, n - LIVE_TILES), n)]
+            except (RecorderError, OSError, ValueError, KeyError):
+                return self._png
+            tiles.sort(key=lambda im: float(im.axis0_m[0]))
+            rows = min(t.data.shape[1] for t in tiles)
+            strip = np.concatenate([t.data[:, :rows] for t in tiles], axis=0)
+            self._png = png_gray(gray_db(strip))
+            self.render_s += time.thread_time() - t0
+            self.renders += 1
+            self._tiles_drawn, self._last_render = n, now
+            return self._png
+
+    def summary(self) -> dict[str, Any]:
+        """``/live.json``: tiles recorded, autofocus estimates, disk, rendering cost."""
+        out: dict[str, Any] = {
+            "tiles": 0,
+            "autofocus": {"t_s": [], "a_y_mps2": [], "a_z_mps2": []},
+            "disk_free_bytes": None,
+            "disk_total_bytes": None,
+            "png_renders": self.renders,
+            "png_render_cpu_s": round(self.render_s, 6),
+        }
+        folder = self.store_path if self.store_path.exists() else self.store_path.parent
+        try:
+            usage = shutil.disk_usage(folder)
+            out["disk_free_bytes"], out["disk_total_bytes"] = usage.free, usage.total
+        except OSError:
+            pass
+        store = self._store()
+        if store is None:
+            return out
+        try:
+            out["tiles"] = store.n_images
+            if "autofocus" in store.tables():
+                n = store.committed("autofocus")
+                cols = ["t_center_s", "a_y_mps2", "a_z_mps2"]
+                a = store.read("autofocus", cols, max(0, n - LIVE_AUTOFOCUS_ROWS), n)
+                out["autofocus"] = {
+                    "t_s": a["t_center_s"].tolist(),
+                    "a_y_mps2": a["a_y_mps2"].tolist(),
+                    "a_z_mps2": a["a_z_mps2"].tolist(),
+                }
+        except (RecorderError, OSError, ValueError, KeyError):
+            pass
+        return out
+
+
+LIVE_PAGE = """<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>sarmoco live</title>
+<style>
+body{font-family:sans-serif;margin:1em;background:#111;color:#ddd}
+table{border-collapse:collapse}td{padding:2px 10px}
+.bad{color:#f66}.ok{color:#6d6}#strip{width:100%;image-rendering:pixelated;background:#000}
+svg{background:#000}
+</style></head><body>
+<h1>sarmoco live</h1>
+<p>Newest focused tiles (along track left to right, far range at the top, 40 dB):</p>
+<img id="strip" alt="no tile yet">
+<h2>Links</h2><table id="health"></table>
+<h2>Run</h2><table id="run"></table>
+<h2>Autofocus estimates (a_y red, a_z cyan, m/s&sup2;)</h2>
+<svg id="af" width="600" height="160"></svg>
+<script>
+"use strict";
+let last = null;
+function row(k, v, cls) {
+  return "<tr><td>" + k + "</td><td class='" + (cls || "") + "'>" + v + "</td></tr>";
+}
+function esc(s) {
+  return String(s).replace(/[&<>]/g, c => ({"&": "&amp;", "<": "&lt;", ">": "&gt;"})[c]);
+}
+async function status() {
+  const s = await (await fetch("status")).json();
+  const c = s.counters, g = s.gauges;
+  let h = "";
+  for (const [k, v] of Object.entries(s.components))
+    h += row(esc(k), (v.ok ? "ok " : "FAILED ") + esc(v.detail), v.ok ? "ok" : "bad");
+  document.getElementById("health").innerHTML = h;
+  const now = performance.now(), n = c.pipeline_pulses_received || 0;
+  const rate = last ? (n - last[1]) / ((now - last[0]) / 1000) : NaN;
+  last = [now, n];
+  let drops = 0;
+  for (const [k, v] of Object.entries(c)) if (k.includes("drop")) drops += v;
+  const l = await (await fetch("live.json")).json();
+  document.getElementById("run").innerHTML =
+    row("INS age", (g.ins_age_seconds ?? NaN).toFixed(2) + " s") +
+    row("pulse rate", rate.toFixed(0) + " /s") +
+    row("pulses", n) + row("dropped", drops, drops ? "bad" : "") +
+    row("backlog", (g.echo_backlog_pulses ?? 0) + " pulses") +
+    row("tiles", l.tiles) +
+    row("disk left", l.disk_free_bytes === null ? "?" :
+        (l.disk_free_bytes / 1e9).toFixed(1) + " GB");
+  plot(l.autofocus);
+}
+function plot(a) {
+  const svg = document.getElementById("af"), t = a.t_s;
+  if (t.length < 2) { svg.innerHTML = ""; return; }
+  const v = a.a_y_mps2.concat(a.a_z_mps2), lo = Math.min(...v), hi = Math.max(...v);
+  const x = i => 600 * (t[i] - t[0]) / (t[t.length - 1] - t[0] || 1);
+  const y = u => 150 - 140 * (u - lo) / (hi - lo || 1);
+  const line = (s, col) => "<polyline fill='none' stroke='" + col + "' points='" +
+    s.map((u, i) => x(i).toFixed(1) + "," + y(u).toFixed(1)).join(" ") + "'/>";
+  svg.innerHTML = line(a.a_y_mps2, "#f55") + line(a.a_z_mps2, "#5dd") +
+    "<text x='4' y='12' fill='#aaa' font-size='11'>" + hi.toPrecision(3) + "</text>" +
+    "<text x='4' y='156' fill='#aaa' font-size='11'>" + lo.toPrecision(3) + "</text>";
+}
+function tick() {
+  status().catch(() => {});
+  document.getElementById("strip").src = "tiles/latest.png?" + Date.now();
+}
+tick();
+setInterval(tick, 2000);
+</script></body></html>
+"""
+"""``GET /``: the operator's live page (no external assets; data from /status, /live.json)."""
+
+
 class StatusServer:
     """HTTP status endpoint on the loopback interface, served from a daemon thread.
 
@@ -166,6 +346,8 @@ class StatusServer:
         TCP port; 0 picks a free one (see :attr:`port`).
     request_timeout_s : float
         A connection that sends no complete request for this long is closed, s.
+    live : LiveView, optional
+        Serve the live page from this run's store (None: ``/`` is 404).
 
     Raises
     ------
@@ -180,11 +362,13 @@ class StatusServer:
         host: str = "127.0.0.1",
         port: int = 0,
         request_timeout_s: float = REQUEST_TIMEOUT_S,
+        live: LiveView | None = None,
     ) -> None:
         if host not in LOOPBACK_HOSTS:
             raise ConfigError(f"status.host: {host!r} is not one of {', '.join(LOOPBACK_HOSTS)}")
         self.counters = counters
         self.health = health
+        self.live = live
         self._started = time.monotonic()
         server_class = _V6Server if host == "::1" else _Server
         self._server = server_class((host, port), _handler_for(self, request_timeout_s))
@@ -257,11 +441,24 @@ def _handler_for(server: StatusServer, timeout_s: float) -> type[BaseHTTPRequest
                 ok = server.health.healthy
                 body = "ok\n" if ok else (json.dumps(bad) if bad else "no component reported\n")
                 ctype, code = "text/plain", 200 if ok else 503
+            elif server.live is not None and path in ("/", "/live.json", "/tiles/latest.png"):
+                if path == "/":
+                    body, ctype, code = LIVE_PAGE, "text/html", 200
+                elif path == "/live.json":
+                    body, ctype, code = json.dumps(server.live.summary()), "application/json", 200
+                else:
+                    png = server.live.png()
+                    if png is not None:
+                        self._send(200, "image/png", png)
+                        return
+                    body, ctype, code = "no tile yet\n", "text/plain", 404
             else:
                 body, ctype, code = "not found\n", "text/plain", 404
-            data = body.encode()
+            self._send(code, f"{ctype}; charset=utf-8", body.encode())
+
+        def _send(self, code: int, ctype: str, data: bytes) -> None:
             self.send_response(code)
-            self.send_header("Content-Type", f"{ctype}; charset=utf-8")
+            self.send_header("Content-Type", ctype)
             self.send_header("Content-Length", str(len(data)))
             self.end_headers()
             self.wfile.write(data)
