@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
 import tomllib
 import types
 import typing
@@ -93,12 +94,22 @@ class RadarConfig:
         The span of :func:`sarmoco.processing.rangecomp.range_axis_m`: matched filter
         ``c/2 (gate + i / f_s)``; dechirp ``c/2 (gate + f_i / K)`` over the beat frequencies
         ``f_i = (i - N/2) f_s / N``.
+
+        Raises
+        ------
+        ConfigError
+            Dechirp with a chirp rate ``bandwidth_hz / pulse_width_s`` that underflows to 0.
         """
         half_c = C_MPS / 2.0
         n, fs, gate = self.n_samples, self.sample_rate_hz, self.range_gate_delay_s
         if self.receive == "matched":
             return half_c * gate, half_c * (gate + (n - 1) / fs)
         k = self.bandwidth_hz / self.pulse_width_s
+        if not k > 0:  # both keys are > 0, but their quotient can underflow
+            raise ConfigError(
+                f"radar.bandwidth_hz / radar.pulse_width_s: {self.bandwidth_hz!r} Hz / "
+                f"{self.pulse_width_s!r} s is no chirp rate (underflows to 0)"
+            )
         return (
             half_c * (gate - (n // 2) * fs / n / k),
             half_c * (gate + (n - 1 - n // 2) * fs / n / k),
@@ -351,6 +362,8 @@ def load_config(path: str | Path) -> Config:
         raise ConfigError(f"{p}: cannot read: {exc.strerror}") from exc
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"{p}: not valid TOML: {exc}") from exc
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{p}: not UTF-8 text (TOML is UTF-8): {exc}") from exc
     return parse_config(table)
 
 
@@ -428,7 +441,7 @@ def check_geometry(cfg: Config) -> None:
         )
     if not near <= r_c <= far:
         raise ConfigError(f"geometry.center_slant_range_m: {r_c!r} m is outside {window}")
-    ground_c = math.sqrt(r_c**2 - h**2)
+    ground_c = math.sqrt((r_c - h) * (r_c + h))  # r_c**2 overflows for r_c > 1.3e154
     if swath / 2.0 >= ground_c:
         raise ConfigError(
             f"imaging.swath_m: {swath!r} m reaches past nadir (the scene centre's ground range "
@@ -496,9 +509,13 @@ def _scalar(tp: type, value: Any, path: str, meta: Mapping[str, Any]) -> Any:
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ConfigError(f"{path}: {value!r} is not an integer")
+        if not -(2**63) <= value < 2**63:
+            raise ConfigError(f"{path}: {value!r} is outside TOML's 64-bit integer range")
     elif tp is float:
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise ConfigError(f"{path}: {value!r} is not a number")
+        if not abs(value) <= sys.float_info.max:  # NaN, inf, or an int beyond any float
+            raise ConfigError(f"{path}: {value!r} is not a finite number")
     for bound, test, word in (
         ("gt", lambda v, b: v > b, ">"),
         ("ge", lambda v, b: v >= b, ">="),
