@@ -35,6 +35,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from sarmoco.daemon.quicklook import gray_db, png_gray
 from sarmoco.daemon.store import RunStore, open_store
@@ -163,6 +164,9 @@ def _number(value: float) -> str:
 LIVE_TILES = 4
 """Newest tiles the live page's strip shows."""
 
+LIVE_STRIP_PX = 1200
+"""Width of the live strip, pixels (each tile is decimated to its share once)."""
+
 LIVE_AUTOFOCUS_ROWS = 300
 """Newest autofocus estimates the live page plots."""
 
@@ -172,7 +176,8 @@ class LiveView:
 
     The newest finished tiles are rendered to one PNG strip in the HTTP thread that asks
     for it, at most once per ``min_interval_s`` and only when a tile was added since (the
-    processing thread never renders); other requests get the last PNG.
+    processing thread never renders); other requests get the last PNG. Each tile is read
+    and turned to gray once (dB re its own peak); a new strip re-encodes the PNG only.
 
     Parameters
     ----------
@@ -187,6 +192,8 @@ class LiveView:
         self.min_interval_s = min_interval_s
         self._lock = threading.Lock()
         self._png: bytes | None = None
+        self._gray: dict[int, tuple[float, npt.NDArray[np.uint8]]] = {}
+        """Tile index to (start along track m, 8-bit picture) of the tiles on the strip."""
         self._tiles_drawn = 0
         self._last_render = -math.inf
         self.renders = 0
@@ -214,13 +221,18 @@ class LiveView:
                 if n == self._tiles_drawn:
                     return self._png
                 t0 = time.thread_time()
-                tiles = [store.image(k)[0] for k in range(max(0, n - LIVE_TILES), n)]
+                keep = range(max(0, n - LIVE_TILES), n)
+                for k in keep:
+                    if k not in self._gray:
+                        tile = store.image(k)[0]
+                        width = LIVE_STRIP_PX // LIVE_TILES
+                        self._gray[k] = (float(tile.axis0_m[0]), gray_db(tile.data, width))
             except (RecorderError, OSError, ValueError, KeyError):
                 return self._png
-            tiles.sort(key=lambda im: float(im.axis0_m[0]))
-            rows = min(t.data.shape[1] for t in tiles)
-            strip = np.concatenate([t.data[:, :rows] for t in tiles], axis=0)
-            self._png = png_gray(gray_db(strip))
+            self._gray = {k: self._gray[k] for k in keep}
+            parts = sorted(self._gray.values(), key=lambda part: part[0])
+            rows = min(g.shape[0] for _, g in parts)  # far range at the top: keep the bottom
+            self._png = png_gray(np.concatenate([g[g.shape[0] - rows :] for _, g in parts], 1))
             self.render_s += time.thread_time() - t0
             self.renders += 1
             self._tiles_drawn, self._last_render = n, now
