@@ -378,7 +378,10 @@ def write_report(store_path: Path, out_dir: Path) -> dict[str, Any]:
                     out_dir / "autofocus.png", "autofocus estimates per subaperture")  # fmt: skip
         summary["autofocus"] = {"subapertures": int(a["t_center_s"].shape[0])}
     if image is not None and store.committed("motion") and _has_echoes(store):
-        summary["comparison"] = write_comparison(store, out_dir)
+        try:
+            summary["comparison"] = write_comparison(store, out_dir)
+        except RecorderError as exc:  # e.g. the brightest target's pulses were not kept
+            summary["comparison_skipped"] = str(exc)
     (out_dir / "report.json").write_text(json.dumps(summary, indent=2, default=float))
     text = _text(summary)
     (out_dir / "report.txt").write_text(text)
@@ -446,6 +449,8 @@ def _text(summary: dict[str, Any]) -> str:
                 f"                 {p['x_m']:7.2f} {p['y_m']:8.2f}   {p['pslr_az_db']:6.2f} "
                 f"{p['pslr_rg_db']:6.2f}     {p['irw_az_m']:.3f} {p['irw_rg_m']:.3f}"
             )
+    if "comparison_skipped" in summary:
+        lines.append(f"comparison       not drawn: {summary['comparison_skipped']}")
     if "comparison" in summary:
         comp = summary["comparison"]
         lines.append(f"comparison       brightest target (pulses 1 in {comp['decimation']})")
