@@ -18,7 +18,11 @@ and its own D_los starting at 0:
   the window, by then all straight flight), and wherever the running deviation
   ``hypot(ΔY, ΔZ)`` from the current track exceeds ``deviation_m``. A slow heading change
   (drift of the track) shows as a deviation growing like ``v0 t δψ``; it is caught by
-  the same test before it reaches the beam tolerance at the ranges imaged.
+  the same test before it reaches the beam tolerance at the ranges imaged. The track
+  started there follows the mean velocity of the whole segment before it (when that is
+  longer than the window): after a turn the first track's heading rests on one window
+  of turbulent flight (about 0.3° off in the survey simulation), the next one on the
+  whole leg so far, so a leg is rarely cut twice.
 
 Everything here is a function of pulse times (GPS ns) and APC velocities (NED, m/s);
 the :class:`Segmenter` carries the state from one block to the next, so feeding a strip
@@ -114,6 +118,9 @@ class Segmenter:
         self._pos = LosState(last_vel_yz=np.zeros(3), disp_yz_m=np.zeros(3))
         self._restart = False
         """A segment starts at the next pulse that is not in a turn."""
+        self._seg_sum = np.zeros(3)
+        self._seg_n = 0
+        """Sum and count of the velocities of the current segment's pulses so far."""
         self._t = np.zeros(0, dtype=np.int64)
         self._v = np.zeros((0, 3))
         self._psi = np.zeros(0)
@@ -145,16 +152,22 @@ class Segmenter:
                 k += int(np.argmin(turn[k:])) if not turn[k:].all() else n - k
                 continue
             if self._restart:
-                self._start(k, t, mean_v, pos, starts, tracks)
+                self._start(k, t, mean_v[k], pos, starts, tracks)
             end = k + (int(np.argmax(turn[k:])) if turn[k:].any() else n - k)
             vel_img = vector_to_imaging(v[k:end], self.track)[:, 1:3]
             disp, state = integrate_los(t[k:end], vel_img, self._disp)
             over = np.flatnonzero(np.hypot(disp[:, 0], disp[:, 1]) > self.limits.deviation_m)
             if over.size:  # a segment starts there (its deviation restarts at 0)
-                k += int(over[0])
-                self._restart = True
+                m = k + int(over[0])
+                seg_n = self._seg_n + m - k
+                long_v = (self._seg_sum + v[k:m].sum(axis=0)) / max(seg_n, 1)
+                use_long = seg_n > 0 and (t[m] - self.track.t0_ns) * 1e-9 > self.limits.window_s
+                self._start(m, t, long_v if use_long else mean_v[m], pos, starts, tracks)
+                k = m
                 continue
             self._disp = state
+            self._seg_sum += v[k:end].sum(axis=0)
+            self._seg_n += end - k
             k = end
         return SegmentPlan(turn, np.asarray(starts, dtype=np.int64), tuple(tracks))
 
@@ -162,14 +175,16 @@ class Segmenter:
         self,
         k: int,
         t: IntArray,
-        mean_v: FloatArray,
+        velocity: FloatArray,
         pos: FloatArray,
         starts: list[int],
         tracks: list[ReferenceTrack],
     ) -> None:
-        """Begin a segment at row ``k``: a track along the window-mean velocity there."""
-        self.track = ReferenceTrack.from_velocity(pos[k], mean_v[k], int(t[k]), self.look_side)
+        """Begin a segment at row ``k``: a track along ``velocity`` (NED, m/s) from there."""
+        self.track = ReferenceTrack.from_velocity(pos[k], velocity, int(t[k]), self.look_side)
         self._disp = LosState()
+        self._seg_sum = np.zeros(3)
+        self._seg_n = 0
         self._restart = False
         starts.append(k)
         tracks.append(self.track)
