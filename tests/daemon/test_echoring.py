@@ -238,6 +238,10 @@ def test_threaded_producer_through_a_duplicating_reordering_network() -> None:
             assert (batch.samples[:, :, 0] == (batch.t_ns // 1000 % 30_000)[:, None]).all()
             seen.extend((batch.t_ns // 1000).tolist())
     thread.join()
-    assert ring.duplicates == len(wire) - 10_000 > 50
-    assert ring.reordered > 50
-    assert seen == sorted(set(seen)) and len(seen) + ring.late_dropped == 10_000
+    # every datagram is taken once, or counted as a duplicate, or counted as too late (a
+    # duplicate that arrives after a later pulse was taken is "late": which one it is
+    # depends on the threads' timing, the sum does not)
+    assert len(seen) + ring.duplicates + ring.late_dropped == len(wire)
+    assert ring.duplicates > 50 and ring.reordered > 50
+    assert seen == sorted(set(seen)) and set(seen) <= set(range(10_000))
+    assert len(seen) >= 10_000 - ring.late_dropped
