@@ -9,8 +9,9 @@ quadrants, both look sides.
 
 The INS is exact and the autofocus is off, so that what focuses the targets is the geometry
 alone: the arm rotated by the attitude (the aligner's APC velocity) and the along-track
-placement of the pulses. Without the arm, or with it counted twice, the azimuth PSLR falls to
-about -11.5 dB (measured when this test was written); with it, -12.9 to -13.1 dB.
+placement of the pulses. With the arm: azimuth PSLR -13.24 to -13.49 dB; with the arm's
+rate dropped from the aligner: -11.89 to -12.27 dB (measured when this test was last
+changed; `pytest -s` prints them).
 """
 
 from __future__ import annotations
@@ -65,4 +66,9 @@ def test_lever_arm_attitude_heading_and_look_side_focus(
         "--nav", str(tmp_path / "nav.tlog"), "--out", str(tmp_path / "run.zarr"), "--quiet",
     )  # fmt: skip
     summary = write_report(tmp_path / "run.zarr", tmp_path / "report")
+    print(  # shown with pytest -s: the README's numbers
+        f"heading {heading_deg:.0f} deg, looking {look_side}: azimuth PSLR "
+        + ", ".join(f"{p['pslr_az_db']:.2f}" for p in summary["image"]["points"][:3])
+        + " dB"
+    )
     assert_focused(tmp_path, summary)
