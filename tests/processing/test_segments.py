@@ -28,7 +28,9 @@ def _plan(t: np.ndarray, vel: np.ndarray, block: int) -> tuple[SegmentPlan, list
     t_ns = (10**18 + np.round(t * 1e9)).astype(np.int64)
     first = ReferenceTrack.from_velocity(np.zeros(3), vel[0], int(t_ns[0]))
     seg = Segmenter(LIMITS, first, "right")
-    turns, starts, tracks = [], [], []
+    turns: list[np.ndarray] = []
+    starts: list[int] = []
+    tracks: list[ReferenceTrack] = []
     for a in range(0, t.size, block):
         p = seg.plan(t_ns[a : a + block], vel[a : a + block])
         turns.append(p.turn)
