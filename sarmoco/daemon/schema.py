@@ -212,6 +212,49 @@ def tile_name(index: int) -> str:
     return f"tile_{index:06d}"
 
 
+# -- attributes (untrusted JSON) -----------------------------------------------------------
+
+
+def read_attr(attrs: Mapping[str, Any], key: str, kind: type | tuple[type, ...], where: str) -> Any:
+    """An attribute of a store read back, checked to be of the type the layout writes.
+
+    Zarr attributes are JSON from a file that may be damaged or not ours: nothing read
+    from them is used before its type is checked (and nothing is ever evaluated).
+
+    Parameters
+    ----------
+    attrs : mapping
+        The node's attributes.
+    key : str
+        Attribute name.
+    kind : type or tuple of type
+        Allowed Python types (``bool`` is not accepted for ``int``).
+    where : str
+        The node, for the message (e.g. ``run.zarr/pulses``).
+
+    Raises
+    ------
+    RecorderError
+        Naming ``where.key`` when the attribute is missing or of another type.
+    """
+    if key not in attrs:
+        raise RecorderError(f"{where}.{key}: attribute missing")
+    value = attrs[key]
+    kinds = kind if isinstance(kind, tuple) else (kind,)
+    if not isinstance(value, kinds) or (isinstance(value, bool) and bool not in kinds):
+        names = " or ".join(k.__name__ for k in kinds)
+        raise RecorderError(f"{where}.{key}: {value!r} is not a {names}")
+    return value
+
+
+def read_committed(attrs: Mapping[str, Any], where: str) -> int:
+    """The :data:`COMMITTED_ATTR` row count of a table: an int >= 0 (see :func:`read_attr`)."""
+    value: int = read_attr(attrs, COMMITTED_ATTR, int, where)
+    if value < 0:
+        raise RecorderError(f"{where}.{COMMITTED_ATTR}: {value!r} is not >= 0")
+    return value
+
+
 # -- codecs ---------------------------------------------------------------------------------
 
 

@@ -12,8 +12,10 @@ recording as a radar and a navigation source, for a replay.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Concatenate, ParamSpec, TypeVar
 
 import dask.array as da
 import numpy as np
@@ -30,6 +32,33 @@ from sarmoco.drivers.samples import EchoPacket, Sample
 from sarmoco.drivers.source import Source
 from sarmoco.errors import RecorderError
 from sarmoco.processing.types import Image
+
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+_DAMAGE = (OSError, ValueError, KeyError, IndexError, TypeError, RuntimeError)
+"""What zarr, numcodecs and json raise on a damaged store: a metadata file that is not
+JSON or not UTF-8 (ValueError), a missing node or array (KeyError, FileNotFoundError), a
+chunk that does not decompress (numcodecs' RuntimeError) or has the wrong size (ValueError)."""
+
+
+def _reading(
+    method: Callable[Concatenate[RunStore, _P], _R],
+) -> Callable[Concatenate[RunStore, _P], _R]:
+    """A :class:`RunStore` method whose damaged-store failures become a RecorderError
+    naming the store (the reader's own RecorderErrors pass unchanged)."""
+
+    @functools.wraps(method)
+    def wrapper(self: RunStore, *args: _P.args, **kwargs: _P.kwargs) -> _R:
+        try:
+            return method(self, *args, **kwargs)
+        except RecorderError:
+            raise
+        except _DAMAGE as exc:
+            raise RecorderError(
+                f"{self.path}: damaged store ({type(exc).__name__}: {exc})"
+            ) from exc
+
+    return wrapper
 
 
 def _array(group: zarr.Group, name: str) -> zarr.Array:
@@ -63,12 +92,20 @@ class RunStore:
             raise RecorderError(
                 f"{self.path}: not a sarmoco store (no {schema.LAYOUT_ATTR} attribute)"
             )
+        version = schema.read_attr(self.root.attrs, schema.LAYOUT_ATTR, int, str(self.path))
+        if version != schema.STORE_LAYOUT_VERSION:
+            raise RecorderError(
+                f"{self.path}.{schema.LAYOUT_ATTR}: layout {version}, this sarmoco reads "
+                f"{schema.STORE_LAYOUT_VERSION}"
+            )
 
     @property
+    @_reading
     def attrs(self) -> dict[str, Any]:
         """Root attributes (read fresh): ``config``, ``versions``, ``metrics``, ``complete``..."""
         return dict(zarr.open_group(str(self.path), mode="r", zarr_format=3).attrs)
 
+    @_reading
     def tables(self) -> list[str]:
         """Names of the tables (groups with a committed row count), images excluded."""
         return sorted(
@@ -77,6 +114,7 @@ class RunStore:
             if name != schema.IMAGES_GROUP and COMMITTED_ATTR in node.attrs
         )
 
+    @_reading
     def _group(self, table: str) -> zarr.Group:
         try:
             node = self.root[table]
@@ -86,14 +124,13 @@ class RunStore:
             raise RecorderError(f"{self.path}: {table!r} is not a table")
         return node
 
+    @_reading
     def committed(self, table: str) -> int:
-        """Rows of ``table`` that are complete (read fresh from the store)."""
+        """Rows of ``table`` that are complete (read fresh from the store; an int >= 0)."""
         group = zarr.open_group(str(self.path / table), mode="r", zarr_format=3)
-        value = group.attrs[COMMITTED_ATTR]
-        if not isinstance(value, int):
-            raise RecorderError(f"{self.path}: {table}.{COMMITTED_ATTR} is {value!r}, not an int")
-        return value
+        return schema.read_committed(group.attrs, f"{self.path}/{table}")
 
+    @_reading
     def read(
         self, table: str, columns: list[str] | None = None, start: int = 0, stop: int | None = None
     ) -> dict[str, npt.NDArray[Any]]:
@@ -114,15 +151,24 @@ class RunStore:
         names = columns if columns is not None else sorted(k for k, _ in group.arrays())
         out: dict[str, npt.NDArray[Any]] = {}
         for name in names:
-            out[name] = np.asarray(_array(group, name)[start:stop])
+            arr = _array(group, name)
+            if arr.ndim == 0 or arr.shape[0] < stop:
+                raise RecorderError(
+                    f"{self.path}/{table}/{name}: shape {arr.shape} holds fewer rows than "
+                    f"{table}.{COMMITTED_ATTR} = {n}"
+                )
+            out[name] = np.asarray(arr[start:stop])
         return out
 
+    @_reading
     def dataset(self, table: str) -> xr.Dataset:
         """A table as a lazy (dask) xarray Dataset cut to its committed rows.
 
         Each array is cut on its own before the Dataset is assembled: after a crash the
         arrays of a table may have been grown to different lengths (growth happens
         before rows are written), which ``xarray.open_zarr`` on the group would refuse.
+        The chunks are read when the Dataset is computed: a damaged chunk raises then, from
+        zarr or numcodecs.
         """
         n = self.committed(table)
         group = self._group(table)
@@ -139,29 +185,32 @@ class RunStore:
         """Image tiles that are complete."""
         return self.committed(schema.IMAGES_GROUP)
 
+    @_reading
     def image(self, index: int) -> tuple[Image, dict[str, Any]]:
         """Tile ``index`` and its attributes (``t0_ns``, ``t1_ns``, ``metrics``)."""
         if not 0 <= index < self.n_images:
             raise RecorderError(f"{self.path}: image {index} not committed ({self.n_images} are)")
-        group = self._group(f"{schema.IMAGES_GROUP}/{schema.tile_name(index)}")
+        name = f"{schema.IMAGES_GROUP}/{schema.tile_name(index)}"
+        group = self._group(name)
         attrs = dict(group.attrs)
         image = Image(
             data=np.asarray(_array(group, "data")[...]),
             axis0_m=np.asarray(_array(group, "axis0_m")[...]),
             axis1_m=np.asarray(_array(group, "axis1_m")[...]),
-            frame=str(attrs["frame"]),
+            frame=schema.read_attr(attrs, "frame", str, f"{self.path}/{name}"),
         )
         return image, attrs
 
     def ins_bytes(self, index: int | None = None) -> bytes:
         """Raw INS bytes: chunk ``index`` as read, or all committed bytes in order."""
         if index is None:
-            return self.read(schema.INS_BYTES.name)["byte"].tobytes()
-        row = self.read(schema.INS_RAW.name, start=index, stop=index + 1)
+            return self.read(schema.INS_BYTES.name, ["byte"])["byte"].tobytes()
+        row = self.read(schema.INS_RAW.name, ["offset", "length"], start=index, stop=index + 1)
         if row["offset"].shape[0] == 0:
             raise RecorderError(f"{self.path}: raw INS chunk {index} not committed")
         off, length = int(row["offset"][0]), int(row["length"][0])
-        return self.read(schema.INS_BYTES.name, start=off, stop=off + length)["byte"].tobytes()
+        byte = self.read(schema.INS_BYTES.name, ["byte"], start=off, stop=off + length)["byte"]
+        return byte.tobytes()
 
 
 def open_store(path: str | Path) -> RunStore:
@@ -257,7 +306,13 @@ class StoreNav(Source):
         self._next = 0
         self._chunk = chunk
         self._raw_store: RunStore | None = store
-        self.raw_format = str(store.attrs.get(schema.INS_RAW_ATTR, {}).get("format", ""))
+        self.raw_format = ""
+        """Format of the recording's raw INS bytes ("" when none were kept)."""
+        attrs = store.attrs
+        if schema.INS_RAW_ATTR in attrs:
+            raw = schema.read_attr(attrs, schema.INS_RAW_ATTR, dict, str(store.path))
+            where = f"{store.path}.{schema.INS_RAW_ATTR}"
+            self.raw_format = schema.read_attr(raw, "format", str, where)
         self.eof = not self._samples
 
     def poll(self, timeout_s: float = 0.0) -> list[Sample]:
