@@ -25,6 +25,7 @@ from sarmoco.app.simconfig import write_config
 from sarmoco.daemon.config import Config, InsConfig, RadarConfig, config_to_dict
 from sarmoco.daemon.status import LOOPBACK_HOSTS
 from sarmoco.drivers.mavlink import MavlinkSource, mavlink2
+from sarmoco.errors import ConfigError
 from tests.daemon.test_daemon_process import Daemon, free_port
 
 PACKAGE = Path(__file__).resolve().parents[1] / "sarmoco"
@@ -186,5 +187,8 @@ def test_signing_rejects_replayed_and_forged_frames() -> None:
 
 @pytest.mark.parametrize("bad_key", [b"", bytes(31), bytes(33)])
 def test_a_signing_key_of_the_wrong_length_is_refused(bad_key: bytes) -> None:
-    with pytest.raises(ValueError, match="signing_key"):
+    """Refused with a ConfigError naming the key, before a socket is opened (none leaks)."""
+    fds = len(os.listdir("/proc/self/fd"))
+    with pytest.raises(ConfigError, match="signing_key"):
         MavlinkSource("udpin:127.0.0.1:0", signing_key=bad_key)
+    assert len(os.listdir("/proc/self/fd")) == fds

@@ -329,6 +329,8 @@ class MavlinkSource(Source):
         source_component: int = mavlink2.MAV_COMP_ID_ONBOARD_COMPUTER,
     ) -> None:
         super().__init__()
+        if signing_key is not None and len(signing_key) != 32:  # before a socket is opened
+            raise ConfigError(f"mavlink.signing_key: {len(signing_key)} bytes, need 32")
         self.url = url
         self.is_file = os.path.isfile(url)
         try:
@@ -358,8 +360,6 @@ class MavlinkSource(Source):
             # pymavlink prints and carries on (returning no data) when the peer goes away
             self._conn.handle_eof = self._conn.handle_disconnect = self._peer_closed
         if signing_key is not None:
-            if len(signing_key) != 32:
-                raise ConfigError(f"mavlink.signing_key: {len(signing_key)} bytes, need 32")
             self._conn.setup_signing(
                 signing_key, sign_outgoing=True, allow_unsigned_callback=lambda _m, _id: False
             )
