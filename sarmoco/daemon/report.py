@@ -22,6 +22,7 @@ from __future__ import annotations
 import html
 import json
 import math
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -158,6 +159,30 @@ def _track(attrs: dict[str, Any]) -> ReferenceTrack:
     )
 
 
+def _segment_strip(store: RunStore, track: Mapping[str, Any], tile: Image) -> Image:
+    """``tile`` joined along track with the tiles of the same reference track that touch it
+    (a target near a tile edge keeps its whole window)."""
+    parts = [tile]
+    for k in range(store.n_images):
+        other, attrs = store.image(k)
+        if attrs.get("reference_track") != track or other.data.shape[1] != tile.data.shape[1]:
+            continue
+        gap = abs(other.spacing_m[0])
+        touches = (
+            abs(other.axis0_m[-1] + gap - tile.axis0_m[0]) < 0.5 * gap
+            or abs(tile.axis0_m[-1] + gap - other.axis0_m[0]) < 0.5 * gap
+        )
+        if touches:
+            parts.append(other)
+    parts.sort(key=lambda im: float(im.axis0_m[0]))
+    return Image(
+        np.concatenate([p.data for p in parts], axis=0),
+        np.concatenate([p.axis0_m for p in parts]),
+        tile.axis1_m,
+        tile.frame,
+    )
+
+
 def _brightest_window(store: RunStore) -> tuple[Image, ReferenceTrack]:
     """The window of ``COMPARE_HALF_M`` around the brightest pixel of all tiles, and its track.
 
@@ -176,6 +201,7 @@ def _brightest_window(store: RunStore) -> tuple[Image, ReferenceTrack]:
     tile, attrs = store.image(best[1])
     if "reference_track" not in attrs:
         raise RecorderError(f"{store.path}: tile {best[1]} has no reference_track attribute")
+    tile = _segment_strip(store, attrs["reference_track"], tile)
     i, j = np.unravel_index(int(np.argmax(np.abs(tile.data))), tile.data.shape)
     h0 = round(COMPARE_HALF_M / abs(tile.spacing_m[0]))
     h1 = round(COMPARE_HALF_M / abs(tile.spacing_m[1]))
