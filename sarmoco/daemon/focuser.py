@@ -150,7 +150,7 @@ class _Segment:
             else None
         )
         ground_range = math.sqrt(max(geo.center_slant_range_m**2 - geo.height_m**2, 0.0))
-        beam_rad = _beam_rad(cfg)
+        beam_rad = imaged_beam_rad(cfg)
         self.imager = TileImager(
             TileLayout(
                 height_m=geo.height_m,
@@ -299,7 +299,7 @@ class _Segment:
         return self.tile_pga.push(tiles) + (self.tile_pga.flush() if last else [])
 
 
-def _beam_rad(cfg: Config) -> float:
+def imaged_beam_rad(cfg: Config) -> float:
     """Beam the pixels take: the azimuth beamwidth plus the squint tolerance each side, rad."""
     im = cfg.imaging
     return math.radians(im.azimuth_beamwidth_deg + 2.0 * im.squint_tolerance_deg)

@@ -31,7 +31,7 @@ import numpy.typing as npt
 
 from sarmoco.daemon.config import Config, parse_config
 from sarmoco.daemon.echoring import to_complex64
-from sarmoco.daemon.focuser import _beam_rad, radar_params
+from sarmoco.daemon.focuser import imaged_beam_rad, radar_params
 from sarmoco.daemon.quicklook import plot_cuts, plot_image, plot_panels, plot_series
 from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.errors import ProcessingError, RecorderError
@@ -257,7 +257,7 @@ def focus_comparison(store: RunStore) -> tuple[dict[str, Image], int]:
     nominal = track.position_imaging(t_ns)
     ins = nominal[0] + disp
     # pulses whose beam sees the window, every k-th
-    beam = _beam_rad(cfg)
+    beam = imaged_beam_rad(cfg)
     y_c = float(np.mean(window.axis1_m))
     half_aperture = math.hypot(y_c, cfg.geometry.height_m) * math.tan(beam / 2.0)
     x_lo, x_hi = float(window.axis0_m[0]), float(window.axis0_m[-1])
