@@ -1,0 +1,73 @@
+"""The ``array`` configuration section (issue 13): one channel per Tx/Rx pair, named errors."""
+
+from __future__ import annotations
+
+import pytest
+
+from sarmoco.daemon.config import parse_config
+from sarmoco.errors import ConfigError
+
+ARRAY_RADAR = {"mode": "array", "channels": 160, "range_gate_delay_s": 1.0e-6}
+"""An array-mode radar whose range window (149.9 .. 763.7 m: 4096 samples at 1 GHz after a
+1 µs gate) holds the nadir range of a 200 m flight height."""
+
+
+def _array_table(**array: object) -> dict[str, object]:
+    return {
+        "radar": dict(ARRAY_RADAR),
+        "geometry": {"height_m": 200.0},
+        "array": dict(array),
+    }
+
+
+def test_array_mode_takes_one_channel_per_pair() -> None:
+    cfg = parse_config(_array_table())
+    assert cfg.radar.mode == "array"
+    assert cfg.radar.channels == cfg.array.n_tx * cfg.array.n_rx == 160
+    assert cfg.array.sub_blocks == (4, 4)
+    small = parse_config(
+        {**_array_table(n_tx=2, n_rx=8, tx_spacing_m=0.16), "radar": ARRAY_RADAR | {"channels": 16}}
+    )
+    assert small.array.n_rx == 8
+
+
+@pytest.mark.parametrize(
+    ("table", "message"),
+    [
+        ({"radar": {"channels": 160}}, "radar.channels: 160: single mode focuses one channel"),
+        (
+            {**_array_table(), "radar": ARRAY_RADAR | {"channels": 80}},
+            "radar.channels: 80 is not array.n_tx * array.n_rx = 2 * 80 = 160",
+        ),
+        (_array_table(sub_blocks=[2, 0]), "array.sub_blocks[1]: 0 is not >= 1"),
+        (_array_table(sub_blocks=[2]), "array.sub_blocks: [2] is not a list of 2 numbers"),
+        (_array_table(n_rx=0), "array.n_rx: 0 is not > 0"),
+        (
+            _array_table(tx_spacing_m=1.0),
+            "array.tx_spacing_m: 1.0 m is less than array.n_rx * array.rx_spacing_m = 1.6 m",
+        ),
+        (_array_table(max_look_deg=90), "array.max_look_deg: 90 is not < 90"),
+        (
+            {**_array_table(), "geometry": {"height_m": 100.0}},
+            "geometry.height_m: 100.0 m (the nadir range) is outside the range window 149.90 ..",
+        ),
+        (_array_table(dem_spacing_m=-1), "array.dem_spacing_m: -1 is not > 0"),
+        ({"radar": {"mode": "mimo"}}, "radar.mode: 'mimo' is not one of 'single', 'array'"),
+    ],
+    ids=[
+        "single-many",
+        "array-count",
+        "sub-blocks-zero",
+        "sub-blocks-len",
+        "n-rx",
+        "tx-overlap",
+        "look",
+        "nadir-outside",
+        "spacing",
+        "mode",
+    ],
+)
+def test_bad_array_settings_name_the_key(table: dict[str, object], message: str) -> None:
+    with pytest.raises(ConfigError) as info:
+        parse_config(table)
+    assert str(info.value).startswith(message), str(info.value)
