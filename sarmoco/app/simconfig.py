@@ -8,7 +8,7 @@ from typing import Any
 
 import tomli_w
 
-from sarmoco.daemon.config import AutofocusConfig, Config, parse_config
+from sarmoco.daemon.config import AutofocusSection, Config, parse_config
 from sarmoco.sim.scenario import Scenario
 
 TILE_LENGTH_M = 10.0
@@ -43,7 +43,7 @@ def autofocus_table(scn: Scenario) -> dict[str, Any]:
     dict
         ``{"subaperture_s": ..., "hop_s": ...}`` or ``{"enabled": False}``.
     """
-    default = AutofocusConfig()
+    default = AutofocusSection()
     aperture_s = synthetic_aperture_s(scn)
     sub_s = max(
         min(default.subaperture_s, aperture_s / SUBAPERTURES_PER_APERTURE),

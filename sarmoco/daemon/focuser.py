@@ -27,7 +27,6 @@ import numpy as np
 from sarmoco.daemon.config import Config
 from sarmoco.processing import rangecomp
 from sarmoco.processing.autofocus import (
-    AutofocusConfig,
     AutofocusGeometry,
     SlidingSubapertureAutofocus,
 )
@@ -135,16 +134,7 @@ class _Segment:
                     radar.wavelength_m, track.v0_mps, geo.height_m, geo.center_slant_range_m
                 ),
                 range_m,
-                AutofocusConfig(
-                    subaperture_s=af.subaperture_s,
-                    hop_s=af.hop_s,
-                    n_lines=af.n_lines,
-                    estimator="map_drift" if af.estimator == "map-drift" else "contrast",
-                    envelope_step=af.envelope_step,
-                    range_order=af.range_order,
-                    pin_window_s=af.pin_window_s,
-                    phase_passes=af.phase_passes,
-                ),
+                af,
             )
             if af.enabled
             else None

@@ -71,6 +71,11 @@ def test_int_accepted_for_float_key() -> None:
         ({"ins": {"lever_arm_m": [1, 2]}}, "ins.lever_arm_m: [1, 2] is not a list of 3 numbers"),
         ({"ins": {"lever_arm_m": [1, 2, "x"]}}, "ins.lever_arm_m[2]: 'x' is not a number"),
         ({"autofocus": {"enabled": 1}}, "autofocus.enabled: 1 is not true or false"),
+        ({"autofocus": {"min_quality": 2}}, "autofocus.min_quality: 2 is not <= 1"),
+        (
+            {"autofocus": {"subaperture_s": 0.2, "hop_s": 0.3}},
+            "autofocus: AutofocusConfig.hop_s: 0.3 must be in (0, subaperture_s 0.2]",
+        ),
         (
             {"imaging": {"azimuth_beamwidth_deg": 90}},
             "imaging.azimuth_beamwidth_deg: 90 is not < 90",

@@ -71,7 +71,7 @@ def measure_line_rates(
         empty = np.zeros(0)
         return LineRates(empty, empty, empty, empty, empty)
     ref = nominal_rate(range_m[bins], geometry.speed_mps, geometry.wavelength_m)
-    if config.estimator == "map_drift":
+    if config.estimator == "map-drift":
         delta, quality = map_drift(bands, t_s, ref)
     else:
         delta, quality = contrast_optimisation(bands, t_s, ref, config.rate_span_hz_per_s)

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from sarmoco.errors import ProcessingError
+from sarmoco.keys import key
 
 
 @dataclass(frozen=True)
@@ -32,82 +33,93 @@ class AutofocusGeometry:
 
 @dataclass(frozen=True)
 class AutofocusConfig:
-    """Settings of the two-step autofocus.
+    """Settings of the two-step autofocus (docs/methods.md §3).
 
-    Parameters
-    ----------
-    subaperture_s, hop_s : float
-        Subaperture length and hop, s (overlap 1 - hop/subaperture, at least 50 % advised).
-    n_lines : int
-        Range lines used per subaperture.
-    guard_bins : int
-        Minimum spacing of two lines, bins.
-    half_band : int
-        Each line is a band of 2 half_band + 1 bins (magnitudes summed for map drift).
-    estimator : {"map_drift", "contrast"}
-        Doppler-rate estimator.
-    envelope_step : bool
-        Run step 1 (False: the paper's phase-only baseline).
-    range_order : int
-        Order of the κ range model of step 2 (0, 1, 2).
-    min_quality : float
-        Lines of lower estimator quality get zero weight.
-    min_peak_db : float
-        Lines whose azimuth-compressed peak stands less than this above the line's median
-        power get zero weight (noise-only lines: the peak of ~M exponential samples is about
-        8 dB over their median, so 15 dB rejects them with a margin), dB.
-    max_below_strongest_db : float
-        Lines whose compressed peak is more than this below the strongest line's get zero
-        weight, dB.
-    min_lines : int
-        A subaperture with fewer usable lines makes no correction (rate error 0) rather than
-        a fit through noise.
-    rate_span_hz_per_s : float
-        Search half-width of contrast optimisation, Hz/s.
-    phase_passes : int
-        The phase step is repeated on its own output this many times in all (the residual
-        rates shrink, so the looks are sharper and the rate change inside a subaperture no
-        longer biases them); κ of the passes add up. Offline a pass covers the whole
-        aperture; streaming, pass p of a subaperture waits until pass p - 1 is known on
-        all of its pulses (latency grows by about 2 hops a pass at 75 % overlap).
-    pin_window_s : float
-        Streaming: the constant and linear terms of the corrections (not observable from
-        Doppler rates; a linear phase moves targets along track) get zero mean and zero
-        trend from the first subaperture centre of a run to ``pin_window_s`` later, and the
-        first pulses are released once that is covered, s. Offline (``inf``) the window
-        runs to the last centre.
+    Each field is a configuration key (:func:`sarmoco.keys.key`): its meaning, unit and
+    bounds are in its metadata, and the daemon's ``[autofocus]`` section is this class
+    plus the daemon's own switches, so the README's key table documents every field.
+    Offline (:func:`autofocus_offline`) ``pin_window_s`` runs to the last subaperture centre.
     """
 
-    subaperture_s: float = 0.4
-    hop_s: float = 0.1
-    n_lines: int = 16
-    guard_bins: int = 6
-    half_band: int = 1
-    estimator: Literal["map_drift", "contrast"] = "map_drift"
-    envelope_step: bool = True
-    range_order: int = 2
-    min_quality: float = 0.3
-    min_peak_db: float = 15.0
-    max_below_strongest_db: float = 20.0
-    min_lines: int = 2
-    rate_span_hz_per_s: float = 150.0
-    phase_passes: int = 3
-    pin_window_s: float = 2.0
+    subaperture_s: float = key(0.4, "Subaperture length", unit="s", gt=0)
+    hop_s: float = key(
+        0.1,
+        "Hop between subaperture starts (overlap = 1 - hop / subaperture, at least 50 % "
+        "advised); at most subaperture_s",
+        unit="s",
+        gt=0,
+    )
+    n_lines: int = key(16, "Range lines used per subaperture", gt=0)
+    guard_bins: int = key(6, "Minimum spacing of two range lines, in range bins", ge=0)
+    half_band: int = key(
+        1,
+        "Each line is a band of 2 half_band + 1 range bins (magnitudes summed for map drift)",
+        ge=0,
+    )
+    estimator: Literal["map-drift", "contrast"] = key("map-drift", "Doppler-rate estimator")
+    envelope_step: bool = key(
+        True,
+        "Estimate cross-track accelerations and correct the envelope (step 1); false: the "
+        "paper's phase-only baseline",
+    )
+    range_order: Literal[0, 1, 2] = key(
+        2, "Order of the range model of the phase step (2: the paper's second-order model)"
+    )
+    min_quality: float = key(
+        0.3, "Lines of lower estimator quality (0..1) get zero weight", ge=0, le=1
+    )
+    min_peak_db: float = key(
+        15.0,
+        "Lines whose azimuth-compressed peak stands less than this above the line's median "
+        "power get zero weight (the peak of ~M exponential noise samples is about 8 dB over "
+        "their median)",
+        unit="dB",
+    )
+    max_below_strongest_db: float = key(
+        20.0,
+        "Lines whose compressed peak is more than this below the strongest line's get zero weight",
+        unit="dB",
+        ge=0,
+    )
+    min_lines: int = key(
+        2,
+        "A subaperture with fewer usable lines makes no correction (rate error 0) rather "
+        "than a fit through noise",
+        ge=1,
+    )
+    rate_span_hz_per_s: float = key(
+        150.0, "Search half-width of the contrast estimator", unit="Hz/s", gt=0
+    )
+    phase_passes: int = key(
+        3,
+        "Passes of the phase step, each on the output of the one before (their kappa add "
+        "up); the release latency is subaperture_s/2 + (phase_passes * ceil(subaperture_s / "
+        "(2 hop_s)) + 1) * hop_s (0.9 s by default, 0.5 s = subaperture_s + hop_s with one "
+        "pass)",
+        ge=1,
+    )
+    pin_window_s: float = key(
+        2.0,
+        "Span of subaperture centres over which the unobservable constant and linear "
+        "corrections are pinned to zero mean and trend (first pulses wait this long)",
+        unit="s",
+        gt=0,
+    )
 
     def __post_init__(self) -> None:
         if not 0 < self.hop_s <= self.subaperture_s:
             raise ProcessingError(
-                f"AutofocusConfig: hop_s {self.hop_s} must be in (0, subaperture_s "
+                f"AutofocusConfig.hop_s: {self.hop_s} must be in (0, subaperture_s "
                 f"{self.subaperture_s}]"
             )
         if self.min_lines < 1 or self.phase_passes < 1:
             raise ProcessingError(
-                f"AutofocusConfig: min_lines {self.min_lines} and phase_passes "
-                f"{self.phase_passes} must be at least 1"
+                f"AutofocusConfig.min_lines {self.min_lines} and phase_passes "
+                f"{self.phase_passes}: each must be at least 1"
             )
         if not self.pin_window_s > 0:
             raise ProcessingError(
                 f"AutofocusConfig.pin_window_s: {self.pin_window_s} must be positive"
             )
-        if self.estimator not in ("map_drift", "contrast"):
+        if self.estimator not in ("map-drift", "contrast"):
             raise ProcessingError(f"AutofocusConfig.estimator: {self.estimator!r} is unknown")
