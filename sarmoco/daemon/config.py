@@ -63,9 +63,16 @@ class RadarConfig:
     sample_format: Literal["int16", "float32"] = _key("int16", "I/Q sample type on the wire")
     channels: int = _key(
         1,
-        "Receive channels (VITA stream IDs 0..channels-1); only 1 is implemented: packets of "
-        "other stream IDs are counted (radar driver's rejected) and skipped",
+        "Receive channels (VITA stream IDs 0..channels-1): 1 in single mode (packets of other "
+        "stream IDs are counted (radar driver's rejected) and skipped); array.n_tx * array.n_rx "
+        "in array mode",
         gt=0,
+    )
+    mode: Literal["single", "array"] = _key(
+        "single",
+        "single: one channel, side-looking SAR focused into image tiles (stripmap or "
+        "spotlight); array: MIMO downward-looking array (issue 13), one stream ID per Tx/Rx "
+        "pair, imaged in 3-D into a DEM (section array)",
     )
 
     def slant_window_m(self) -> tuple[float, float]:
@@ -256,6 +263,46 @@ class ImagingConfig:
 
 
 @dataclass(frozen=True)
+class ArrayConfig:
+    """MIMO downward-looking array (radar.mode = "array"; docs/methods.md §4).
+
+    Elements lie on the wing (body y axis) about the antenna reference point
+    (``ins.lever_arm_m`` from the IMU): receivers ``n`` at ``(n - (n_rx - 1) / 2) rx_spacing_m``,
+    transmitters ``m`` at ``(m - (n_tx - 1) / 2) tx_spacing_m``. Tx ``m`` / Rx ``n`` arrive on
+    VITA stream ID ``m * n_rx + n``.
+    """
+
+    n_tx: int = _key(2, "Transmitters across the wing", gt=0)
+    n_rx: int = _key(80, "Receivers across the wing", gt=0)
+    rx_spacing_m: float = _key(0.02, "Receiver spacing along the wing (body y)", unit="m", gt=0)
+    tx_spacing_m: float = _key(
+        1.6,
+        "Transmitter spacing along the wing (body y); n_rx * rx_spacing_m makes the equivalent "
+        "phase centres one uniform array at rx_spacing_m / 2",
+        unit="m",
+        gt=0,
+    )
+    max_look_deg: float = _key(
+        20.0, "Largest cross-track look angle from nadir imaged", unit="deg", gt=0, lt=90
+    )
+    sub_blocks: tuple[int, int] = _key(
+        (4, 4),
+        "Sub-blocks of the second roll compensation in (k_x, k_y): along-track by cross-track "
+        "wavenumber blocks (1, 1: one phase for the whole spectrum)",
+        ge=1,
+    )
+    dem_spacing_m: float = _key(
+        1.0, "Grid spacing of the DEM product (north and east)", unit="m", gt=0
+    )
+    roll_compensation: bool = _key(
+        True, "Compensate the roll error (both steps); false images with the nominal geometry"
+    )
+    record_uncompensated: bool = _key(
+        True, "Also image without roll compensation and record that DEM beside the product"
+    )
+
+
+@dataclass(frozen=True)
 class RecorderConfig:
     """Zarr v3 recording of each run."""
 
@@ -291,6 +338,7 @@ class Config:
     mocomp: MocompConfig = field(default_factory=MocompConfig)
     autofocus: AutofocusSection = field(default_factory=AutofocusSection)
     imaging: ImagingConfig = field(default_factory=ImagingConfig)
+    array: ArrayConfig = field(default_factory=ArrayConfig)
     recorder: RecorderConfig = field(default_factory=RecorderConfig)
     status: StatusConfig = field(default_factory=StatusConfig)
 
@@ -336,24 +384,65 @@ def parse_config(table: Mapping[str, Any]) -> Config:
         the keys of a radar and geometry that cannot be imaged together.
     """
     cfg: Config = _build(Config, table, "")
-    check_channels(cfg.radar)
-    check_geometry(cfg)
+    check_channels(cfg.radar, cfg.array)
+    if cfg.radar.mode == "array":
+        check_array(cfg)
+    else:
+        check_geometry(cfg)
     return cfg
 
 
-def check_channels(radar: RadarConfig) -> None:
-    """Refuse more than one receive channel (no array mode yet).
+def check_channels(radar: RadarConfig, array: ArrayConfig) -> None:
+    """Refuse a channel count the mode cannot use.
 
     Raises
     ------
     ConfigError
-        If ``radar.channels`` > 1.
+        Single mode with ``radar.channels`` > 1; array mode with ``radar.channels`` other
+        than ``array.n_tx * array.n_rx``.
     """
-    if radar.channels > 1:
+    if radar.mode == "array":
+        pairs = array.n_tx * array.n_rx
+        if radar.channels != pairs:
+            raise ConfigError(
+                f"radar.channels: {radar.channels} is not array.n_tx * array.n_rx = "
+                f"{array.n_tx} * {array.n_rx} = {pairs} (array mode takes one stream ID per "
+                "Tx/Rx pair)"
+            )
+    elif radar.channels > 1:
         raise ConfigError(
-            f"radar.channels: {radar.channels}: array mode is not implemented (each channel "
+            f"radar.channels: {radar.channels}: single mode focuses one channel (each channel "
             "would need its own aperture and image set); set radar.channels = 1: the daemon "
-            "focuses VITA stream ID 0 and counts and skips the packets of other stream IDs"
+            "focuses VITA stream ID 0 and counts and skips the packets of other stream IDs; "
+            'or radar.mode = "array" for a MIMO array (channels = array.n_tx * array.n_rx)'
+        )
+
+
+def check_array(cfg: Config) -> None:
+    """Refuse an array whose settings cannot give a DEM.
+
+    Raises
+    ------
+    ConfigError
+        Naming the key: transmitters closer than the receive aperture
+        (``array.tx_spacing_m`` < ``array.n_rx * array.rx_spacing_m`` with ``n_tx`` > 1: the
+        equivalent phase centres of two transmitters overlap), or a range window that does
+        not hold the nadir range ``geometry.height_m``.
+    """
+    a, r = cfg.array, cfg.radar
+    if a.n_tx > 1 and a.tx_spacing_m < a.n_rx * a.rx_spacing_m * (1.0 - 1e-9):
+        raise ConfigError(
+            f"array.tx_spacing_m: {a.tx_spacing_m!r} m is less than array.n_rx * "
+            f"array.rx_spacing_m = {a.n_rx * a.rx_spacing_m:g} m: the Tx/Rx pairs' equivalent "
+            "phase centres overlap"
+        )
+    near, far = r.slant_window_m()
+    h = cfg.geometry.height_m
+    if not near < h < far:
+        raise ConfigError(
+            f"geometry.height_m: {h!r} m (the nadir range) is outside the range window "
+            f"{near:.2f} .. {far:.2f} m (radar.range_gate_delay_s {r.range_gate_delay_s!r} s, "
+            f"radar.n_samples {r.n_samples!r})"
         )
 
 
