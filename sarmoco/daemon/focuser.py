@@ -20,7 +20,9 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields
+from typing import Protocol
 
 import numpy as np
 
@@ -91,10 +93,75 @@ class FocusOutput:
         self.tracks += [track] * len(tiles)
 
 
-class _Segment:
-    """INS compensation, autofocus, pre-filter and tiles of one straight reference track."""
+class TileSink(Protocol):
+    """What a segment's focused pulses go to: a :class:`TileImager`, or a stand-in that
+    keeps them for imaging elsewhere (a batch images blocks of tiles on other workers)."""
 
-    def __init__(self, cfg: Config, radar: RadarParams, track: ReferenceTrack) -> None:
+    def add(
+        self,
+        rc: ComplexArray,
+        t_ns: IntArray,
+        apc_m: FloatArray,
+        compensated_dy_m: FloatArray | None = None,
+    ) -> list[Tile]:
+        """Take pulses ready for backprojection (see :meth:`TileImager.add`); finished tiles."""
+
+    def close(self) -> list[Tile]:
+        """End of the segment: the tiles still open."""
+
+
+SinkFactory = Callable[[TileImager, ReferenceTrack], TileSink]
+"""Makes a segment's sink from the imager it would use and its reference track."""
+
+
+def tile_imaging(cfg: Config, radar: RadarParams) -> tuple[TileImager, TilePga | None]:
+    """A segment's tile imager and tile PGA (None when ``autofocus.pga`` is off)."""
+    geo, im, af = cfg.geometry, cfg.imaging, cfg.autofocus
+    ground_range = math.sqrt(max(geo.center_slant_range_m**2 - geo.height_m**2, 0.0))
+    beam_rad = imaged_beam_rad(cfg)
+    imager = TileImager(
+        TileLayout(
+            height_m=geo.height_m,
+            ground_range_m=ground_range,
+            swath_m=im.swath_m,
+            tile_length_m=im.tile_length_m,
+            pixel_m=im.pixel_m,
+            beamwidth_rad=beam_rad,
+        ),
+        rangecomp.range_axis_m(radar),
+        radar.wavelength_m,
+    )
+    tile_pga = (
+        TilePga(
+            StripPga(
+                geo.height_m,
+                radar.wavelength_m,
+                beam_rad / 2.0,
+                window_m=af.pga_window_m,
+                max_iter=af.pga_iterations,
+                guard_m=10.0 * radar.range_resolution_m,
+            )
+        )
+        if af.pga
+        else None
+    )
+    return imager, tile_pga
+
+
+class _Segment:
+    """INS compensation, autofocus, pre-filter and tiles of one straight reference track.
+
+    ``sink`` (optional) takes the pulses the tile imager would backproject; tile PGA is
+    then left to whoever images them.
+    """
+
+    def __init__(
+        self,
+        cfg: Config,
+        radar: RadarParams,
+        track: ReferenceTrack,
+        sink: SinkFactory | None = None,
+    ) -> None:
         self.track = track
         geo, im, af = cfg.geometry, cfg.imaging, cfg.autofocus
         range_m = rangecomp.range_axis_m(radar)
@@ -139,38 +206,15 @@ class _Segment:
             if af.enabled
             else None
         )
-        ground_range = math.sqrt(max(geo.center_slant_range_m**2 - geo.height_m**2, 0.0))
         beam_rad = imaged_beam_rad(cfg)
-        self.imager = TileImager(
-            TileLayout(
-                height_m=geo.height_m,
-                ground_range_m=ground_range,
-                swath_m=im.swath_m,
-                tile_length_m=im.tile_length_m,
-                pixel_m=im.pixel_m,
-                beamwidth_rad=beam_rad,
-            ),
-            range_m,
-            radar.wavelength_m,
-        )
+        imager, self.tile_pga = tile_imaging(cfg, radar)
+        self.imager: TileSink = imager
+        if sink is not None:
+            self.imager, self.tile_pga = sink(imager, track), None
         doppler_hz = 2.0 * track.v0_mps * math.sin(beam_rad / 2.0) / radar.wavelength_m
         self.prefilter = (
             AzimuthPrefilter(radar.prf_hz, doppler_hz, im.prefilter_oversampling)
             if im.prefilter and doppler_hz > 0
-            else None
-        )
-        self.tile_pga = (
-            TilePga(
-                StripPga(
-                    geo.height_m,
-                    radar.wavelength_m,
-                    beam_rad / 2.0,
-                    window_m=af.pga_window_m,
-                    max_iter=af.pga_iterations,
-                    guard_m=10.0 * radar.range_resolution_m,
-                )
-            )
-            if af.pga
             else None
         )
 
@@ -343,10 +387,20 @@ class Focuser:
     velocity_ned : ndarray, shape (3,)
         Mean INS velocity at the start, NED, m/s: fixes the first track's heading and
         speed v0.
+    sink : SinkFactory, optional
+        Hand every segment's pulses ready for backprojection to a sink made by this
+        instead of imaging them (no tiles come out; see :class:`TileSink`).
     """
 
-    def __init__(self, cfg: Config, t0_ns: int, velocity_ned: FloatArray) -> None:
+    def __init__(
+        self,
+        cfg: Config,
+        t0_ns: int,
+        velocity_ned: FloatArray,
+        sink: SinkFactory | None = None,
+    ) -> None:
         self.cfg = cfg
+        self._sink = sink
         self.radar = radar_params(cfg)
         self.range_m = rangecomp.range_axis_m(self.radar)
         self.window = None if cfg.imaging.window == "none" else cfg.imaging.window
@@ -359,7 +413,7 @@ class Focuser:
             if cfg.mocomp.segments
             else None
         )
-        self.segment: _Segment | None = _Segment(cfg, self.radar, track)
+        self.segment: _Segment | None = _Segment(cfg, self.radar, track, sink)
         self._done = self.segment
         """The segment closed last (what :attr:`track` and :attr:`autofocus` show after it)."""
         self.segments = 1
@@ -410,7 +464,7 @@ class Focuser:
         for a, b in itertools.pairwise(bounds):
             if a in new:
                 self._close(out)
-                self.segment = _Segment(self.cfg, self.radar, new[a])
+                self.segment = _Segment(self.cfg, self.radar, new[a], self._sink)
                 self.segments += 1
             if plan.turn[a]:
                 self._close(out)
