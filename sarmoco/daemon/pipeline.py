@@ -32,7 +32,7 @@ from sarmoco.daemon.aligner import AlignedBlock, Aligner
 from sarmoco.daemon.config import Config
 from sarmoco.daemon.echoring import Block, EchoRing, SampleFormat, sample_dtype, sample_shape
 from sarmoco.daemon.flags import FLAG_DTYPE, NAV_UNUSABLE, PulseFlag
-from sarmoco.daemon.focuser import Focuser, FocusOutput
+from sarmoco.daemon.focuser import Focuser, FocusOutput, SinkFactory
 from sarmoco.daemon.navbuffer import NavBuffer
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.status import Counters
@@ -164,10 +164,20 @@ class Pipeline:
         The run's store (written from the processing loop only).
     counters : Counters
         Status counters (updated here, served by the status endpoint).
+    sink : SinkFactory, optional
+        Imaging deferred: the focuser's segments hand their pulses to sinks made by this
+        and record no tiles (:class:`~sarmoco.daemon.focuser.Focuser`).
     """
 
-    def __init__(self, cfg: Config, recorder: Recorder, counters: Counters) -> None:
+    def __init__(
+        self,
+        cfg: Config,
+        recorder: Recorder,
+        counters: Counters,
+        sink: SinkFactory | None = None,
+    ) -> None:
         self.cfg = cfg
+        self.sink = sink
         self.recorder = recorder
         self.counters = counters
         capacity = max(1024, math.ceil(RING_SECONDS * cfg.radar.prf_hz))
@@ -388,7 +398,7 @@ class Pipeline:
             return None
         p = p.since(int(np.argmax(p.usable)))
         start_vel = p.vel_ned[p.usable][: self.cfg.imaging.block_pulses].mean(axis=0)
-        self.focuser = Focuser(self.cfg, int(p.t_ns[0]), start_vel)
+        self.focuser = Focuser(self.cfg, int(p.t_ns[0]), start_vel, self.sink)
         self.recorder.set_attribute(
             schema.REFERENCE_TRACK_ATTR, schema.encode_reference_track(self.focuser.track)
         )

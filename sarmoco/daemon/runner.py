@@ -14,6 +14,7 @@ from pathlib import Path
 from types import FrameType
 
 from sarmoco.daemon.config import Config, config_to_dict
+from sarmoco.daemon.focuser import SinkFactory
 from sarmoco.daemon.links import open_ins, open_radar
 from sarmoco.daemon.pipeline import Pipeline, RunSummary, ring_format
 from sarmoco.daemon.recorder import Recorder
@@ -356,32 +357,46 @@ class _LiveRun:
 
 
 def replay_files(
-    cfg: Config, radar_file: Path, nav_file: Path, out: Path, progress: bool = True
+    cfg: Config,
+    radar_file: Path,
+    nav_file: Path,
+    out: Path,
+    progress: bool = True,
+    sink: SinkFactory | None = None,
 ) -> RunSummary:
     """Replay a ``.vrt`` radar file and an INS log through the pipeline on a virtual clock
-    (see :func:`_replay`)."""
+    (see :func:`_replay`; ``sink``: imaging deferred, see :class:`Pipeline`)."""
     total = max(radar_file.stat().st_size, 1)
     with (
         open_radar(cfg, str(radar_file)) as radar,
         open_ins(cfg, str(nav_file), keep_raw=cfg.recorder.raw_ins) as ins,
     ):
         done = (lambda: radar.decoder.counters.bytes / total) if progress else None
-        return _replay(cfg, radar, ins, out, done)
+        return _replay(cfg, radar, ins, out, done, sink)
 
 
-def replay_store(cfg: Config, recording: Path, out: Path, progress: bool = True) -> RunSummary:
+def replay_store(
+    cfg: Config,
+    recording: Path,
+    out: Path,
+    progress: bool = True,
+    sink: SinkFactory | None = None,
+) -> RunSummary:
     """Replay a recorded store (raw echoes and INS samples as received) through the pipeline.
 
     The pulses are read into the pipeline as a radar file is, and the INS samples the
     live run accepted are offered again in time order (:class:`StorePulses`,
     :class:`StoreNav`), both through :func:`_replay`. The recording's raw INS bytes are
-    carried over (unless ``recorder.raw_ins`` is off).
+    carried over (unless ``recorder.raw_ins`` is off). ``sink``: imaging deferred (see
+    :class:`Pipeline`).
     """
     src = open_store(recording)
     with StorePulses(src) as radar, StoreNav(src) as ins:
         if cfg.recorder.raw_ins:
             ins.keep_raw()
-        return _replay(cfg, radar, ins, out, (lambda: radar.fraction) if progress else None)
+        return _replay(
+            cfg, radar, ins, out, (lambda: radar.fraction) if progress else None, sink
+        )
 
 
 def _replay(
@@ -390,6 +405,7 @@ def _replay(
     ins: Source,
     out: Path,
     done: Callable[[], float] | None,
+    sink: SinkFactory | None = None,
 ) -> RunSummary:
     """Run recorded pulses and INS samples through a new pipeline on a virtual clock.
 
@@ -402,6 +418,8 @@ def _replay(
     ----------
     done : callable or None
         Share of the input read so far, for a progress bar on stderr (None: no bar).
+    sink : SinkFactory, optional
+        Imaging deferred: no tiles are recorded (:class:`Pipeline`).
 
     Raises
     ------
@@ -412,7 +430,7 @@ def _replay(
     lead_ns = round(cfg.ins.max_gap_s * 1e9)
     ins_span = _Span()
     with open_recorder(cfg, out) as recorder:
-        pipe = Pipeline(cfg, recorder, Counters())
+        pipe = Pipeline(cfg, recorder, Counters(), sink)
         record_ins_format(recorder, ins)
         ahead: list[Sample] = []  # read from the log, not yet due (a poll may return seconds)
         while not radar.eof:
