@@ -394,9 +394,7 @@ def replay_store(
     with StorePulses(src) as radar, StoreNav(src) as ins:
         if cfg.recorder.raw_ins:
             ins.keep_raw()
-        return _replay(
-            cfg, radar, ins, out, (lambda: radar.fraction) if progress else None, sink
-        )
+        return _replay(cfg, radar, ins, out, (lambda: radar.fraction) if progress else None, sink)
 
 
 def _replay(
