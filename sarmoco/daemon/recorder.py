@@ -105,6 +105,62 @@ def software_versions() -> dict[str, str]:
     return versions
 
 
+def create_tile(
+    images: zarr.Group, index: int, axis0_m: npt.ArrayLike, axis1_m: npt.ArrayLike
+) -> zarr.Group:
+    """Create image tile ``index`` in the ``images`` group: its axes (m) written, its
+    complex64 ``data`` array created empty, to be filled by :func:`write_tile`.
+
+    A batch creates every tile of a run this way first, then writes each tile's pixels
+    from wherever it was formed (region writes into arrays that exist).
+    """
+    group = images.create_group(schema.tile_name(index))
+    axes = [np.asarray(a, dtype=np.float64) for a in (axis0_m, axis1_m)]
+    shape = (axes[0].size, axes[1].size)
+    group.create_array(
+        "data",
+        shape=shape,
+        chunks=tuple(min(n, 1024) for n in shape),
+        dtype=np.complex64,
+        dimension_names=schema.TILE_DIMS,
+        attributes={"coordinates": " ".join(schema.TILE_COORDS)},
+    )
+    for name, dim, value in zip(schema.TILE_COORDS, schema.TILE_DIMS, axes, strict=True):
+        arr = group.create_array(
+            name, shape=value.shape, chunks=value.shape, dtype=value.dtype, dimension_names=(dim,)
+        )
+        arr[...] = value
+    return group
+
+
+def write_tile(
+    group: zarr.Group,
+    image: Image,
+    t0_ns: int,
+    t1_ns: int,
+    metrics: Mapping[str, float] | None = None,
+    reference_track: Mapping[str, Any] | None = None,
+) -> None:
+    """Write a tile's pixels into the ``data`` array :func:`create_tile` made (a region
+    write of the whole array) and its attributes (:func:`~sarmoco.daemon.schema.encode_tile_attrs`).
+
+    Raises
+    ------
+    RecorderError
+        The image is not of the tile's shape.
+    """
+    data = group["data"]
+    assert isinstance(data, zarr.Array)
+    if image.data.shape != data.shape:
+        raise RecorderError(
+            f"{group.store_path}: image of shape {image.data.shape} for a tile of {data.shape}"
+        )
+    data[...] = np.asarray(image.data, dtype=np.complex64)
+    group.update_attributes(
+        schema.encode_tile_attrs(image.frame, t0_ns, t1_ns, metrics, reference_track)
+    )
+
+
 class Table:
     """Arrays of one group that grow together along their first dimension.
 
@@ -384,27 +440,8 @@ class Recorder(Closing):
             (:func:`~sarmoco.daemon.schema.encode_reference_track`).
         """
         index = self.n_images
-        group = self._images.create_group(schema.tile_name(index))
-        data = np.asarray(image.data, dtype=np.complex64)
-        n0, n1 = data.shape
-        for name, value, dims, chunks in (
-            ("data", data, ("axis0", "axis1"), (min(n0, 1024), min(n1, 1024))),
-            ("axis0_m", np.asarray(image.axis0_m, dtype=np.float64), ("axis0",), (n0,)),
-            ("axis1_m", np.asarray(image.axis1_m, dtype=np.float64), ("axis1",), (n1,)),
-        ):
-            arr = group.create_array(
-                name, shape=value.shape, chunks=chunks, dtype=value.dtype, dimension_names=dims
-            )
-            arr[...] = value
-        group.update_attributes(
-            {
-                "frame": image.frame,
-                "t0_ns": int(t0_ns),
-                "t1_ns": int(t1_ns),
-                "metrics": {k: float(v) for k, v in (metrics or {}).items()},
-            }
-            | ({} if reference_track is None else {"reference_track": dict(reference_track)})
-        )
+        group = create_tile(self._images, index, image.axis0_m, image.axis1_m)
+        write_tile(group, image, t0_ns, t1_ns, metrics, reference_track)
         self.n_images = index + 1
         self._images.update_attributes({COMMITTED_ATTR: self.n_images})
         self._maybe_sync()

@@ -212,6 +212,33 @@ def tile_name(index: int) -> str:
     return f"tile_{index:06d}"
 
 
+TILE_DIMS = ("axis0", "axis1")
+"""Dimensions of a tile's ``data``: along the reference track, then ground range."""
+TILE_COORDS = ("axis0_m", "axis1_m")
+"""A tile's coordinate arrays (imaging-frame metres, one per entry of :data:`TILE_DIMS`)."""
+
+
+def encode_tile_attrs(
+    frame: str,
+    t0_ns: int,
+    t1_ns: int,
+    metrics: Mapping[str, float] | None,
+    reference_track: Mapping[str, Any] | None,
+) -> dict[str, Any]:
+    """A tile group's attributes: ``frame``, the GPS ns span ``t0_ns``/``t1_ns`` of the
+    pulses that formed it, ``metrics`` (floats) and, when given, ``reference_track``
+    (:func:`encode_reference_track`: the axes are in its imaging frame)."""
+    attrs = {
+        "frame": frame,
+        "t0_ns": int(t0_ns),
+        "t1_ns": int(t1_ns),
+        "metrics": {k: float(v) for k, v in (metrics or {}).items()},
+    }
+    if reference_track is not None:
+        attrs["reference_track"] = dict(reference_track)
+    return attrs
+
+
 # -- attributes (untrusted JSON) -----------------------------------------------------------
 
 
