@@ -108,6 +108,7 @@ def test_phase_and_envelope_bring_every_pulse_back_to_the_reference_track() -> N
 
 @pytest.mark.parametrize("n", [128, 96, 127])  # separable tables, and the general path
 def test_shift_range_is_a_sub_sample_delay(n: int) -> None:
+    """Peaks move by fractional bins with their phase (the autofocus's envelope shift too)."""
     x = _gauss_peaks(n, np.array([40.0, 40.0]))
     y = shift_range(x.astype(np.complex64), np.array([2.5, -7.25]))
     np.testing.assert_allclose(y, _gauss_peaks(n, np.array([42.5, 32.75])), atol=3e-6)

@@ -6,11 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sarmoco.processing.autofocus.splice import (
-    phase_screen,
-    remove_phase,
-    shift_range,
-)
+from sarmoco.processing.autofocus.splice import phase_screen, remove_phase
+from sarmoco.processing.mocomp import shift_range
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 
 
@@ -42,5 +39,5 @@ class Corrections:
 
     def apply(self, rc: ComplexArray, range_m: FloatArray) -> ComplexArray:
         """Shift the envelopes and remove the phase error: returns corrected (P, S) data."""
-        shifted = shift_range(rc, self.los_m, float(range_m[1] - range_m[0]))
+        shifted = shift_range(rc, self.los_m / float(range_m[1] - range_m[0]))
         return remove_phase(shifted, self.phase_cycles, np.asarray(range_m) - self.ref_range_m)

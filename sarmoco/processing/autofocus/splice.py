@@ -1,5 +1,6 @@
 """Splicing of per-subaperture estimates into continuous series, their double integration, and
-the corrections built from them (range shift of the envelope, phase per range bin)."""
+the phase per range bin built from them (the envelope is moved by
+:func:`sarmoco.processing.mocomp.shift_range`)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,6 @@ import math
 
 import numba
 import numpy as np
-import scipy.fft
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.types import ComplexArray, FloatArray
@@ -164,32 +164,6 @@ def _rotate(
             out[p, k] = data[p, k] * z
             z *= step
             step *= second[p]
-
-
-def shift_range(rc: ComplexArray, shift_m: FloatArray, bin_m: float) -> ComplexArray:
-    """Move every pulse's envelope by ``shift_m`` (a peak at R goes to R + shift).
-
-    A linear phase in range frequency (FFT zero-padded by at least 16 bins, so shifts of a
-    few bins do not wrap); the carrier phase of a compressed peak is kept. Single-precision
-    input stays single precision.
-
-    Parameters
-    ----------
-    rc : ndarray, shape (P, S)
-        Range-compressed pulses on a uniform range axis of spacing ``bin_m``.
-    shift_m : ndarray, shape (P,)
-        Shift of each pulse, m.
-    """
-    n = rc.shape[1]
-    pad = scipy.fft.next_fast_len(n + 16)
-    spec = scipy.fft.fft(rc, pad, axis=1)
-    poly = np.zeros((rc.shape[0], 3))
-    poly[:, 1] = shift_m
-    df = 1.0 / (pad * bin_m)
-    half = (pad + 1) // 2  # fftfreq order: 0 .. half-1, then -(pad-half) .. -1, times df
-    _rotate(spec, poly, 0.0, df, 0, half, spec)
-    _rotate(spec, poly, (half - pad) * df, df, half, pad, spec)
-    return np.asarray(scipy.fft.ifft(spec, axis=1, overwrite_x=True)[:, :n], dtype=rc.dtype)
 
 
 def remove_phase(

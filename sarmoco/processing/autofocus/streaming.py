@@ -47,10 +47,10 @@ from sarmoco.processing.autofocus.splice import (
     integrate_twice,
     phase_screen,
     remove_phase,
-    shift_range,
     splice,
     zero_line_start,
 )
+from sarmoco.processing.mocomp import shift_range
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 
 
@@ -241,7 +241,7 @@ class SlidingSubapertureAutofocus:
         done = len(self._shifted)
         if upto > done:
             los = self._los(self._los0)[0][done:upto]
-            self._shifted.append(shift_range(self._data.rows[done:upto], los, self._bin_m))
+            self._shifted.append(shift_range(self._data.rows[done:upto], los / self._bin_m))
 
     def _pin_end(self) -> float:
         if self._pin_end_s is None:

@@ -8,7 +8,7 @@ import pytest
 from sarmoco.processing.autofocus import doppler_rate as dr
 from sarmoco.processing.autofocus.pga import pga
 from sarmoco.processing.autofocus.separation import fit_accelerations, fit_range_polynomial
-from sarmoco.processing.autofocus.splice import integrate_twice, shift_range, zero_line_start
+from sarmoco.processing.autofocus.splice import integrate_twice, zero_line_start
 from tests.processing.autofocus import _synth as S
 
 ACC_YZ = (0.5, -0.8)
@@ -98,18 +98,6 @@ def test_double_integration_pins_line() -> None:
     zero = np.zeros(1)
     start = integrate_twice(t, acc, zero, zero)[0][:, 0]
     np.testing.assert_allclose(start, (1.0 - np.cos(2.0 * t)) / 4.0, atol=1e-5)
-
-
-def test_shift_range_moves_envelope_keeps_carrier() -> None:
-    """A peak at R moves to R + shift with its carrier phase exp(-j 4π R/λ) unchanged."""
-    r_axis = np.arange(990.0, 1010.0, S.BIN_M)
-    r0, shift = 1000.03, 0.37
-    carrier = np.exp(-4j * np.pi * r0 / S.WAVELENGTH_M)
-    line = (np.sinc((r_axis - r0) / S.RES_M) * carrier)[None, :]
-    got = shift_range(line.astype(np.complex64), np.array([shift]), S.BIN_M)[0]
-    want = np.sinc((r_axis - r0 - shift) / S.RES_M) * carrier
-    core = np.abs(r_axis - 1000.0) < 5.0
-    assert np.max(np.abs(got[core] - want[core])) < 0.02
 
 
 def test_pga_recovers_smooth_and_random_phase() -> None:
