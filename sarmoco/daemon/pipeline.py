@@ -195,6 +195,7 @@ class Pipeline:
         self.summary = RunSummary()
         counters.add_source("pipeline", self.totals)
         self._nav_rows: queue.SimpleQueue[schema.NavRow] = queue.SimpleQueue()
+        self._geodetic_origin: schema.GeodeticOrigin | None = None
         self._ins_raw: queue.SimpleQueue[tuple[bytes, int | None]] = queue.SimpleQueue()
         self._ins_recorded_mono = -math.inf
         self._id_lock = threading.Lock()
@@ -468,6 +469,13 @@ class Pipeline:
         if rows:
             self.recorder.append_nav(**schema.encode_nav(rows))
             self.summary.nav_samples += len(rows)
+            if self._geodetic_origin is None:
+                self._geodetic_origin = schema.first_geodetic_origin(rows)
+                if self._geodetic_origin is not None:
+                    self.recorder.set_attribute(
+                        schema.GEODETIC_ORIGIN_ATTR,
+                        schema.encode_geodetic_origin(self._geodetic_origin),
+                    )
 
     def totals(self) -> dict[str, float]:
         """Monotonic counts of the run (served as Prometheus counters ``pipeline_*``)."""

@@ -294,6 +294,7 @@ class Recorder(Closing):
                 "config": json.loads(json.dumps(dict(config or {}), default=str)),
                 "versions": software_versions(),
                 schema.COMPLETE_ATTR: False,
+                schema.GEODETIC_ORIGIN_ATTR: schema.encode_geodetic_origin(None),
             }
         )
         self.pulses = self._create(schema.pulses_table(n_samples, sample_format, raw_echoes))
@@ -352,9 +353,11 @@ class Recorder(Closing):
         quat: npt.ArrayLike,
         result: npt.ArrayLike,
         rx_ns: npt.ArrayLike | None = None,
+        lla: npt.ArrayLike | None = None,
     ) -> None:
         """Record INS samples as received (NaN for fields a sample lacks; see the layout)."""
         t = np.atleast_1d(np.asarray(t_ns, dtype=np.int64))
+        lla = np.full((t.shape[0], 3), np.nan) if lla is None else lla
         rx = np.full(t.shape, -1, dtype=np.int64) if rx_ns is None else rx_ns
         self.nav.append(
             t_ns=t,
@@ -364,6 +367,7 @@ class Recorder(Closing):
             pos_ned=np.asarray(pos_ned, dtype=np.float64).reshape(-1, 3),
             quat=np.asarray(quat, dtype=np.float64).reshape(-1, 4),
             result=np.atleast_1d(np.asarray(result, dtype=np.int8)),
+            lla=np.asarray(lla, dtype=np.float64).reshape(-1, 3),
         )
         self._maybe_sync()
 

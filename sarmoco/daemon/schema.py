@@ -11,7 +11,8 @@ Layout (every group but ``images`` is a *table*: arrays that share their first
 dimension, plus a ``committed`` attribute counting the rows that are complete)::
 
     <run>.zarr/   attrs: sarmoco_store (layout version), created_utc, config, versions,
-                         metrics, complete, reference_track, ins_raw (format of ins_bytes)
+                         metrics, complete, reference_track, ins_raw (format of ins_bytes),
+                         geodetic_origin (:func:`encode_geodetic_origin`)
       pulses/     t_ns, pulse_id (pulse) int64    transmit time GPS ns, running number
                   channel (pulse) int32, flags (pulse) uint32 (PulseFlag bits)
                   echo (pulse, sample[, iq])      raw echoes, int16 I/Q or complex64 (optional)
@@ -19,8 +20,9 @@ dimension, plus a ``committed`` attribute counting the rows that are complete)::
                   kind (nav) uint8                receive clock, -1 unknown); kind
                   vel_ned (nav, ned) m/s          NAV_KIND_VELOCITY or NAV_KIND_ATTITUDE;
                   pos_ned (nav, ned) m            fields a sample lacks are NaN;
-                  quat (nav, quat) wxyz           result: PushResult of the nav buffer
-                  result (nav) int8
+                  quat (nav, quat) wxyz           result: PushResult of the nav buffer;
+                  result (nav) int8               lla: the INS's valid geodetic position
+                  lla (nav, lla) deg, deg, m      (lat, lon WGS-84, altitude)
       ins_raw/    rx_ns, offset, length (raw_chunk) int64: raw INS bytes as read,
       ins_bytes/  byte (byte) uint8                so a log can be decoded again
       motion/     pulse_id, t_ns (motion) int64; pos_ned m, vel_ned m/s (motion, ned);
@@ -56,7 +58,7 @@ from sarmoco.errors import RecorderError
 from sarmoco.processing.autofocus.report import SubapertureReport
 from sarmoco.processing.geometry import ReferenceTrack
 
-STORE_LAYOUT_VERSION = 1
+STORE_LAYOUT_VERSION = 2
 """Value of the root attribute :data:`LAYOUT_ATTR`; bumped when the layout changes."""
 LAYOUT_ATTR = "sarmoco_store"
 """Root attribute that marks a sarmoco store (its value: the layout version)."""
@@ -68,10 +70,16 @@ REFERENCE_TRACK_ATTR = "reference_track"
 """Root attribute: the run's reference track (:func:`encode_reference_track`)."""
 INS_RAW_ATTR = "ins_raw"
 """Root attribute ``{"format": ...}`` naming the format of ``ins_bytes`` when kept."""
+GEODETIC_ORIGIN_ATTR = "geodetic_origin"
+"""Root attribute: where on Earth the run is (:func:`encode_geodetic_origin`)."""
+NO_ABSOLUTE_POSITION = "no INS sample with a valid geodetic position"
+"""``geodetic_origin.absent`` of a store whose INS gave no absolute position."""
 
 NAV_KIND_VELOCITY, NAV_KIND_ATTITUDE = 0, 1
 """Values of ``nav/kind``: a :class:`VelocitySample` or an :class:`AttitudeSample` row."""
 
+NAV_SAMPLE_COLUMNS = ("t_ns", "kind", "vel_ned", "pos_ned", "quat", "lla")
+"""Columns of ``nav`` that :func:`decode_nav` reads."""
 NavSample = VelocitySample | AttitudeSample
 """The INS samples the ``nav`` table holds."""
 NavRow = tuple[NavSample, int | None, PushResult]
@@ -156,6 +164,7 @@ NAV = TableSpec(
         "pos_ned": _col(np.float64, (3,), ("ned",)),
         "quat": _col(np.float64, (4,), ("quat",)),
         "result": _col(np.int8),
+        "lla": _col(np.float64, (3,), ("lla",)),
     },
 )
 INS_RAW = TableSpec(
@@ -308,6 +317,7 @@ def encode_nav(rows: Sequence[NavRow]) -> dict[str, npt.NDArray[Any]]:
         "pos_ned": np.full((n, 3), math.nan),
         "quat": np.full((n, 4), math.nan),
         "result": np.fromiter((int(res) for _, _, res in rows), np.int8, n),
+        "lla": np.full((n, 3), math.nan),
     }
     for i, (s, _, _) in enumerate(rows):
         if isinstance(s, VelocitySample):
@@ -315,6 +325,8 @@ def encode_nav(rows: Sequence[NavRow]) -> dict[str, npt.NDArray[Any]]:
             cols["vel_ned"][i] = s.vel_ned_mps
             if s.pos_ned_m is not None:
                 cols["pos_ned"][i] = s.pos_ned_m
+            if s.lat_lon_alt is not None and s.valid & Validity.POSITION:
+                cols["lla"][i] = s.lat_lon_alt
         else:
             cols["kind"][i] = NAV_KIND_ATTITUDE
             cols["quat"][i] = s.quat_wxyz
@@ -327,7 +339,7 @@ def decode_nav(cols: Mapping[str, npt.NDArray[Any]], source: str = "store.nav") 
     Parameters
     ----------
     cols : mapping of str to ndarray
-        Columns ``t_ns``, ``kind``, ``vel_ned``, ``pos_ned``, ``quat`` of some rows.
+        Columns ``t_ns``, ``kind``, ``vel_ned``, ``pos_ned``, ``quat``, ``lla`` of some rows.
     source : str
         ``source`` of the samples made.
 
@@ -335,7 +347,7 @@ def decode_nav(cols: Mapping[str, npt.NDArray[Any]], source: str = "store.nav") 
     -------
     list of VelocitySample or AttitudeSample
         In row order. The store keeps no validity bits or device time: a velocity is
-        ``VELOCITY`` (and ``POSITION`` with a position), an attitude
+        ``VELOCITY`` (and ``POSITION`` with a local or geodetic position), an attitude
         ``ATTITUDE | HEADING``, and the device time is the GPS time.
 
     Raises
@@ -344,12 +356,13 @@ def decode_nav(cols: Mapping[str, npt.NDArray[Any]], source: str = "store.nav") 
         A row's ``kind`` is not one of the ``NAV_KIND_*`` values.
     """
     out: list[NavSample] = []
-    for t, kind, v, p, q in zip(
+    for t, kind, v, p, q, g in zip(
         cols["t_ns"].tolist(),
         cols["kind"].tolist(),
         cols["vel_ned"].tolist(),
         cols["pos_ned"].tolist(),
         cols["quat"].tolist(),
+        cols["lla"].tolist(),
         strict=True,
     ):
         if kind == NAV_KIND_ATTITUDE:
@@ -357,8 +370,11 @@ def decode_nav(cols: Mapping[str, npt.NDArray[Any]], source: str = "store.nav") 
             out.append(AttitudeSample(t, (q[0], q[1], q[2], q[3]), valid, source, t))
         elif kind == NAV_KIND_VELOCITY:
             pos = None if any(map(math.isnan, p)) else (p[0], p[1], p[2])
-            valid = Validity.VELOCITY | (Validity.POSITION if pos else Validity.NONE)
-            out.append(VelocitySample(t, (v[0], v[1], v[2]), valid, source, t, pos))
+            lla = None if any(map(math.isnan, g)) else (g[0], g[1], g[2])
+            valid = Validity.VELOCITY | (Validity.POSITION if pos or lla else Validity.NONE)
+            out.append(
+                VelocitySample(t, (v[0], v[1], v[2]), valid, source, t, pos, lat_lon_alt=lla)
+            )
         else:
             raise RecorderError(f"nav/kind: {kind} is not a sample kind (0 velocity, 1 attitude)")
     return out
@@ -414,5 +430,83 @@ def encode_reference_track(track: ReferenceTrack) -> dict[str, Any]:
         "x_hat_ned": track.x_hat.tolist(),
         "y_hat_ned": track.y_hat.tolist(),
         "v0_mps": track.v0_mps,
-        "origin": "APC at t0_ns (INS-only: no absolute position)",
+        "origin": "APC at t0_ns (INS-integrated; on Earth through the root geodetic_origin)",
     }
+
+
+@dataclass(frozen=True)
+class GeodeticOrigin:
+    """Where a run is on Earth: the first valid geodetic position its INS gave.
+
+    Attributes
+    ----------
+    t_ns : int
+        GPS time of that INS sample, ns.
+    lla : tuple of 3 float
+        Latitude, longitude (deg, WGS-84) and altitude (m) as the INS reported it.
+    source : str
+        The INS message (e.g. ``"sbg.EKF_NAV"``, ``"mavlink.GLOBAL_POSITION_INT"``).
+    """
+
+    t_ns: int
+    lla: tuple[float, float, float]
+    source: str
+
+
+HEIGHT_NOTE = "INS altitude (MSL) used as WGS-84 ellipsoid height: geoid undulation not applied"
+"""How the altitude of :class:`GeodeticOrigin` is used as a height (stored beside it)."""
+
+
+def encode_geodetic_origin(origin: GeodeticOrigin | None) -> dict[str, Any]:
+    """The root attribute :data:`GEODETIC_ORIGIN_ATTR`: ``{"absent": why}`` while the INS
+    gave no absolute position, else ``t_ns``, ``lat_deg``, ``lon_deg``, ``alt_m``,
+    ``source`` and ``height`` (:data:`HEIGHT_NOTE`)."""
+    if origin is None:
+        return {"absent": NO_ABSOLUTE_POSITION}
+    lat, lon, alt = origin.lla
+    return {
+        "t_ns": origin.t_ns,
+        "lat_deg": lat,
+        "lon_deg": lon,
+        "alt_m": alt,
+        "source": origin.source,
+        "height": HEIGHT_NOTE,
+    }
+
+
+def decode_geodetic_origin(attrs: Mapping[str, Any], where: str) -> GeodeticOrigin:
+    """The run's :class:`GeodeticOrigin` from the root attributes of a store.
+
+    Raises
+    ------
+    RecorderError
+        Naming ``where.geodetic_origin``: the attribute is missing or damaged, or the run has
+        no absolute position (the INS gave none: nothing in the store is on Earth).
+    """
+    value = read_attr(attrs, GEODETIC_ORIGIN_ATTR, dict, where)
+    key = f"{where}.{GEODETIC_ORIGIN_ATTR}"
+    if "absent" in value:
+        raise RecorderError(f"{key}: no absolute position ({value['absent']})")
+    lat = read_attr(value, "lat_deg", (float, int), key)
+    lon = read_attr(value, "lon_deg", (float, int), key)
+    alt = read_attr(value, "alt_m", (float, int), key)
+    if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and math.isfinite(alt)):
+        raise RecorderError(f"{key}: lat {lat!r}, lon {lon!r}, alt {alt!r} out of range")
+    t_ns = read_attr(value, "t_ns", int, key)
+    return GeodeticOrigin(
+        t_ns, (float(lat), float(lon), float(alt)), read_attr(value, "source", str, key)
+    )
+
+
+def first_geodetic_origin(rows: Sequence[NavRow]) -> GeodeticOrigin | None:
+    """The origin a run takes from INS rows: the first accepted velocity sample with a
+    valid geodetic position (None when there is none)."""
+    for s, _, result in rows:
+        if (
+            result == PushResult.ACCEPTED
+            and isinstance(s, VelocitySample)
+            and s.lat_lon_alt is not None
+            and s.valid & Validity.POSITION
+        ):
+            return GeodeticOrigin(s.t_gps_ns, s.lat_lon_alt, s.source)
+    return None

@@ -299,7 +299,7 @@ class StoreNav(Source):
 
     def __init__(self, store: RunStore, chunk: int = 256) -> None:
         super().__init__()
-        cols = store.read(schema.NAV.name, ["t_ns", "kind", "vel_ned", "pos_ned", "quat", "result"])
+        cols = store.read(schema.NAV.name, [*schema.NAV_SAMPLE_COLUMNS, "result"])
         keep = np.flatnonzero(cols["result"] == int(PushResult.ACCEPTED))
         keep = keep[np.argsort(cols["t_ns"][keep], kind="stable")]
         self._samples = schema.decode_nav({k: v[keep] for k, v in cols.items()})

@@ -1,6 +1,9 @@
 """The simulated SBG INS: sbgECom binary logs over a pseudo-terminal or into a file.
 
-Per INS sample: EKF_NAV (velocity NED, geodetic position) and EKF_QUAT (or
+Per INS sample: EKF_NAV (velocity NED, geodetic position: the INS position, or the
+velocity integrated from the first sample for grades without one, as the simulated
+autopilot's LOCAL_POSITION_NED, about :data:`~sarmoco.sim.insfeed.GEODETIC_ORIGIN`;
+position valid) and EKF_QUAT (or
 EKF_EULER); every ``utc_period_s`` a UTC_TIME pairing the device clock with UTC
 and the GPS time of week; one EVENT_A per radar pulse (sync-in: the pulse
 transmit time on the device clock). Times are the device clock in µs since
@@ -22,6 +25,7 @@ from sarmoco.drivers import sbg_codec as codec
 from sarmoco.drivers.attitude import quat_to_euler
 from sarmoco.drivers.clock import NS_PER_S, SECONDS_PER_WEEK
 from sarmoco.processing.types import FloatArray
+from sarmoco.sim.emit_mavlink import dead_reckoned
 from sarmoco.sim.emitter import Emitter
 from sarmoco.sim.faults import PacketFaults
 from sarmoco.sim.insfeed import GEODETIC_ORIGIN, InsFeed, ned_to_geodetic
@@ -135,15 +139,16 @@ class SbgEmitter(SbgDevice):
 
     def __init__(self, link: Link, feed: InsFeed, **options: Any) -> None:
         super().__init__(link, feed, **options)
-        self.geodetic = None if feed.pos_ned is None else ned_to_geodetic(feed.pos_ned)
+        pos_ned = (
+            feed.pos_ned if feed.pos_ned is not None else dead_reckoned(feed.t_ns, feed.vel_ned)
+        )
+        self.geodetic = ned_to_geodetic(pos_ned)
         g = feed.grade
         self.vel_std = vec3(np.full(3, max(g.vel_std_mps, MIN_STD)))
         self.att_std = vec3(np.full(3, max(g.att_std_rad, MIN_STD)))
         self.pos_std = vec3(np.full(3, max(g.pos_noise_m, MIN_STD)))
         self.status = SOLUTION_NAV_POSITION | codec.SOL_ATTITUDE_VALID | codec.SOL_HEADING_VALID
-        self.status |= codec.SOL_VELOCITY_VALID
-        if self.geodetic is not None:
-            self.status |= codec.SOL_POSITION_VALID
+        self.status |= codec.SOL_VELOCITY_VALID | codec.SOL_POSITION_VALID
         self.sent: dict[str, int] = {"EKF_NAV": 0, "EKF_ATT": 0, "UTC_TIME": 0, "EVENT_A": 0}
 
     def events(self) -> Iterator[Event]:
@@ -168,7 +173,7 @@ class SbgEmitter(SbgDevice):
             utc = codec.UtcTime(time_us, UTC_STATUS, *utc_f, gps_tow_ms(self.wire.gps_ns(t_ref)))
             self._send_msg(utc, "UTC_TIME", t_emit)
         q = vec4(f.quat[i])
-        lla = GEODETIC_ORIGIN if self.geodetic is None else vec3(self.geodetic[i])
+        lla = vec3(self.geodetic[i])
         status = self.status
         nav = codec.EkfNav(
             time_us, vec3(f.vel_ned[i]), self.vel_std, lla, 0.0, self.pos_std, status
