@@ -267,18 +267,25 @@ class ArrayConfig:
     """MIMO downward-looking array (radar.mode = "array"; docs/methods.md §4).
 
     Elements lie on the wing (body y axis) about the antenna reference point
-    (``ins.lever_arm_m`` from the IMU): receivers ``n`` at ``(n - (n_rx - 1) / 2) rx_spacing_m``,
-    transmitters ``m`` at ``(m - (n_tx - 1) / 2) tx_spacing_m``. Tx ``m`` / Rx ``n`` arrive on
-    VITA stream ID ``m * n_rx + n``.
+    (``ins.lever_arm_m`` from the IMU) in the filled MIMO layout
+    (:func:`~sarmoco.processing.array.geometry.mimo_layout`): receivers ``2 d`` apart,
+    transmitters ``n_rx 2 d`` apart, so that the equivalent phase centres of the pairs are one
+    uniform virtual array of spacing ``d = epc_spacing_m``. Tx ``m`` / Rx ``n`` arrive on VITA
+    stream ID ``m * n_rx + n``.
     """
 
     n_tx: int = _key(2, "Transmitters across the wing", gt=0)
     n_rx: int = _key(80, "Receivers across the wing", gt=0)
-    rx_spacing_m: float = _key(0.02, "Receiver spacing along the wing (body y)", unit="m", gt=0)
-    tx_spacing_m: float = _key(
-        1.6,
-        "Transmitter spacing along the wing (body y); n_rx * rx_spacing_m makes the equivalent "
-        "phase centres one uniform array at rx_spacing_m / 2",
+    epc_spacing_m: float = _key(
+        0.02,
+        "Spacing d of the equivalent phase centres (virtual array) along the wing",
+        unit="m",
+        gt=0,
+    )
+    antenna_length_m: float = _key(
+        2.0,
+        "Along-track length D of the elements: Doppler band |k_x| <= 4 pi / D, along-track "
+        "resolution D / 2; the pulse spacing v / PRF must be <= D / 4",
         unit="m",
         gt=0,
     )
@@ -286,14 +293,12 @@ class ArrayConfig:
         20.0, "Largest cross-track look angle from nadir imaged", unit="deg", gt=0, lt=90
     )
     sub_blocks: tuple[int, int] = _key(
-        (4, 4),
+        (1, 8),
         "Sub-blocks of the second roll compensation in (k_x, k_y): along-track by cross-track "
         "wavenumber blocks (1, 1: one phase for the whole spectrum)",
         ge=1,
     )
-    dem_spacing_m: float = _key(
-        1.0, "Grid spacing of the DEM product (north and east)", unit="m", gt=0
-    )
+    dem_spacing_m: float = _key(0.5, "Cross-track grid spacing of the DEM product", unit="m", gt=0)
     roll_compensation: bool = _key(
         True, "Compensate the roll error (both steps); false images with the nominal geometry"
     )
@@ -424,18 +429,17 @@ def check_array(cfg: Config) -> None:
     Raises
     ------
     ConfigError
-        Naming the key: transmitters closer than the receive aperture
-        (``array.tx_spacing_m`` < ``array.n_rx * array.rx_spacing_m`` with ``n_tx`` > 1: the
-        equivalent phase centres of two transmitters overlap), or a range window that does
-        not hold the nadir range ``geometry.height_m``.
+        Naming the key: fewer than two channels (no virtual array), a matched-filter receiver
+        missing (``radar.receive``), or a range window that does not hold the nadir range
+        ``geometry.height_m``.
     """
     a, r = cfg.array, cfg.radar
-    if a.n_tx > 1 and a.tx_spacing_m < a.n_rx * a.rx_spacing_m * (1.0 - 1e-9):
+    if a.n_tx * a.n_rx < 2:
         raise ConfigError(
-            f"array.tx_spacing_m: {a.tx_spacing_m!r} m is less than array.n_rx * "
-            f"array.rx_spacing_m = {a.n_rx * a.rx_spacing_m:g} m: the Tx/Rx pairs' equivalent "
-            "phase centres overlap"
+            f"array.n_rx: {a.n_tx} * {a.n_rx} Tx/Rx pairs make no virtual array (at least 2)"
         )
+    if r.receive != "matched":
+        raise ConfigError(f"radar.receive: {r.receive!r}: the array imager needs 'matched'")
     near, far = r.slant_window_m()
     h = cfg.geometry.height_m
     if not near < h < far:

@@ -24,10 +24,8 @@ def test_array_mode_takes_one_channel_per_pair() -> None:
     cfg = parse_config(_array_table())
     assert cfg.radar.mode == "array"
     assert cfg.radar.channels == cfg.array.n_tx * cfg.array.n_rx == 160
-    assert cfg.array.sub_blocks == (4, 4)
-    small = parse_config(
-        {**_array_table(n_tx=2, n_rx=8, tx_spacing_m=0.16), "radar": ARRAY_RADAR | {"channels": 16}}
-    )
+    assert cfg.array.sub_blocks == (1, 8)
+    small = parse_config({**_array_table(n_tx=2, n_rx=8), "radar": ARRAY_RADAR | {"channels": 16}})
     assert small.array.n_rx == 8
 
 
@@ -43,8 +41,12 @@ def test_array_mode_takes_one_channel_per_pair() -> None:
         (_array_table(sub_blocks=[2]), "array.sub_blocks: [2] is not a list of 2 numbers"),
         (_array_table(n_rx=0), "array.n_rx: 0 is not > 0"),
         (
-            _array_table(tx_spacing_m=1.0),
-            "array.tx_spacing_m: 1.0 m is less than array.n_rx * array.rx_spacing_m = 1.6 m",
+            {**_array_table(n_tx=1, n_rx=1), "radar": ARRAY_RADAR | {"channels": 1}},
+            "array.n_rx: 1 * 1 Tx/Rx pairs make no virtual array (at least 2)",
+        ),
+        (
+            {**_array_table(), "radar": ARRAY_RADAR | {"receive": "dechirp"}},
+            "radar.receive: 'dechirp': the array imager needs 'matched'",
         ),
         (_array_table(max_look_deg=90), "array.max_look_deg: 90 is not < 90"),
         (
@@ -52,6 +54,7 @@ def test_array_mode_takes_one_channel_per_pair() -> None:
             "geometry.height_m: 100.0 m (the nadir range) is outside the range window 149.90 ..",
         ),
         (_array_table(dem_spacing_m=-1), "array.dem_spacing_m: -1 is not > 0"),
+        (_array_table(epc_spacing_m=0), "array.epc_spacing_m: 0 is not > 0"),
         ({"radar": {"mode": "mimo"}}, "radar.mode: 'mimo' is not one of 'single', 'array'"),
     ],
     ids=[
@@ -60,10 +63,12 @@ def test_array_mode_takes_one_channel_per_pair() -> None:
         "sub-blocks-zero",
         "sub-blocks-len",
         "n-rx",
-        "tx-overlap",
+        "one-pair",
+        "dechirp",
         "look",
         "nadir-outside",
         "spacing",
+        "epc-spacing",
         "mode",
     ],
 )
