@@ -25,6 +25,7 @@ from sarmoco.drivers import sbg_codec as codec
 from sarmoco.drivers.sbg import SbgDecoder
 from sarmoco.errors import ProtocolError
 from tests.fuzz.bounds import assert_named_error, bounded_allocation
+from tests.fuzz.edits import edited
 
 DBC = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "can" / "sbgCan.dbc"
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -65,25 +66,16 @@ def message(draw: Any) -> codec.Message:
                        tuple(draw(st.integers(0, 0xFFFF)) for _ in range(4)))  # type: ignore[arg-type]  # fmt: skip
 
 
-@st.composite
-def damaged(draw: Any, frame: bytes) -> bytes:
+def _length(draw: Any, buf: bytearray) -> None:
+    """Rewrite the length field (bytes 4..5, little endian), up to 64 KiB."""
+    if len(buf) >= 6:
+        buf[4:6] = draw(st.sampled_from([0, 1, 4086, 4087, 0xFFFF])).to_bytes(2, "little")
+
+
+def damaged(frame: bytes) -> st.SearchStrategy[bytes]:
     """``frame`` with a few edits: bit flips, the length field rewritten (to 64 KiB), cut
     short, bytes inserted, or garbage appended."""
-    buf = bytearray(frame)
-    for _ in range(draw(st.integers(0, 3))):
-        op = draw(st.sampled_from(["flip", "length", "cut", "insert", "append"]))
-        pos = draw(st.integers(0, max(len(buf) - 1, 0)))
-        if op == "flip" and buf:
-            buf[pos] ^= 1 << draw(st.integers(0, 7))
-        elif op == "length" and len(buf) >= 6:
-            buf[4:6] = draw(st.sampled_from([0, 1, 4086, 4087, 0xFFFF])).to_bytes(2, "little")
-        elif op == "cut":
-            del buf[pos:]
-        elif op == "insert":
-            buf[pos:pos] = draw(st.binary(min_size=1, max_size=6))
-        else:
-            buf += draw(st.binary(min_size=1, max_size=40))
-    return bytes(buf)
+    return edited(frame, max_insert=6, max_append=40, format_edits={"length": _length})
 
 
 frames = st.lists(

@@ -28,6 +28,7 @@ from sarmoco.drivers.vita49 import (
 )
 from sarmoco.errors import ConfigError
 from tests.fuzz.bounds import assert_named_error, bounded_allocation
+from tests.fuzz.edits import edited
 
 FUZZ = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
@@ -63,35 +64,35 @@ def context_packet(draw: Any) -> bytes:
     )  # fmt: skip
 
 
-@st.composite
-def mutated(draw: Any, packet: bytes) -> bytes:
+def _word(draw: Any, buf: bytearray) -> None:
+    """Replace one of the first eight 32-bit words (the header and its fields)."""
+    if len(buf) >= 4:
+        at = 4 * draw(st.integers(0, min(7, len(buf) // 4 - 1)))
+        buf[at : at + 4] = draw(st.integers(0, 2**32 - 1)).to_bytes(4, "big")
+
+
+def _size(draw: Any, buf: bytearray) -> None:
+    """Rewrite the packet-size field (words, up to 0xFFFF)."""
+    if len(buf) >= 4:
+        size = draw(st.sampled_from([0, 1, 5, 0x7FFF, 0xFFFF, len(buf) // 4 + 1]))
+        buf[2:4] = size.to_bytes(2, "big")
+
+
+def _short(draw: Any, buf: bytearray) -> None:
+    """Cut to whole words with the size field agreeing (headers more often than payloads)."""
+    if len(buf) >= 4:
+        most = max(len(buf) // 4, 1)
+        words = draw(st.integers(1, min(8, most)) | st.integers(1, most))
+        del buf[4 * words :]
+        buf[2:4] = words.to_bytes(2, "big")
+
+
+def mutated(packet: bytes) -> st.SearchStrategy[bytes]:
     """``packet`` with a few random edits: bit flips, a header word or length field
     rewritten (up to 0xFFFF words), cut short (with or without its size field agreeing),
     bytes inserted or appended."""
-    buf = bytearray(packet)
-    for _ in range(draw(st.integers(0, 4))):
-        op = draw(st.sampled_from(["flip", "word", "size", "cut", "short", "insert", "append"]))
-        pos = draw(st.integers(0, max(len(buf) - 1, 0)))
-        if op == "flip" and buf:
-            buf[pos] ^= 1 << draw(st.integers(0, 7))
-        elif op == "word" and len(buf) >= 4:
-            at = 4 * draw(st.integers(0, min(7, len(buf) // 4 - 1)))
-            buf[at : at + 4] = draw(st.integers(0, 2**32 - 1)).to_bytes(4, "big")
-        elif op == "size" and len(buf) >= 4:
-            buf[2:4] = draw(st.sampled_from([0, 1, 5, 0x7FFF, 0xFFFF, len(buf) // 4 + 1]))\
-                .to_bytes(2, "big")  # fmt: skip
-        elif op == "short" and len(buf) >= 4:  # cut to whole words, size field agreeing
-            most = max(len(buf) // 4, 1)  # headers are cut more often than payloads
-            words = draw(st.integers(1, min(8, most)) | st.integers(1, most))
-            del buf[4 * words :]
-            buf[2:4] = words.to_bytes(2, "big")
-        elif op == "cut":
-            del buf[pos:]
-        elif op == "insert":
-            buf[pos:pos] = draw(st.binary(min_size=1, max_size=8))
-        else:
-            buf += draw(st.binary(min_size=1, max_size=64))
-    return bytes(buf)
+    edits = {"word": _word, "size": _size, "short": _short}
+    return edited(packet, count=(0, 4), max_append=64, format_edits=edits)
 
 
 @st.composite
