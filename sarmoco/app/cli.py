@@ -134,7 +134,7 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if (out / "truth.json").exists():  # an earlier demo's output: replace it
         shutil.rmtree(out)
-    run_loopback(out, args.scale)
+    run_loopback(out, args.scale, scene=args.scene)
     print((out / "report" / "report.txt").read_text(), end="")
     print(f"store {out / 'run.zarr'}, quicklooks in {out / 'report'}")
     return 0
@@ -197,6 +197,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     demo.add_argument("--out", default="demo-out", help="output folder (default demo-out)")
     demo.add_argument("--scale", type=float, default=0.1, help="ku-vehicle scenario scale")
+    demo.add_argument(
+        "--scene", default="extended", choices=("points", "extended"),
+        help="extended (default): terrain clutter and corner reflectors; points: 3 targets",
+    )  # fmt: skip
     demo.set_defaults(func=_cmd_demo)
     return parser
 

@@ -18,12 +18,14 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from sarmoco.app.simcommand import platform_arguments, scenario_overrides
 from sarmoco.app.simconfig import config_table, write_config
 from sarmoco.daemon.report import write_report
 from sarmoco.errors import SarmocoError
+from sarmoco.sim.extended import load_scene
 from sarmoco.sim.insemitters import INS_EMITTERS
-from sarmoco.sim.scenario import load_preset
 
 PRESET = "ku-vehicle"
 DAEMON_START_S = 60.0
@@ -37,6 +39,9 @@ IDLE_EXIT_S = 2.0
 
 DRAIN_TIMEOUT_S = 300.0
 """After the simulator is done, how long the daemon may take to catch up before SIGTERM, s."""
+
+PATCH_MARGIN_M = 1.0
+"""The extended scene's comparison window reaches this far beyond its clutter patch, m."""
 
 
 def free_udp_port() -> int:
@@ -75,6 +80,7 @@ def run_loopback(
     motion: str = "turbulence",
     platform: Sequence[str] = (),
     faults: Sequence[str] = (),
+    scene: str = "points",
     **sections: dict[str, Any],
 ) -> dict[str, Any]:
     """Play a scaled ku-vehicle scenario from ``sarmoco sim --serve`` into ``sarmoco run``.
@@ -103,6 +109,10 @@ def run_loopback(
         ``--lever-arm``); the daemon's configuration follows them.
     faults : sequence of str
         Simulator fault switches (``sarmoco sim --fault``, e.g. ``"loss=0.02@radar"``).
+    scene : str
+        ``sarmoco sim --scene``: "points" (the preset's targets) or "extended" (terrain
+        clutter and corner reflectors, :mod:`sarmoco.sim.extended`); the report's
+        comparison then covers the whole clutter patch.
     **sections : dict
         Extra configuration keys per section (e.g. ``autofocus={"enabled": False}``).
 
@@ -118,14 +128,16 @@ def run_loopback(
         [*py, "sim", "--preset", PRESET, "--scale", str(scale), "--motion", motion,
          "--motion-seed", "1", "--ins-grade", "tactical", "--serve", "--radar", radar_url,
          "--ins", f"{ins}:{INS_EMITTERS[ins].loopback.format(port=free_udp_port())}",
-         "--truth", str(out / "truth.json"), *platform, *(f"--fault={f}" for f in faults)],
+         "--truth", str(out / "truth.json"), "--scene", scene, *platform,
+         *(f"--fault={f}" for f in faults)],
         stdout=subprocess.PIPE, text=True,
     )  # fmt: skip
     daemon: subprocess.Popen[str] | None = None
+    scn = load_scene(scene, PRESET, scale, **scenario_overrides(platform_arguments(platform)))
     try:
         hello = read_json_line(sim, "the simulator", DAEMON_START_S)
         table = config_table(
-            load_preset(PRESET, scale, **scenario_overrides(platform_arguments(platform))),
+            scn,
             radar={"link": hello["radar"]["connect"]},
             ins={"protocol": ins, "link": _connect_link(hello["ins"][0]["connect"])},
             recorder={"directory": str(out)},
@@ -154,4 +166,7 @@ def run_loopback(
             if proc is not None and proc.poll() is None:
                 proc.kill()
                 proc.wait()
-    return write_report(out / "run.zarr", out / "report")
+    if scn.clutter is None:
+        return write_report(out / "run.zarr", out / "report")
+    half = 0.5 * float(np.ptp(scn.clutter.x_m)) + PATCH_MARGIN_M
+    return write_report(out / "run.zarr", out / "report", compare_half_m=(half, half))

@@ -57,6 +57,7 @@ from sarmoco.drivers.clock import GPS_LEAP_SECONDS_DEFAULT
 from sarmoco.errors import ConfigError
 from sarmoco.sim.emit_radar import RadarEmitter
 from sarmoco.sim.emitter import Emitter, WireTime
+from sarmoco.sim.extended import SCENES, load_scene
 from sarmoco.sim.faults import Faults, parse_faults
 from sarmoco.sim.ins import GRADES
 from sarmoco.sim.insemitters import host_port, live_ins_emitter
@@ -65,7 +66,7 @@ from sarmoco.sim.links import Link, TcpServerLink, UdpOutLink
 from sarmoco.sim.outfiles import NAV_FILES, TRUTH_FILE, truth_record, write_run, write_truth
 from sarmoco.sim.player import Pacing, play_emitters
 from sarmoco.sim.run import SimRun, simulate
-from sarmoco.sim.scenario import DEFAULT_LEVER_ARM_M, PRESETS, load_preset
+from sarmoco.sim.scenario import DEFAULT_LEVER_ARM_M, PRESETS
 from sarmoco.sim.trajectory import MotionSpec
 
 
@@ -74,6 +75,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.description = __doc__
     p.add_argument("--preset", required=True, choices=PRESETS, help="scenario preset")
     p.add_argument("--scale", type=float, default=1.0, help="scenario scale in (0, 1] (default 1)")
+    p.add_argument(
+        "--scene", default="points", choices=SCENES,
+        help="points: the preset's targets; extended: terrain-shaded clutter and corner "
+        "reflectors (sarmoco.sim.extended; default points)",
+    )  # fmt: skip
     p.add_argument("--seed", type=int, default=0, help="seed of noise, INS errors and faults")
     p.add_argument("--pulses", type=int, default=None, help="pulses to simulate (default: all)")
     p.add_argument(
@@ -175,7 +181,7 @@ def radar_link(url: str) -> Link:
 
 def build_run(args: argparse.Namespace, faults: Faults) -> SimRun:
     """Simulate the scenario the arguments describe."""
-    scn = load_preset(args.preset, scale=args.scale, **scenario_overrides(args))
+    scn = load_scene(args.scene, args.preset, scale=args.scale, **scenario_overrides(args))
     return simulate(
         scn,
         _motion(args.motion, args.motion_seed),

@@ -37,7 +37,11 @@ from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.errors import ProcessingError, RecorderError
 from sarmoco.processing import rangecomp
 from sarmoco.processing.geometry import ReferenceTrack, vector_to_imaging
-from sarmoco.processing.imaging.backprojection import backproject
+from sarmoco.processing.imaging.backprojection import (
+    DEFAULT_UPSAMPLE,
+    RangeLines,
+    backproject_into,
+)
 from sarmoco.processing.imaging.grid import PlaneGrid
 from sarmoco.processing.metrics import (
     image_contrast,
@@ -159,20 +163,20 @@ def _track(attrs: dict[str, Any]) -> ReferenceTrack:
     )
 
 
-def _segment_strip(store: RunStore, track: Mapping[str, Any], tile: Image) -> Image:
-    """``tile`` joined along track with the tiles of the same reference track that touch it
-    (a target near a tile edge keeps its whole window)."""
+def _segment_strip(
+    store: RunStore, track: Mapping[str, Any], tile: Image, x_lo: float, x_hi: float
+) -> Image:
+    """``tile`` joined along track with the tiles of the same reference track (and width)
+    that hold pixels between ``x_lo`` and ``x_hi`` (m), so a window reaching past the tile's
+    edges is whole."""
     parts = [tile]
     for k in range(store.n_images):
         other, attrs = store.image(k)
         if attrs.get("reference_track") != track or other.data.shape[1] != tile.data.shape[1]:
             continue
-        gap = abs(other.spacing_m[0])
-        touches = (
-            abs(other.axis0_m[-1] + gap - tile.axis0_m[0]) < 0.5 * gap
-            or abs(tile.axis0_m[-1] + gap - other.axis0_m[0]) < 0.5 * gap
-        )
-        if touches:
+        if other.axis0_m[0] == tile.axis0_m[0]:
+            continue  # the tile itself
+        if float(other.axis0_m[-1]) >= x_lo and float(other.axis0_m[0]) <= x_hi:
             parts.append(other)
     parts.sort(key=lambda im: float(im.axis0_m[0]))
     return Image(
@@ -183,8 +187,9 @@ def _segment_strip(store: RunStore, track: Mapping[str, Any], tile: Image) -> Im
     )
 
 
-def _brightest_window(store: RunStore) -> tuple[Image, ReferenceTrack]:
-    """The window of ``COMPARE_HALF_M`` around the brightest pixel of all tiles, and its track.
+def _brightest_window(store: RunStore, half_m: tuple[float, float]) -> tuple[Image, ReferenceTrack]:
+    """The window of ``half_m`` (along track, ground range; m) around the brightest pixel of
+    all tiles, and its track.
 
     Raises
     ------
@@ -201,17 +206,22 @@ def _brightest_window(store: RunStore) -> tuple[Image, ReferenceTrack]:
     tile, attrs = store.image(best[1])
     if "reference_track" not in attrs:
         raise RecorderError(f"{store.path}: tile {best[1]} has no reference_track attribute")
-    tile = _segment_strip(store, attrs["reference_track"], tile)
+    x_peak = float(tile.axis0_m[int(np.argmax(np.abs(tile.data)) // tile.data.shape[1])])
+    tile = _segment_strip(
+        store, attrs["reference_track"], tile, x_peak - half_m[0], x_peak + half_m[0]
+    )
     i, j = np.unravel_index(int(np.argmax(np.abs(tile.data))), tile.data.shape)
-    h0 = round(COMPARE_HALF_M / abs(tile.spacing_m[0]))
-    h1 = round(COMPARE_HALF_M / abs(tile.spacing_m[1]))
+    h0 = round(half_m[0] / abs(tile.spacing_m[0]))
+    h1 = round(half_m[1] / abs(tile.spacing_m[1]))
     rows = slice(max(int(i) - h0, 0), int(i) + h0 + 1)
     cols = slice(max(int(j) - h1, 0), int(j) + h1 + 1)
     window = Image(tile.data[rows, cols], tile.axis0_m[rows], tile.axis1_m[cols], tile.frame)
     return window, _track(attrs["reference_track"])
 
 
-def focus_comparison(store: RunStore) -> tuple[dict[str, Image], int]:
+def focus_comparison(
+    store: RunStore, half_m: tuple[float, float] = (COMPARE_HALF_M, COMPARE_HALF_M)
+) -> tuple[dict[str, Image], int]:
     """The brightest target's window focused three ways (:data:`PANELS`), on one grid.
 
     Raw: the recorded raw echoes, range-compressed and backprojected with the antenna on
@@ -220,7 +230,8 @@ def focus_comparison(store: RunStore) -> tuple[dict[str, Image], int]:
     NED m/s, integrated by the trapezoid rule in the imaging frame from the segment's
     first pulse, as the daemon's LOS compensation does for ΔY, ΔZ) put it. INS + autofocus:
     the recorded tile. Only the pulses whose beam (``imaging.azimuth_beamwidth_deg`` plus
-    the squint tolerance) covers the window are used, every k-th (``COMPARE_OVERSAMPLING``).
+    the squint tolerance) covers the window are used, every k-th (``COMPARE_OVERSAMPLING``),
+    and a pixel takes a pulse only within that beam, as in the daemon.
     The two re-focused windows are scaled to the recorded one's energy, so that on one dB
     scale a defocused target shows as a lower, wider peak.
 
@@ -236,7 +247,7 @@ def focus_comparison(store: RunStore) -> tuple[dict[str, Image], int]:
     RecorderError
         No raw echoes or no motion recorded, no tiles, or no pulse sees the window.
     """
-    window, track = _brightest_window(store)
+    window, track = _brightest_window(store, half_m)
     try:
         store.read("pulses", ["echo"], 0, 0)
     except RecorderError as exc:
@@ -278,10 +289,12 @@ def focus_comparison(store: RunStore) -> tuple[dict[str, Image], int]:
     range_m = rangecomp.range_axis_m(radar)
     energy = float(np.sum(np.abs(window.data) ** 2))
     panels: dict[str, Image] = {}
+    lines = RangeLines.upsample(rc, range_m, DEFAULT_UPSAMPLE)
     for name, apc in zip(PANELS[:2], (nominal[near], ins[near]), strict=True):
-        im = backproject(rc, range_m, apc, radar.wavelength_m, grid)
-        scale = math.sqrt(energy / max(float(np.sum(np.abs(im.data) ** 2)), 1e-30))
-        panels[name] = Image(im.data * scale, window.axis0_m, window.axis1_m, window.frame)
+        data = np.zeros((window.axis0_m.size, window.axis1_m.size), dtype=np.complex64)
+        backproject_into(data, lines, apc, radar.wavelength_m, grid, beam_half_angle_rad=beam / 2)
+        scale = math.sqrt(energy / max(float(np.sum(np.abs(data) ** 2)), 1e-30))
+        panels[name] = Image(data * scale, window.axis0_m, window.axis1_m, window.frame)
     panels[PANELS[2]] = window
     return panels, k
 
@@ -297,8 +310,13 @@ def _ideal_resolution_m(cfg: Config, slant_m: float, ground_m: float) -> tuple[f
     return azimuth, radar.range_resolution_m * slant_m / ground_m
 
 
-def write_comparison(store: RunStore, out_dir: Path) -> dict[str, Any]:
+def write_comparison(
+    store: RunStore, out_dir: Path, half_m: tuple[float, float] = (COMPARE_HALF_M, COMPARE_HALF_M)
+) -> dict[str, Any]:
     """Write ``compare.png`` and ``cuts.png``; the panels' point-target measures.
+
+    ``half_m``: half size of the window around the brightest target, along track and in
+    ground range, m (an extended scene's whole patch, or a point target's neighbourhood).
 
     Returns
     -------
@@ -308,7 +326,7 @@ def write_comparison(store: RunStore, out_dir: Path) -> dict[str, Any]:
         point or no sidelobe inside the window) is None. ``peak_db``: the panel's peak re
         the brightest panel's.
     """
-    panels, k = focus_comparison(store)
+    panels, k = focus_comparison(store, half_m)
     ref = next(iter(panels.values()))
     title = "brightest target, the same echoes focused 3 ways"
     data = {n: im.data for n, im in panels.items()}
@@ -355,8 +373,14 @@ def write_comparison(store: RunStore, out_dir: Path) -> dict[str, Any]:
     return {"decimation": k, "ideal_resolution_m": [res_az, res_rg], "panels": stats}
 
 
-def write_report(store_path: Path, out_dir: Path) -> dict[str, Any]:
+def write_report(
+    store_path: Path,
+    out_dir: Path,
+    compare_half_m: tuple[float, float] = (COMPARE_HALF_M, COMPARE_HALF_M),
+) -> dict[str, Any]:
     """Write the quicklooks and the summary of a store; returns the summary.
+
+    ``compare_half_m``: half size of the comparison window (:func:`write_comparison`), m.
 
     Raises
     ------
@@ -405,7 +429,7 @@ def write_report(store_path: Path, out_dir: Path) -> dict[str, Any]:
         summary["autofocus"] = {"subapertures": int(a["t_center_s"].shape[0])}
     if image is not None and store.committed("motion") and _has_echoes(store):
         try:
-            summary["comparison"] = write_comparison(store, out_dir)
+            summary["comparison"] = write_comparison(store, out_dir, compare_half_m)
         except RecorderError as exc:  # e.g. the brightest target's pulses were not kept
             summary["comparison_skipped"] = str(exc)
     (out_dir / "report.json").write_text(json.dumps(summary, indent=2, default=float))

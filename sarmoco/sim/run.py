@@ -10,6 +10,7 @@ import numpy as np
 
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 from sarmoco.sim.echo import synthesize
+from sarmoco.sim.extended import clutter_echo
 from sarmoco.sim.ins import InsMeasurement, measure_ins
 from sarmoco.sim.scenario import Scenario
 from sarmoco.sim.trajectory import MotionSpec, Trajectory, apc_trajectory, true_trajectory
@@ -77,6 +78,7 @@ class SimRun:
                 "look_side": scn.look_side,
                 "lever_arm_m": list(scn.lever_arm_m),
                 "snr_db": scn.snr_db,
+                "clutter_scatterers": 0 if scn.clutter is None else scn.clutter.amplitude.size,
                 "radar": radar,
             },
             "motion": motion,
@@ -154,6 +156,11 @@ def simulate(
         np.random.default_rng(noise_seed),
         illumination=scn.illumination(traj.pos_ned, targets),
     )
+    if scn.clutter is not None:
+        half_beam = scn.integration_angle_rad / 2.0 if scn.mode == "stripmap" else None
+        echo += clutter_echo(
+            scn.radar, traj.pos_ned, scn.clutter, scn.track_to_ned[:, 0], half_beam
+        )
     ins = measure_ins(
         lambda t: true_trajectory(scn, t, motion),
         float(t_s[0]) - INS_MARGIN_S,
