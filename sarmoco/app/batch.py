@@ -1,0 +1,353 @@
+"""``sarmoco batch``: ground reprocessing of recordings on a dask.distributed cluster.
+
+Each recording (a store written by ``sarmoco run``/``replay``, or a ``.vrt`` radar
+file with its INS log) is reprocessed in two kinds of task:
+
+1. **Front end**, one task per recording: the replay of :func:`replay_store` /
+   :func:`replay_files` with imaging deferred. Alignment, range compression, INS
+   compensation, the sliding-subaperture autofocus and the azimuth pre-filter run
+   once over the whole recording, exactly as in a single-process replay; they write
+   the output store's tables (pulses, nav, motion, autofocus) and keep, per segment,
+   the pulses the tile imager would take in a scratch store
+   (:mod:`sarmoco.app.imaging_stream`). They cannot be cut into blocks: the
+   autofocus pins its unobservable constant and linear terms over the first
+   ``autofocus.pin_window_s`` of a segment and integrates from there, and D_los
+   integrates from the segment's start, so a block started mid-segment would carry
+   another phase.
+2. **Imaging blocks**, many per segment: ``--tiles-per-block`` consecutive tiles,
+   backprojected, refined by tile PGA, and written into tiles of the output store
+   that were created beforehand (region writes: each block fills only its tiles'
+   arrays). A block replays the imager calls whose pulses reach its tiles plus the
+   overlap: half the beam footprint beyond each end (a pixel takes the pulses within
+   half the beamwidth of broadside), and one tile more each side when tile PGA is on
+   (it focuses a tile with its raw neighbours). Its tiles then get the same pulses,
+   cut into the same calls and chunks, in the same order as in the single-process
+   replay: the images agree to float rounding (the tests find them bit-equal).
+
+Backprojection is the bulk of the work in a full-size run; the front ends of many
+recordings also run side by side.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import sys
+import time
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import zarr
+
+from sarmoco.app.imaging_stream import SegmentStream, StreamRecorder
+from sarmoco.daemon import schema
+from sarmoco.daemon.config import Config, load_config
+from sarmoco.daemon.focuser import radar_params, tile_imaging
+from sarmoco.daemon.pipeline import RunSummary, tile_metrics
+from sarmoco.daemon.recorder import create_tile, write_tile
+from sarmoco.daemon.runner import replay_files, replay_store
+from sarmoco.errors import ConfigError
+
+LOOPBACK = "127.0.0.1"
+"""The only address a local cluster binds."""
+
+
+@dataclass(frozen=True)
+class Recording:
+    """One recording to reprocess and the store to write.
+
+    Attributes
+    ----------
+    out : Path
+        Output store to create.
+    store : Path or None
+        A store recorded by ``sarmoco run`` or ``replay`` (with raw echoes).
+    radar, nav : Path or None
+        Or a VITA 49.2 radar file and its INS log.
+    """
+
+    out: Path
+    store: Path | None = None
+    radar: Path | None = None
+    nav: Path | None = None
+
+    @property
+    def scratch(self) -> Path:
+        """The scratch store of its deferred pulses (removed when the batch succeeds)."""
+        return self.out.with_name(self.out.name + ".batch-scratch")
+
+
+@dataclass(frozen=True)
+class FrontEnd:
+    """What a recording's front-end task gives back: its totals and segment streams."""
+
+    recording: Recording
+    summary: RunSummary
+    streams: list[SegmentStream]
+
+
+@dataclass(frozen=True)
+class ImageBlock:
+    """Tiles ``first_tile .. last_tile`` of one segment, and where they go in the store.
+
+    Attributes
+    ----------
+    out : Path
+        Output store.
+    stream : SegmentStream
+        The segment.
+    first_tile, last_tile : int
+        Tile indices of the segment's layout (inclusive).
+    store_index : int
+        Store index of the segment's first tile (``stream.tiles[0]``).
+    """
+
+    out: Path
+    stream: SegmentStream
+    first_tile: int
+    last_tile: int
+    store_index: int
+
+
+def front_end(cfg: Config, recording: Recording) -> FrontEnd:
+    """Replay a recording with imaging deferred (a task): tables into the output store,
+    the pulses to image into its scratch store. The output store is marked not
+    ``complete`` until its tiles are written (:func:`finish_store`)."""
+    sink = StreamRecorder(recording.scratch)
+    if recording.store is not None:
+        summary = replay_store(cfg, recording.store, recording.out, False, sink)
+    else:
+        assert recording.radar is not None and recording.nav is not None
+        summary = replay_files(cfg, recording.radar, recording.nav, recording.out, False, sink)
+    root = zarr.open_group(str(recording.out), mode="r+", zarr_format=3)
+    root.update_attributes({schema.COMPLETE_ATTR: False})
+    return FrontEnd(recording, summary, sink.streams())
+
+
+def block_span_m(block: ImageBlock, with_pga: bool) -> tuple[float, float]:
+    """Along-track span (imaging x, m) of the pulses a block needs: its tiles, one tile
+    more each side with tile PGA, and half the beam footprint beyond."""
+    layout = block.stream.layout
+    extra = 1 if with_pga else 0
+    first, last = block.first_tile - extra, block.last_tile + extra
+    half, length = layout.half_footprint_m, layout.tile_length_m
+    return first * length - half, (last + 1) * length + half
+
+
+def image_block(cfg: Config, block: ImageBlock) -> list[tuple[int, dict[str, float]]]:
+    """Form, refine and write one block's tiles (a task); their store indices and metrics.
+
+    The imager replays the segment's calls that reach the block; the tiles it forms
+    outside the block (and its PGA neighbours, which only serve as context) are dropped.
+    """
+    imager, tile_pga = tile_imaging(cfg, radar_params(cfg))
+    stream = block.stream
+    extra = 1 if tile_pga is not None else 0
+    wanted = range(block.first_tile - extra, block.last_tile + extra + 1)
+    formed = []
+    for call in stream.calls_within(*block_span_m(block, tile_pga is not None)):
+        formed += [t for t in imager.add(*stream.read(call)) if t.index in wanted]
+    formed += [t for t in imager.close() if t.index in wanted]
+    if tile_pga is not None:
+        formed = tile_pga.push(formed) + tile_pga.flush()
+    images = zarr.open_group(str(block.out / schema.IMAGES_GROUP), mode="r+", zarr_format=3)
+    track = schema.encode_reference_track(stream.track)
+    written = []
+    for tile in formed:
+        if not block.first_tile <= tile.index <= block.last_tile:
+            continue
+        index = block.store_index + tile.index - stream.tiles[0]
+        metrics = tile_metrics(tile.data) | {
+            "pulses": float(tile.n_pulses),
+            "index": float(tile.index),
+        }
+        group = images[schema.tile_name(index)]
+        assert isinstance(group, zarr.Group)
+        write_tile(group, tile.image(), tile.t0_ns, tile.t1_ns, metrics, track)
+        written.append((index, metrics))
+    return written
+
+
+def plan_blocks(result: FrontEnd, tiles_per_block: int) -> list[ImageBlock]:
+    """Create every tile of a recording's output store (axes, empty data) and cut each
+    segment's tiles into blocks of ``tiles_per_block``, in store order (segment by
+    segment, tiles by index, as the single-process replay records them)."""
+    images = zarr.open_group(
+        str(result.recording.out / schema.IMAGES_GROUP), mode="r+", zarr_format=3
+    )
+    blocks, index = [], 0
+    for stream in result.streams:
+        tiles = stream.tiles
+        for k in tiles:
+            grid = stream.layout.grid(k)
+            create_tile(images, index + k - tiles[0], grid.axis0_m, grid.axis1_m)
+        for k0 in tiles[::tiles_per_block]:
+            k1 = min(k0 + tiles_per_block - 1, tiles[-1])
+            blocks.append(ImageBlock(result.recording.out, stream, k0, k1, index))
+        index += len(tiles)
+    return blocks
+
+
+def finish_store(result: FrontEnd, written: dict[int, dict[str, float]]) -> RunSummary:
+    """Commit the tiles, write the run metrics with them, mark the store complete, and
+    remove the scratch store; the run's summary."""
+    summary = replace(
+        result.summary,
+        tiles=len(written),
+        tile_metrics=[written[i] for i in sorted(written)],
+    )
+    root = zarr.open_group(str(result.recording.out), mode="r+", zarr_format=3)
+    images = root[schema.IMAGES_GROUP]
+    images.update_attributes({schema.COMMITTED_ATTR: len(written)})
+    metrics = json.loads(json.dumps(summary.as_dict(), default=str))
+    root.update_attributes({"metrics": metrics, schema.COMPLETE_ATTR: True})
+    shutil.rmtree(result.recording.scratch, ignore_errors=True)
+    return summary
+
+
+def run_batch(
+    client: Any,
+    cfg: Config,
+    recordings: Sequence[Recording],
+    tiles_per_block: int = 4,
+    progress: bool = True,
+) -> list[RunSummary]:
+    """Reprocess recordings on a dask.distributed client; their summaries, in order.
+
+    Front ends are submitted at once; each recording's imaging blocks as soon as its
+    front end is done.
+    """
+    from distributed import as_completed
+
+    if tiles_per_block < 1:
+        raise ConfigError(f"batch: --tiles-per-block {tiles_per_block} is not >= 1")
+    fronts = [client.submit(front_end, cfg, r, pure=False) for r in recordings]
+    owner: dict[Any, int] = {f: i for i, f in enumerate(fronts)}
+    results: list[FrontEnd | None] = [None] * len(recordings)
+    written: list[dict[int, dict[str, float]]] = [{} for _ in recordings]
+    pending = as_completed(fronts)
+    total, done = len(fronts), 0
+    for future in pending:
+        i, value = owner[future], future.result()
+        done += 1
+        if isinstance(value, FrontEnd):
+            results[i] = value
+            blocks = [
+                client.submit(image_block, cfg, b, pure=False)
+                for b in plan_blocks(value, tiles_per_block)
+            ]
+            owner.update({f: i for f in blocks})
+            pending.update(blocks)
+            total += len(blocks)
+        else:
+            written[i].update(value)
+        if progress:
+            _progress(done, total)
+    if progress:
+        sys.stderr.write("\n")
+    summaries = []
+    for result, tiles in zip(results, written, strict=True):
+        assert result is not None
+        summaries.append(finish_store(result, tiles))
+    return summaries
+
+
+@contextmanager
+def cluster_client(scheduler: str | None, workers: int, dashboard: bool = True) -> Iterator[Any]:
+    """A client of the cluster at ``scheduler``, or of a local cluster of ``workers``
+    worker processes (one thread each) bound to 127.0.0.1 only (dashboard on a free
+    loopback port, or none)."""
+    from distributed import Client, LocalCluster
+
+    if scheduler:
+        with Client(scheduler) as client:
+            yield client
+        return
+    if workers < 1:
+        raise ConfigError(f"batch: --workers {workers} is not >= 1")
+    with (
+        LocalCluster(
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            host=LOOPBACK,
+            dashboard_address=f"{LOOPBACK}:0" if dashboard else None,
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        yield client
+
+
+def dashboard_text(client: Any) -> str:
+    """Where the cluster's dashboard is, or why there is none."""
+    try:
+        import bokeh  # noqa: F401
+    except ImportError:
+        return "dashboard: none (bokeh is not installed; pip install bokeh to serve it)"
+    link = client.dashboard_link
+    return f"dashboard: {link}" if link else "dashboard: off"
+
+
+def _progress(done: int, total: int) -> None:
+    width = 40
+    filled = round(width * done / max(total, 1))
+    sys.stderr.write(f"\rbatch [{'#' * filled}{'.' * (width - filled)}] {done}/{total} tasks")
+    sys.stderr.flush()
+
+
+# -- command line -----------------------------------------------------------------------
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """The arguments of ``sarmoco batch``."""
+    parser.add_argument("recordings", nargs="*", type=Path, help="stores to reprocess")
+    parser.add_argument("--config", required=True, help="TOML configuration file")
+    parser.add_argument("--radar", type=Path, help="a VITA 49.2 radar file (.vrt) ...")
+    parser.add_argument("--nav", type=Path, help="... and its INS log")
+    parser.add_argument(
+        "--out", required=True, type=Path,
+        help="store to create (one recording) or folder of RECORDING-NAME.zarr stores",
+    )  # fmt: skip
+    parser.add_argument("--scheduler", help="dask scheduler address (default: a local cluster)")
+    parser.add_argument("--workers", type=int, default=2, help="local worker processes")
+    parser.add_argument(
+        "--tiles-per-block", type=int, default=4, help="tiles per imaging task (default 4)"
+    )
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def recordings_of(args: argparse.Namespace) -> list[Recording]:
+    """The recordings the command line names, each with its output store."""
+    if (args.radar is None) != (args.nav is None):
+        raise ConfigError("batch: give both --radar FILE.vrt and --nav FILE, or neither")
+    inputs: list[tuple[str, Recording]] = [
+        (p.stem, Recording(Path(), store=p)) for p in args.recordings
+    ]
+    if args.radar is not None:
+        inputs.append((args.radar.stem, Recording(Path(), radar=args.radar, nav=args.nav)))
+    if not inputs:
+        raise ConfigError("batch: give recordings (stores), or --radar FILE.vrt --nav FILE")
+    if len(inputs) == 1:
+        return [replace(inputs[0][1], out=args.out)]
+    names = [name for name, _ in inputs]
+    if len(set(names)) != len(names):
+        raise ConfigError(f"batch: recordings with the same name {names} would share an output")
+    return [replace(r, out=args.out / f"{name}.zarr") for name, r in inputs]
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """Run ``sarmoco batch``."""
+    cfg = load_config(args.config)
+    recordings = recordings_of(args)
+    start = time.monotonic()
+    with cluster_client(args.scheduler, args.workers) as client:
+        print(dashboard_text(client), file=sys.stderr)
+        summaries = run_batch(client, cfg, recordings, args.tiles_per_block, not args.quiet)
+    for r, s in zip(recordings, summaries, strict=True):
+        print(f"{r.out}: {s.pulses_processed} pulses focused, {s.tiles} tiles")
+    print(f"batch: {len(recordings)} recording(s) in {time.monotonic() - start:.1f} s")
+    return 0
