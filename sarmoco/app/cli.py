@@ -91,6 +91,18 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_batch_arguments(parser: argparse.ArgumentParser) -> None:
+    from sarmoco.app.batch import add_arguments
+
+    add_arguments(parser)
+
+
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from sarmoco.app.batch import run_command
+
+    return run_command(args)
+
+
 def _cmd_report(args: argparse.Namespace) -> int:
     from sarmoco.daemon.report import write_report
 
@@ -176,6 +188,13 @@ def build_parser() -> argparse.ArgumentParser:
     replay.add_argument("--out", required=True, help="store to create")
     replay.add_argument("--quiet", action="store_true", help="no progress bar")
     replay.set_defaults(func=_cmd_replay)
+
+    batch = sub.add_parser(
+        "batch",
+        help="reprocess recordings in blocks on a dask.distributed cluster (ground)",
+        add_arguments=_add_batch_arguments,
+    )
+    batch.set_defaults(func=_cmd_batch)
 
     report = sub.add_parser("report", help="quicklook PNGs and metrics of a store")
     report.add_argument("store", help="a run or replay store")
