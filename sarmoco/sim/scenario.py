@@ -31,7 +31,6 @@ from importlib import resources
 from typing import Any, Literal
 
 import numpy as np
-import numpy.typing as npt
 
 from sarmoco.errors import ConfigError
 from sarmoco.processing.types import C_MPS, FloatArray, RadarParams
@@ -70,29 +69,6 @@ class Target:
 
     pos_ned: tuple[float, float, float]
     amplitude: complex = 1.0
-
-
-@dataclass(frozen=True, eq=False)
-class Clutter:
-    """Distributed scatterers of an extended scene (:mod:`sarmoco.sim.extended`).
-
-    Parameters
-    ----------
-    pos_ned : ndarray of float64, shape (K, 3)
-        Scatterer positions, NED, m.
-    amplitude : ndarray of complex128, shape (K,)
-        Complex reflectivity of each scatterer (unit: a unit point target's).
-    x_m, y_m : ndarray of float64
-        The scatterers' grid in the track frame (along track x, ground range y), m.
-    reflectivity : ndarray of float64, shape (x_m.size, y_m.size)
-        The mean power reflectivity map on that grid (amplitude² / its scale), in [0, 1].
-    """
-
-    pos_ned: FloatArray
-    amplitude: npt.NDArray[np.complex128]
-    x_m: FloatArray
-    y_m: FloatArray
-    reflectivity: FloatArray
 
 
 @dataclass(frozen=True)
@@ -138,8 +114,6 @@ class Scenario:
         Side of the track the antenna looks to.
     lever_arm_m : tuple of 3 float
         INS point to antenna phase centre, body frame (forward, right, down), m.
-    clutter : Clutter or None
-        Distributed scatterers besides ``targets`` (the extended scene), or None.
     """
 
     name: str
@@ -161,7 +135,6 @@ class Scenario:
     look_side: Literal["right", "left"] = "right"
     lever_arm_m: tuple[float, float, float] = DEFAULT_LEVER_ARM_M
     notes: dict[str, float] = field(default_factory=dict, compare=False)
-    clutter: Clutter | None = field(default=None, compare=False)
 
     @property
     def track_to_ned(self) -> FloatArray:
@@ -276,7 +249,6 @@ _SCENARIO_KEYS = {f.name for f in fields(Scenario)} - {
     "scale",
     "notes",
     "scene_center_ned",
-    "clutter",
 }
 _PRESET_KEYS = {"azimuth_resolution_m", "beamwidth_rad"}
 
@@ -405,75 +377,19 @@ def load_preset(name: str, scale: float = 1.0, **overrides: Any) -> Scenario:
     if unknown:
         raise ConfigError(f"scenario: unknown override(s) {sorted(unknown)}")
     raw = _read_preset(name)
-    radar_raw = dict(raw["radar"])
-    p: dict[str, Any] = {
-        "speed_mps": float(raw["speed_mps"]),
-        "altitude_m": float(raw["altitude_m"]),
-        "center_slant_range_m": float(raw["center_slant_range_m"]),
-        "swath_m": float(raw["swath_m"]) * scale,
-        "mode": raw["mode"],
-        "snr_db": raw.get("snr_db"),
-        "t0_ns": DEFAULT_T0_NS,
-        "carrier_hz": float(radar_raw["carrier_hz"]),
-        "bandwidth_hz": float(radar_raw["bandwidth_hz"]),
-        "pulse_width_s": float(radar_raw["pulse_width_s"]) * scale,
-        "sample_rate_hz": float(radar_raw["sample_rate_hz"]),
-        "receive": radar_raw["receive"],
-        "chirp_direction": radar_raw.get("chirp_direction", "up"),
-        "iq_conjugate": radar_raw.get("iq_conjugate", False),
-    }
-    wavelength = C_MPS / p["carrier_hz"]
-    p["integration_angle_rad"] = _integration_angle(raw, wavelength)
-    p.update(overrides)
-    if "n_samples" in radar_raw and "n_samples" not in p and p["receive"] == radar_raw["receive"]:
-        # the preset's sample count belongs to its own receive chain only
-        p["n_samples"] = 2 * round(int(radar_raw["n_samples"]) * scale / 2.0)
-    wavelength = C_MPS / p["carrier_hz"]
+    p = _preset_params(raw, scale, overrides)
     if p["center_slant_range_m"] <= p["altitude_m"]:
         raise ConfigError(
             f"scenario.center_slant_range_m: {p['center_slant_range_m']} is not > altitude "
             f"{p['altitude_m']}"
         )
     ground_c = math.sqrt(p["center_slant_range_m"] ** 2 - p["altitude_m"] ** 2)
-    if "targets" not in p:
-        tg = raw["targets"]
-        p["targets"] = tuple(
-            Target((fn * p["swath_m"], ground_c + fe * p["swath_m"], 0.0))
-            for fn, fe in zip(tg["north_frac"], tg["east_frac"], strict=True)
-        )
-    targets = tuple(p["targets"])
+    targets = _targets(p, raw.get("targets", {}), ground_c)
     t_ned = np.array([t.pos_ned for t in targets], dtype=np.float64).reshape(-1, 3)
-    if t_ned.shape[0] == 0:
-        raise ConfigError("scenario.targets: empty")
     p.setdefault("aperture_s", _aperture_s(p, t_ned, ground_c))
     p.setdefault("track_start_north_m", _track_start(p, t_ned))
-    if "prf_hz" not in p:
-        floor = PRF_OVERSAMPLING * _doppler_bandwidth_hz(p, t_ned, wavelength)
-        full = float(radar_raw["prf_hz"])
-        p["prf_hz"] = max(full * scale, min(full, floor))
-    near, far = _slant_window_m(p, t_ned, ground_c)
-    n_samples, gate = _receiver(p, near, far, p["center_slant_range_m"])
-    radar = RadarParams(
-        carrier_hz=p["carrier_hz"],
-        bandwidth_hz=p["bandwidth_hz"],
-        pulse_width_s=p["pulse_width_s"],
-        sample_rate_hz=p["sample_rate_hz"],
-        prf_hz=p["prf_hz"],
-        n_samples=n_samples,
-        range_gate_delay_s=gate,
-        receive=p["receive"],
-        chirp_direction=p["chirp_direction"],
-        iq_conjugate=p["iq_conjugate"],
-    )
-    if p["mode"] not in ("stripmap", "spotlight"):
-        raise ConfigError(f"scenario.mode: {p['mode']!r} is not 'stripmap' or 'spotlight'")
-    look_side = p.get("look_side", "right")
-    if look_side not in ("right", "left"):
-        raise ConfigError(f"scenario.look_side: {look_side!r} is not 'right' or 'left'")
-    heading = float(p.get("heading_rad", 0.0))
-    lever = tuple(float(v) for v in p.get("lever_arm_m", DEFAULT_LEVER_ARM_M))
-    if len(lever) != 3:
-        raise ConfigError(f"scenario.lever_arm_m: {p.get('lever_arm_m')!r} is not 3 numbers")
+    radar, (near, far) = _radar(p, float(raw["radar"]["prf_hz"]), scale, t_ned, ground_c)
+    look_side, heading, lever = _orientation(p)
     rot = _track_to_ned(heading, look_side)
     notes = {k: float(raw[k]) for k in _PRESET_KEYS if k in raw}
     notes["slant_window_near_m"], notes["slant_window_far_m"] = near, far
@@ -495,6 +411,94 @@ def load_preset(name: str, scale: float = 1.0, **overrides: Any) -> Scenario:
         t0_ns=int(p["t0_ns"]),
         heading_rad=heading,
         look_side=look_side,
-        lever_arm_m=_point(np.asarray(lever)),
+        lever_arm_m=lever,
         notes=notes,
     )
+
+
+def _preset_params(raw: dict[str, Any], scale: float, overrides: dict[str, Any]) -> dict[str, Any]:
+    """The preset's geometry and radar keys as one flat table, scaled, overrides applied.
+
+    The preset's ``n_samples`` is kept (scaled) only while the receive chain is its own.
+    """
+    radar_raw = raw["radar"]
+    p: dict[str, Any] = {
+        "speed_mps": float(raw["speed_mps"]),
+        "altitude_m": float(raw["altitude_m"]),
+        "center_slant_range_m": float(raw["center_slant_range_m"]),
+        "swath_m": float(raw["swath_m"]) * scale,
+        "mode": raw["mode"],
+        "snr_db": raw.get("snr_db"),
+        "t0_ns": DEFAULT_T0_NS,
+        "carrier_hz": float(radar_raw["carrier_hz"]),
+        "bandwidth_hz": float(radar_raw["bandwidth_hz"]),
+        "pulse_width_s": float(radar_raw["pulse_width_s"]) * scale,
+        "sample_rate_hz": float(radar_raw["sample_rate_hz"]),
+        "receive": radar_raw["receive"],
+        "chirp_direction": radar_raw.get("chirp_direction", "up"),
+        "iq_conjugate": radar_raw.get("iq_conjugate", False),
+    }
+    p["integration_angle_rad"] = _integration_angle(raw, C_MPS / p["carrier_hz"])
+    p.update(overrides)
+    if "n_samples" in radar_raw and "n_samples" not in p and p["receive"] == radar_raw["receive"]:
+        p["n_samples"] = 2 * round(int(radar_raw["n_samples"]) * scale / 2.0)
+    if p["mode"] not in ("stripmap", "spotlight"):
+        raise ConfigError(f"scenario.mode: {p['mode']!r} is not 'stripmap' or 'spotlight'")
+    return p
+
+
+def _targets(p: dict[str, Any], fractions: dict[str, Any], ground_c: float) -> tuple[Target, ...]:
+    """The override's targets, or the preset's (fractions of the swath about the scene
+    centre at ground range ``ground_c``, m), in the track frame."""
+    if "targets" in p:
+        targets = tuple(p["targets"])
+    else:
+        targets = tuple(
+            Target((fn * p["swath_m"], ground_c + fe * p["swath_m"], 0.0))
+            for fn, fe in zip(fractions["north_frac"], fractions["east_frac"], strict=True)
+        )
+    if not targets:
+        raise ConfigError("scenario.targets: empty")
+    return targets
+
+
+def _radar(
+    p: dict[str, Any], full_prf_hz: float, scale: float, targets_ned: FloatArray, ground_c: float
+) -> tuple[RadarParams, tuple[float, float]]:
+    """The radar parameters and the slant window [near, far] (m) they receive.
+
+    The PRF, unless given, is the preset's scaled down but not below
+    :data:`PRF_OVERSAMPLING` times the targets' Doppler bandwidth; the gate and sample
+    count follow the window (:func:`_receiver`).
+    """
+    if "prf_hz" not in p:
+        floor = PRF_OVERSAMPLING * _doppler_bandwidth_hz(p, targets_ned, C_MPS / p["carrier_hz"])
+        p["prf_hz"] = max(full_prf_hz * scale, min(full_prf_hz, floor))
+    near, far = _slant_window_m(p, targets_ned, ground_c)
+    n_samples, gate = _receiver(p, near, far, p["center_slant_range_m"])
+    radar = RadarParams(
+        carrier_hz=p["carrier_hz"],
+        bandwidth_hz=p["bandwidth_hz"],
+        pulse_width_s=p["pulse_width_s"],
+        sample_rate_hz=p["sample_rate_hz"],
+        prf_hz=p["prf_hz"],
+        n_samples=n_samples,
+        range_gate_delay_s=gate,
+        receive=p["receive"],
+        chirp_direction=p["chirp_direction"],
+        iq_conjugate=p["iq_conjugate"],
+    )
+    return radar, (near, far)
+
+
+def _orientation(
+    p: dict[str, Any],
+) -> tuple[Literal["right", "left"], float, tuple[float, float, float]]:
+    """Look side, heading (rad from north) and lever arm (body frame, m) of the overrides."""
+    look_side = p.get("look_side", "right")
+    if look_side not in ("right", "left"):
+        raise ConfigError(f"scenario.look_side: {look_side!r} is not 'right' or 'left'")
+    lever = tuple(float(v) for v in p.get("lever_arm_m", DEFAULT_LEVER_ARM_M))
+    if len(lever) != 3:
+        raise ConfigError(f"scenario.lever_arm_m: {p.get('lever_arm_m')!r} is not 3 numbers")
+    return look_side, float(p.get("heading_rad", 0.0)), _point(np.asarray(lever))
