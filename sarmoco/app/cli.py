@@ -140,6 +140,18 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     return status
 
 
+def _add_bench_arguments(parser: argparse.ArgumentParser) -> None:
+    from sarmoco.app.benchcmd import add_arguments
+
+    add_arguments(parser)
+
+
+def _cmd_bench(args: argparse.Namespace) -> int:
+    from sarmoco.app.benchcmd import run_command
+
+    return run_command(args)
+
+
 def _cmd_demo(args: argparse.Namespace) -> int:
     from sarmoco.app.demo import run_loopback
 
@@ -210,6 +222,13 @@ def build_parser() -> argparse.ArgumentParser:
         add_arguments=_add_sim_arguments,
     )
     sim.set_defaults(func=_cmd_sim)
+
+    bench = sub.add_parser(
+        "bench",
+        help="can this computer keep up? simulated radar and INS on loopback into the daemon",
+        add_arguments=_add_bench_arguments,
+    )
+    bench.set_defaults(func=_cmd_bench)
 
     demo = sub.add_parser(
         "demo", help="simulated hardware + daemon on loopback, then the report (the main job)"

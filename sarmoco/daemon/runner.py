@@ -270,11 +270,18 @@ class _LiveRun:
     # -- processing loop ----------------------------------------------------------------------
 
     def supervise(self, idle_exit_s: float | None) -> None:
-        """Process, report health and status, until stopped (or idle for ``idle_exit_s``)."""
+        """Process, report health and status, until stopped (or idle for ``idle_exit_s``).
+
+        The wall time spent in processing passes is counted (``processing_busy_seconds``):
+        data seconds processed over it is how many times faster than real time the loop
+        runs (``sarmoco bench``'s ``realtime_ratio``).
+        """
         last_status = 0.0
         while not self.st.stop.is_set():
+            start = time.monotonic()
             released = self._process()
             now = time.monotonic()
+            self.counters.inc("processing_busy_seconds", now - start)
             if self._update_health(now):
                 self.notifier.keepalive()
             if now - last_status >= 1.0:

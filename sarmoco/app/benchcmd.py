@@ -1,0 +1,472 @@
+"""``sarmoco bench``: can this computer keep up with this radar?
+
+The online chain runs as in flight: ``sarmoco sim --serve`` (a child process) plays a
+preset in real time over loopback, VITA 49 over UDP for the radar and MAVLink over UDP
+for the INS, into ``sarmoco run`` (another child process) with recording, autofocus
+and imaging on, writing into a temporary directory (removed unless ``--keep``). The
+simulator pins the run to the host clock, so a pulse's GPS time stamp is the host GPS
+time it was due on the wire.
+
+What is measured (one JSON line with ``--json``):
+
+``realtime_ratio``
+    Seconds of data processed per wall second of the daemon's processing loop, over the
+    whole stream: pulses the pipeline took in (recorded and passed on to focusing;
+    ``pipeline_pulses_received``) / PRF over ``processing_busy_seconds`` (the wall time
+    the loop spent in processing passes), both from the daemon's ``/status`` at the end
+    of the stream. Above 1 the daemon keeps up with that margin; below 1 it falls
+    behind and loses pulses.
+``fft_floor_ratio``
+    CPU seconds per pulse taken in of the whole daemon (every thread: decode, ring,
+    alignment, focusing, recording; from ``/proc/PID/stat`` between the daemon's ready
+    line and the end of the stream) over the CPU seconds per pulse of a single-threaded
+    ``scipy.fft.fft`` of the pulse length, timed in this process in the same run.
+``latency_p50_s``, ``latency_p99_s``
+    Pulse to record: the store's ``pulses`` ``committed`` counter is polled every
+    :data:`POLL_S`; the pulses that became committed between two polls get the later
+    poll's host GPS time as their record time (an upper bound, resolution ``POLL_S``).
+``lost_pulses``
+    Pulses sent that the store does not hold (radar link drops and ring overflows).
+``peak_rss_mb``, ``rss_growth_mb_per_min``
+    The daemon's peak VmHWM, and the slope of a line fitted to its VmRSS (sampled every
+    second) after a warm-up of a third of the stream (30 s at most).
+
+The simulator holds every echo of the run in memory before it plays (about 90 kB per
+full-size ``thz-spotlight`` pulse while it synthesises): ``--duration`` is bounded by
+the memory of the machine, not by the daemon.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import urllib.request
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import scipy.fft
+
+from sarmoco.app.demo import free_udp_port, read_json_line
+from sarmoco.app.simconfig import config_table, write_config
+from sarmoco.daemon.store import open_store
+from sarmoco.drivers.clock import GPS_LEAP_SECONDS_DEFAULT
+from sarmoco.errors import ConfigError, SarmocoError
+from sarmoco.sim.pacing import host_gps_ns
+from sarmoco.sim.scenario import PRESETS, load_preset
+
+PY = [sys.executable, "-m", "sarmoco"]
+SIM_ARGS = ["--motion", "turbulence", "--motion-seed", "1", "--ins-grade", "tactical"]
+"""The simulated flight: turbulent motion, tactical-grade INS (as the end-to-end tests)."""
+
+POLL_S = 0.01
+"""Interval of the committed-counter poll (latency resolution), s."""
+
+START_TIMEOUT_S = 900.0
+"""Longest wait for the simulator (it synthesises every echo first) or the daemon, s."""
+
+DRAIN_S = 10.0
+"""After the simulator is done, the daemon is stopped once it has recorded every pulse sent,
+or when no pulse was recorded for this long, s."""
+
+RSS_WARMUP_MAX_S = 30.0
+"""Longest warm-up left out of the RSS trend, s."""
+
+KEYS = (
+    "realtime_ratio",
+    "fft_floor_ratio",
+    "latency_p50_s",
+    "latency_p99_s",
+    "lost_pulses",
+    "peak_rss_mb",
+    "rss_growth_mb_per_min",
+)
+"""The figures ``sarmoco bench`` prints (``--json``: with the run's description)."""
+
+
+# -- the daemon process, seen from outside ---------------------------------------------------
+
+
+def proc_status_kb(pid: int, field_name: str) -> int:
+    """A ``kB`` field of ``/proc/PID/status`` (``VmRSS``, ``VmHWM``), kB."""
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith(f"{field_name}:"):
+            return int(line.split()[1])
+    raise SarmocoError(f"bench: no {field_name} for process {pid}")
+
+
+def proc_cpu_s(pid: int) -> float:
+    """User + system CPU time of process ``pid`` (all its threads) so far, s."""
+    stat = Path(f"/proc/{pid}/stat").read_text()
+    fields = stat[stat.rindex(")") + 2 :].split()  # after "pid (comm) "
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def committed_now(store: Path) -> int:
+    """The ``committed`` attribute of the store's pulses (0 before the group exists)."""
+    try:
+        meta = json.loads((store / "pulses" / "zarr.json").read_text())
+    except (FileNotFoundError, json.JSONDecodeError):
+        return 0
+    return int(meta["attributes"]["committed"])
+
+
+@dataclass
+class Watch:
+    """What the watcher thread saw of a running daemon."""
+
+    commits: list[tuple[int, int, int]] = field(default_factory=list)
+    """(host GPS ns at the poll, committed before, committed after) for each change."""
+    rss: list[tuple[float, int]] = field(default_factory=list)
+    """(s since the watch began, VmRSS kB)."""
+    last_commit_mono: float = 0.0
+    """Host monotonic time of the last change of the committed counter, s."""
+
+    def committed(self) -> int:
+        """Pulses committed at the last poll that saw a change."""
+        return self.commits[-1][2] if self.commits else 0
+
+
+def watch(pid: int, store: Path, seen: Watch, stop: threading.Event) -> None:
+    """Poll the committed counter every :data:`POLL_S` and VmRSS every second until ``stop``."""
+    t0 = time.monotonic()
+    last, next_rss = 0, t0
+    while not stop.is_set():
+        n = committed_now(store)
+        if n > last:
+            seen.commits.append((host_gps_ns(GPS_LEAP_SECONDS_DEFAULT), last, n))
+            seen.last_commit_mono = time.monotonic()
+            last = n
+        now = time.monotonic()
+        if now >= next_rss:
+            try:
+                seen.rss.append((now - t0, proc_status_kb(pid, "VmRSS")))
+            except (FileNotFoundError, SarmocoError):
+                return
+            next_rss += 1.0
+        time.sleep(POLL_S)
+
+
+def latencies_s(commits: list[tuple[int, int, int]], t_ns: np.ndarray) -> np.ndarray:
+    """Pulse-to-record latency of every committed pulse seen by :func:`watch`, s."""
+    lat = [(t_poll - t_ns[a:b]) / 1e9 for t_poll, a, b in commits if b <= t_ns.size]
+    return np.concatenate(lat) if lat else np.zeros(0)
+
+
+def rss_trend_mb_per_min(rss: list[tuple[float, int]], warmup_s: float) -> float:
+    """Slope of a line through the RSS samples after ``warmup_s``, MB/min (NaN: < 3 samples)."""
+    t = np.array([r[0] for r in rss], dtype=np.float64)
+    mb = np.array([r[1] for r in rss], dtype=np.float64) / 1024.0
+    keep = t >= warmup_s
+    if np.count_nonzero(keep) < 3:
+        return float("nan")
+    return float(np.polyfit(t[keep] / 60.0, mb[keep], 1)[0])
+
+
+def fft_cpu_s_per_pulse(n_samples: int, repeats: int = 20, block: int = 64) -> float:
+    """CPU seconds of one single-threaded ``scipy.fft.fft`` of ``n_samples`` complex64, s.
+
+    A block of pulses is transformed along fast time ``repeats`` times (after one
+    warm-up call); the best repetition counts (the floor, as other load only adds).
+    """
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((block, n_samples)) + 1j * rng.standard_normal((block, n_samples))
+    x = x.astype(np.complex64)
+    scipy.fft.fft(x, axis=1, workers=1)
+    best = float("inf")
+    for _ in range(repeats):
+        t0 = time.process_time()
+        scipy.fft.fft(x, axis=1, workers=1)
+        best = min(best, time.process_time() - t0)
+    return best / block
+
+
+def dir_bytes(path: Path) -> int:
+    """Bytes of all files under ``path``."""
+    return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
+
+
+# -- one bench run -----------------------------------------------------------------------------
+
+
+@dataclass
+class BenchRun:
+    """A simulator → daemon run on loopback and what was seen of it."""
+
+    preset: str
+    scale: float
+    duration_s: float
+    prf_hz: float
+    n_samples: int
+    pulses_sent: int
+    watch: Watch
+    status: dict[str, Any]
+    """The daemon's ``/status`` document at the end of the stream (before SIGTERM)."""
+    cpu_s: float
+    """Daemon CPU seconds from its ready line to the end of the stream."""
+    peak_rss_kb: int
+    exit_status: int
+    store: Path
+    t_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    """Times of the recorded pulses, GPS ns."""
+
+    @property
+    def counters(self) -> dict[str, float]:
+        """The daemon's counters at the end of the stream."""
+        counters: dict[str, float] = self.status.get("counters", {})
+        return counters
+
+
+def _http_port() -> int:
+    """A TCP port on 127.0.0.1 that is free right now."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _fetch_status(port: int) -> dict[str, Any]:
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/status", timeout=10) as resp:
+        status: dict[str, Any] = json.loads(resp.read())
+    return status
+
+
+def live_run(
+    out: Path,
+    preset: str,
+    scale: float,
+    duration_s: float,
+    **sections: dict[str, Any],
+) -> BenchRun:
+    """Play ``duration_s`` of a preset from ``sarmoco sim --serve`` into ``sarmoco run``.
+
+    Parameters
+    ----------
+    out : Path
+        Folder for the configuration, the daemon's log and the store ``run.zarr``.
+    preset, scale : str, float
+        Scenario (``sarmoco sim --preset --scale``).
+    duration_s : float
+        Seconds of flight to play (pulses at the scenario's PRF).
+    **sections : dict
+        Configuration keys per section on top of the scenario's (e.g.
+        ``recorder={"raw_echoes": False}``).
+    """
+    scn = load_preset(preset, scale)
+    n_pulses = max(1, round(duration_s * scn.radar.prf_hz))
+    sim = subprocess.Popen(
+        [*PY, "sim", "--preset", preset, "--scale", str(scale), "--pulses", str(n_pulses),
+         *SIM_ARGS, "--serve", "--radar", f"udp://127.0.0.1:{free_udp_port()}",
+         "--ins", f"mavlink:udpout:127.0.0.1:{free_udp_port()}"],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    daemon: subprocess.Popen[str] | None = None
+    stop = threading.Event()
+    seen = Watch()
+    store = out / "run.zarr"
+    try:
+        hello = read_json_line(sim, "the simulator", START_TIMEOUT_S)
+        http_port = _http_port()
+        table = config_table(
+            scn,
+            radar={"link": hello["radar"]["connect"]},
+            ins={"protocol": "mavlink", "link": hello["ins"][0]["connect"]},
+            recorder={"directory": str(out)},
+            status={"http_port": http_port},
+        )
+        for name, values in sections.items():
+            table.setdefault(name, {}).update(values)
+        cfg_path = write_config(out / "sarmoco.toml", table)
+        with (out / "daemon.log").open("w") as err:
+            daemon = subprocess.Popen(
+                [*PY, "run", "--config", str(cfg_path), "--store", str(store)],
+                stdout=subprocess.PIPE, stderr=err, text=True,
+            )  # fmt: skip
+        read_json_line(daemon, "the daemon", START_TIMEOUT_S)
+        cpu0 = proc_cpu_s(daemon.pid)
+        watcher = threading.Thread(target=watch, args=(daemon.pid, store, seen, stop))
+        watcher.start()
+        if sim.wait(timeout=duration_s + START_TIMEOUT_S) != 0:
+            raise SarmocoError(f"bench: the simulator failed (status {sim.returncode})")
+        while (  # the daemon records what it still holds
+            daemon.poll() is None
+            and seen.committed() < n_pulses
+            and time.monotonic() - seen.last_commit_mono < DRAIN_S
+        ):
+            time.sleep(0.1)
+        if daemon.poll() is not None:
+            raise SarmocoError(f"bench: the daemon died (status {daemon.returncode}), see {out}")
+        status = _fetch_status(http_port)
+        cpu_s = proc_cpu_s(daemon.pid) - cpu0
+        peak_kb = proc_status_kb(daemon.pid, "VmHWM")
+        stop.set()
+        watcher.join()
+        daemon.send_signal(signal.SIGTERM)
+        exit_status = daemon.wait(timeout=START_TIMEOUT_S)
+    finally:
+        stop.set()
+        for proc in (sim, daemon):
+            if proc is not None and proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    return BenchRun(
+        preset=preset,
+        scale=scale,
+        duration_s=n_pulses / scn.radar.prf_hz,
+        prf_hz=scn.radar.prf_hz,
+        n_samples=scn.radar.n_samples,
+        pulses_sent=n_pulses,
+        watch=seen,
+        status=status,
+        cpu_s=cpu_s,
+        peak_rss_kb=peak_kb,
+        exit_status=exit_status,
+        store=store,
+        t_ns=open_store(store).read("pulses", ["t_ns"])["t_ns"],
+    )
+
+
+def figures(run: BenchRun, fft_s_per_pulse: float) -> dict[str, float]:
+    """The :data:`KEYS` figures of a run (see the module)."""
+    c = run.counters
+    taken = c.get("pipeline_pulses_received", 0.0)
+    busy = c.get("processing_busy_seconds", 0.0)
+    lat = latencies_s(run.watch.commits, run.t_ns)
+    p50, p99 = np.percentile(lat, [50, 99]) if lat.size else (float("nan"), float("nan"))
+    warmup = min(RSS_WARMUP_MAX_S, run.duration_s / 3.0)
+    return {
+        "realtime_ratio": taken / run.prf_hz / busy if busy > 0 else float("nan"),
+        "fft_floor_ratio": run.cpu_s / taken / fft_s_per_pulse if taken else float("nan"),
+        "latency_p50_s": float(p50),
+        "latency_p99_s": float(p99),
+        "lost_pulses": float(run.pulses_sent - run.t_ns.size),
+        "peak_rss_mb": run.peak_rss_kb / 1024.0,
+        "rss_growth_mb_per_min": rss_trend_mb_per_min(run.watch.rss, warmup),
+    }
+
+
+def bench(
+    preset: str,
+    duration_s: float,
+    *,
+    scale: float = 1.0,
+    record: bool = True,
+    autofocus: bool = True,
+    work: Path | None = None,
+    keep: bool = False,
+) -> dict[str, Any]:
+    """Run the bench (see the module); returns the figures and the run's description.
+
+    Parameters
+    ----------
+    preset : str
+        Scenario preset (``sarmoco sim --preset``).
+    duration_s : float
+        Seconds of flight to play.
+    scale : float
+        Scenario scale in (0, 1].
+    record : bool
+        Record the raw echoes (``recorder.raw_echoes``).
+    autofocus : bool
+        Autofocus on (``autofocus.enabled``; the scenario may have it off when its
+        aperture holds fewer than two subapertures).
+    work : Path, optional
+        Where the temporary run folder is made (default: the system's temporary folder).
+    keep : bool
+        Keep the run folder (store, configuration, daemon log).
+
+    Raises
+    ------
+    ConfigError
+        For an unknown preset, a scale outside (0, 1] or a duration not > 0.
+    """
+    if preset not in PRESETS:
+        raise ConfigError(f"bench --preset: {preset!r} is not one of {', '.join(PRESETS)}")
+    if not 0.0 < scale <= 1.0:
+        raise ConfigError(f"bench --scale: {scale!r} is not in (0, 1]")
+    if not duration_s > 0.0:
+        raise ConfigError(f"bench --duration: {duration_s!r} s is not > 0")
+    if work is not None:
+        work.mkdir(parents=True, exist_ok=True)
+    out = Path(tempfile.mkdtemp(prefix=f"sarmoco-bench-{preset}-", dir=work))
+    sections: dict[str, dict[str, Any]] = {"recorder": {"raw_echoes": record}}
+    if not autofocus:
+        sections["autofocus"] = {"enabled": False}
+    load_start = os.getloadavg()[0]
+    try:
+        fft_s = fft_cpu_s_per_pulse(load_preset(preset, scale).radar.n_samples)
+        run = live_run(out, preset, scale, duration_s, **sections)
+        written = dir_bytes(run.store)
+    finally:
+        if not keep:
+            shutil.rmtree(out, ignore_errors=True)
+    c = run.counters
+    return figures(run, fft_s) | {
+        "preset": preset,
+        "scale": scale,
+        "duration_s": run.duration_s,
+        "pulses_sent": run.pulses_sent,
+        "pulses_recorded": int(run.t_ns.size),
+        "pulses_taken": int(c.get("pipeline_pulses_received", 0)),
+        "pulses_focused": int(c.get("pipeline_pulses_processed", 0)),
+        "pulses_dropped_ring": int(c.get("pipeline_pulses_dropped_ring", 0)),
+        "radar_link_drops": int(c.get("radar_drops", 0)),
+        "tiles": int(c.get("pipeline_tiles", 0)),
+        "processing_busy_s": c.get("processing_busy_seconds", 0.0),
+        "daemon_cpu_s": run.cpu_s,
+        "fft_cpu_s_per_pulse": fft_s,
+        "record_raw_echoes": record,
+        "bytes_written": written,
+        "exit_status": run.exit_status,
+        "load_average": [load_start, os.getloadavg()[0]],
+        "cores": os.cpu_count(),
+        "kept": str(out) if keep else None,
+    }
+
+
+# -- the command -------------------------------------------------------------------------------
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the arguments of ``sarmoco bench`` to its parser."""
+    p.description = __doc__.split("\n\n")[0] if __doc__ else None
+    p.add_argument("--preset", required=True, choices=PRESETS, help="scenario preset")
+    p.add_argument("--duration", type=float, required=True, metavar="S", help="seconds of flight")
+    p.add_argument("--scale", type=float, default=1.0, help="scenario scale in (0, 1] (default 1)")
+    p.add_argument("--json", action="store_true", help="one JSON line on stdout")
+    p.add_argument("--keep", action="store_true", help="keep the run folder (store, log)")
+    p.add_argument("--no-record", action="store_true", help="raw echoes not recorded")
+    p.add_argument("--no-autofocus", action="store_true", help="autofocus off")
+    p.add_argument("--work", type=Path, help="folder for the temporary run folder")
+
+
+def run_command(args: argparse.Namespace) -> int:
+    """Handler of ``sarmoco bench``; returns the exit status."""
+    result = bench(
+        args.preset,
+        args.duration,
+        scale=args.scale,
+        record=not args.no_record,
+        autofocus=not args.no_autofocus,
+        work=args.work,
+        keep=args.keep,
+    )
+    if args.json:
+        print(json.dumps(result), flush=True)
+        return 0
+    width = max(map(len, result))
+    for key, value in result.items():
+        text = f"{value:.4g}" if isinstance(value, float) else str(value)
+        print(f"{key:<{width}}  {text}")
+    where = f"kept in {result['kept']}" if result["kept"] else "removed"
+    print(f"{result['bytes_written']} bytes written ({where})")
+    return 0

@@ -1,0 +1,61 @@
+"""``sarmoco bench``: simulator and daemon as real processes on loopback, figures on stdout.
+
+A scaled ``thz-spotlight`` (PRF 2 kHz, 410 samples) plays for 2 s; the one JSON line
+must hold every figure with a sane value, and the temporary run folder must be gone.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from sarmoco.app.benchcmd import KEYS
+from sarmoco.app.cli import main
+from sarmoco.sim.scenario import load_preset
+
+PRESET, SCALE, DURATION_S = "thz-spotlight", 0.1, 2.0
+
+
+def test_bench_prints_sane_figures_and_removes_its_folder(tmp_path: Path) -> None:
+    proc = subprocess.run(
+        [sys.executable, "-m", "sarmoco", "bench", "--preset", PRESET, "--scale", str(SCALE),
+         "--duration", str(DURATION_S), "--json", "--work", str(tmp_path)],
+        check=True, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    lines = proc.stdout.splitlines()
+    assert len(lines) == 1, proc.stdout
+    r = json.loads(lines[0])
+    assert set(KEYS) <= set(r)
+    radar = load_preset(PRESET, SCALE).radar
+    assert r["pulses_sent"] == round(DURATION_S * radar.prf_hz)
+    assert r["exit_status"] == 0
+    assert r["lost_pulses"] == r["pulses_sent"] - r["pulses_recorded"] >= 0
+    assert r["pulses_taken"] == r["pulses_recorded"] > 0.9 * r["pulses_sent"]
+    assert 0 < r["pulses_focused"] <= r["pulses_taken"]
+    assert r["tiles"] > 0
+    assert r["realtime_ratio"] > 0
+    # the whole chain costs more CPU per pulse than one FFT of the pulse, but not absurdly
+    assert 1.0 < r["fft_floor_ratio"] < 1e5
+    assert 0.0 < r["latency_p50_s"] <= r["latency_p99_s"] < 60.0
+    assert 50.0 < r["peak_rss_mb"] < 4096.0
+    assert math.isfinite(r["rss_growth_mb_per_min"])
+    raw_bytes = r["pulses_recorded"] * radar.n_samples * 4  # int16 I and Q
+    assert r["bytes_written"] > 0.5 * raw_bytes  # raw echoes recorded (zstd: noise stays)
+    assert r["kept"] is None and list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    ("args", "key"),
+    [(["--scale", "2"], "--scale"), (["--duration", "0"], "--duration")],
+)
+def test_bench_refuses_bad_arguments(
+    args: list[str], key: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    status = main(["bench", "--preset", PRESET, "--duration", "1", *args])
+    assert status == 2
+    assert f"bench {key}" in capsys.readouterr().err
