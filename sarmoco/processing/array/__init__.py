@@ -1,0 +1,5 @@
+"""MIMO downward-looking array: geometry, roll compensation, 3-D imaging, DEM evaluation.
+
+Imports only numpy/scipy, :mod:`sarmoco.processing` and :mod:`sarmoco.errors`
+(docs/methods.md §4).
+"""
