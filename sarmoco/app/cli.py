@@ -103,6 +103,18 @@ def _cmd_batch(args: argparse.Namespace) -> int:
     return run_command(args)
 
 
+def _add_export_arguments(parser: argparse.ArgumentParser) -> None:
+    from sarmoco.app.export import add_arguments
+
+    add_arguments(parser)
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from sarmoco.app.export import run_command
+
+    return run_command(args)
+
+
 def _cmd_report(args: argparse.Namespace) -> int:
     from sarmoco.daemon.report import write_report
 
@@ -207,6 +219,13 @@ def build_parser() -> argparse.ArgumentParser:
         add_arguments=_add_batch_arguments,
     )
     batch.set_defaults(func=_cmd_batch)
+
+    export = sub.add_parser(
+        "export",
+        help="a store's image and phase history as SICD / CPHD / CRSD (sarkit-checked)",
+        add_arguments=_add_export_arguments,
+    )
+    export.set_defaults(func=_cmd_export)
 
     report = sub.add_parser("report", help="quicklook PNGs and metrics of a store")
     report.add_argument("store", help="a run or replay store")

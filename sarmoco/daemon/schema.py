@@ -434,6 +434,32 @@ def encode_reference_track(track: ReferenceTrack) -> dict[str, Any]:
     }
 
 
+def decode_reference_track(value: Mapping[str, Any], where: str) -> ReferenceTrack:
+    """A :class:`ReferenceTrack` back from :func:`encode_reference_track`'s mapping.
+
+    Raises
+    ------
+    RecorderError
+        Naming ``where.KEY`` for a missing or mistyped field, or a vector not of 3 numbers.
+    """
+
+    def vector(key: str) -> npt.NDArray[np.float64]:
+        v = read_attr(value, key, list, where)
+        if len(v) != 3 or not all(
+            isinstance(c, float | int) and not isinstance(c, bool) for c in v
+        ):
+            raise RecorderError(f"{where}.{key}: {v!r} is not 3 numbers")
+        return np.asarray(v, dtype=np.float64)
+
+    return ReferenceTrack(
+        origin_ned=vector("origin_ned"),
+        x_hat=vector("x_hat_ned"),
+        y_hat=vector("y_hat_ned"),
+        v0_mps=float(read_attr(value, "v0_mps", (float, int), where)),
+        t0_ns=read_attr(value, "t0_ns", int, where),
+    )
+
+
 @dataclass(frozen=True)
 class GeodeticOrigin:
     """Where a run is on Earth: the first valid geodetic position its INS gave.

@@ -1,9 +1,8 @@
 """The simulated SBG INS: sbgECom binary logs over a pseudo-terminal or into a file.
 
 Per INS sample: EKF_NAV (velocity NED, geodetic position: the INS position, or the
-velocity integrated from the first sample for grades without one, as the simulated
-autopilot's LOCAL_POSITION_NED, about :data:`~sarmoco.sim.insfeed.GEODETIC_ORIGIN`;
-position valid) and EKF_QUAT (or
+velocity integrated from the true position at the first sample for grades without
+one; NED about :data:`~sarmoco.sim.insfeed.GEODETIC_ORIGIN`, position valid) and EKF_QUAT (or
 EKF_EULER); every ``utc_period_s`` a UTC_TIME pairing the device clock with UTC
 and the GPS time of week; one EVENT_A per radar pulse (sync-in: the pulse
 transmit time on the device clock). Times are the device clock in µs since
@@ -140,7 +139,9 @@ class SbgEmitter(SbgDevice):
     def __init__(self, link: Link, feed: InsFeed, **options: Any) -> None:
         super().__init__(link, feed, **options)
         pos_ned = (
-            feed.pos_ned if feed.pos_ned is not None else dead_reckoned(feed.t_ns, feed.vel_ned)
+            feed.pos_ned
+            if feed.pos_ned is not None
+            else feed.start_pos_ned + dead_reckoned(feed.t_ns, feed.vel_ned)
         )
         self.geodetic = ned_to_geodetic(pos_ned)
         g = feed.grade

@@ -8,7 +8,7 @@ carries the same samples on the same clock.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -17,6 +17,7 @@ from sarmoco.sim.faults import Faults, dropout_keep
 from sarmoco.sim.ins import InsGrade
 from sarmoco.sim.insclock import InsClock
 from sarmoco.sim.run import SimRun
+from sarmoco.sim.trajectory import true_trajectory
 
 OUTPUT_LATENCY_S = 0.001
 """Time from an INS sample's epoch to its message leaving the device, s."""
@@ -71,6 +72,9 @@ class InsFeed:
         Nominal sample rate on the device clock, Hz.
     latency_ns : int
         Output latency, ns.
+    start_pos_ned : ndarray, shape (3,)
+        True position of the INS at the first sample sent, scenario NED, m: where the
+        position an INS without a measured one reports (its velocity integrated) starts.
     """
 
     index: IntArray
@@ -84,6 +88,7 @@ class InsFeed:
     clock: InsClock
     rate_hz: float
     latency_ns: int = round(OUTPUT_LATENCY_S * 1e9)
+    start_pos_ned: FloatArray = field(default_factory=lambda: np.zeros(3))
 
     @classmethod
     def from_run(cls, run: SimRun, faults: Faults) -> InsFeed:
@@ -95,6 +100,8 @@ class InsFeed:
         dt = np.diff(ins.t_device_ns)
         rate = 1e9 / float(np.median(dt)) if dt.size else 1.0
         pulses = run.t_ns[dropout_keep(run.t_ns, run.t0_ns, faults.ins_dropouts_s)]
+        t_first_s = (nav.t_ns[keep][:1] - run.scenario.t0_ns) * 1e-9
+        start = true_trajectory(run.scenario, t_first_s, run.motion).pos_ned
         return cls(
             index=np.flatnonzero(keep).astype(np.int64),
             t_ns=nav.t_ns[keep],
@@ -106,6 +113,7 @@ class InsFeed:
             grade=ins.grade,
             clock=clock,
             rate_hz=rate,
+            start_pos_ned=start[0] if start.size else np.zeros(3),
         )
 
     def every(self, period_s: float) -> int:

@@ -1,0 +1,237 @@
+"""Where a store's images are on Earth: the run frame tied to the INS's geodetic positions.
+
+The motion compensation works in the *run frame*: NED axes, origin at the antenna phase
+centre (APC) of the first focused pulse, positions the trapezoid-integrated INS velocity of
+the APC (the INS-only D_los, docs/methods.md §3). Reference tracks and image grids are in
+that frame. The store also keeps the INS's geodetic positions (``nav/lla``) and the
+geodetic origin of the run (the first of them, :class:`~sarmoco.daemon.schema.GeodeticOrigin`).
+:func:`georeference` ties the two: the run frame is shifted by the mean difference between
+the INS's positions (as NED about the geodetic origin) and the integrated track at the same
+instants, so that
+
+    ECEF(p) = ECEF(origin) + R_nedᵀ (p + offset)
+
+for any run-frame point p (R_ned: north, east, down at the origin). The phase never uses
+this: only the export and the quicklook do.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sarmoco.daemon import schema
+from sarmoco.daemon.config import parse_config
+from sarmoco.daemon.navbuffer import PushResult
+from sarmoco.daemon.store import RunStore
+from sarmoco.errors import RecorderError
+from sarmoco.geodesy import (
+    ecef_to_geodetic,
+    geodetic_to_ecef,
+    geodetic_to_ned,
+    ned_rotation,
+)
+from sarmoco.processing.geometry import ReferenceTrack, lever_arm_ned
+from sarmoco.processing.mocomp import LosState, integrate_los
+from sarmoco.processing.types import FloatArray, Image, IntArray
+
+
+@dataclass(frozen=True)
+class Georeference:
+    """The run frame of a store on the WGS-84 ellipsoid.
+
+    Attributes
+    ----------
+    origin : GeodeticOrigin
+        The run's geodetic origin (lat, lon deg; altitude m, used as ellipsoid height).
+    offset_ned_m : ndarray, shape (3,)
+        Run-frame origin in NED about the geodetic origin, m.
+    fit_rms_m : float
+        RMS distance between the INS positions and the shifted integrated track, m.
+    n_fixes : int
+        INS positions the offset was fitted to.
+    """
+
+    origin: schema.GeodeticOrigin
+    offset_ned_m: FloatArray
+    fit_rms_m: float
+    n_fixes: int
+
+    @property
+    def rotation(self) -> FloatArray:
+        """Rows north, east, down in ECEF at the origin (``v_ecef = rotation.T @ v_ned``)."""
+        return ned_rotation(self.origin.lla[0], self.origin.lla[1])
+
+    def ecef(self, pos_run_m: FloatArray) -> FloatArray:
+        """Run-frame points (..., 3), m → ECEF (..., 3), m."""
+        ned = np.asarray(pos_run_m, dtype=np.float64) + self.offset_ned_m
+        return np.asarray(geodetic_to_ecef(np.asarray(self.origin.lla)) + ned @ self.rotation)
+
+    def ecef_vector(self, vec_ned: FloatArray) -> FloatArray:
+        """NED vectors (..., 3) (velocities, unit axes) → the same vectors in ECEF."""
+        return np.asarray(np.asarray(vec_ned, dtype=np.float64) @ self.rotation)
+
+    def geodetic(self, pos_run_m: FloatArray) -> FloatArray:
+        """Run-frame points (..., 3), m → latitude, longitude (deg), height (m)."""
+        return ecef_to_geodetic(self.ecef(pos_run_m))
+
+
+def run_track(store: RunStore) -> tuple[IntArray, FloatArray, FloatArray]:
+    """The integrated APC track of the focused pulses in the run frame.
+
+    Returns
+    -------
+    t_ns : ndarray of int64, shape (P,)
+        Pulse times from the first reference track's start, GPS ns.
+    pos_m : ndarray, shape (P, 3)
+        APC positions, run frame (NED, zero at the first focused pulse), m.
+    quat : ndarray, shape (P, 4)
+        INS attitude at the pulses (scalar first, body to NED).
+
+    Raises
+    ------
+    RecorderError
+        The store has no reference track or no focused pulse.
+    """
+    track = schema.decode_reference_track(
+        schema.read_attr(store.attrs, schema.REFERENCE_TRACK_ATTR, dict, str(store.path)),
+        f"{store.path}.{schema.REFERENCE_TRACK_ATTR}",
+    )
+    m = store.read(schema.MOTION.name, ["t_ns", "vel_ned", "quat"])
+    keep = (
+        (m["t_ns"] >= track.t0_ns)
+        & np.isfinite(m["vel_ned"]).all(axis=1)
+        & np.isfinite(m["quat"]).all(axis=1)
+    )
+    t, vel = m["t_ns"][keep], m["vel_ned"][keep]
+    if t.size < 2:
+        raise RecorderError(f"{store.path}: fewer than 2 focused pulses with motion")
+    pos, _ = integrate_los(t, vel, LosState(last_vel_yz=np.zeros(3), disp_yz_m=np.zeros(3)))
+    return t, pos, m["quat"][keep]
+
+
+def georeference(store: RunStore) -> Georeference:
+    """Tie a store's run frame to the INS's geodetic positions (see the module docstring).
+
+    The INS positions are those of the INS: each is moved to the antenna by the lever arm
+    (``ins.lever_arm_m`` of the run's configuration) turned by the attitude of the nearest
+    pulse before the fit.
+
+    Raises
+    ------
+    RecorderError
+        The store has no absolute position (``geodetic_origin`` absent), or no INS position
+        falls within the focused pulses.
+    """
+    origin = schema.decode_geodetic_origin(store.attrs, str(store.path))
+    cfg = parse_config(store.attrs["config"])
+    t, pos, quat = run_track(store)
+    nav = store.read(schema.NAV.name, ["t_ns", "lla", "result"])
+    ok = (
+        np.isfinite(nav["lla"]).all(axis=1)
+        & (nav["result"] == int(PushResult.ACCEPTED))
+        & (nav["t_ns"] >= t[0])
+        & (nav["t_ns"] <= t[-1])
+    )
+    if not ok.any():
+        raise RecorderError(
+            f"{store.path}: nav/lla: no INS geodetic position within the focused pulses"
+        )
+    t_fix = nav["t_ns"][ok]
+    nearest = np.clip(np.searchsorted(t, t_fix), 0, t.size - 1)
+    arm = lever_arm_ned(quat[nearest], np.asarray(cfg.ins.lever_arm_m, dtype=np.float64))
+    fixes = geodetic_to_ned(nav["lla"][ok], origin.lla) + arm
+    rel = (t - t[0]).astype(np.float64)
+    track = np.stack(
+        [np.interp((t_fix - t[0]).astype(np.float64), rel, pos[:, k]) for k in range(3)], axis=1
+    )
+    offset = (fixes - track).mean(axis=0)
+    rms = float(np.sqrt(np.mean(np.sum((fixes - track - offset) ** 2, axis=1))))
+    return Georeference(origin, offset, rms, int(ok.sum()))
+
+
+@dataclass(frozen=True)
+class SegmentImage:
+    """The tiles of one reference track joined along track (axis 0), in that track's frame.
+
+    Attributes
+    ----------
+    image : Image
+        Pixels and axes (m) as the tiles hold them.
+    track : ReferenceTrack
+        The segment's reference track (run frame).
+    t0_ns, t1_ns : int
+        First and last pulse time of the tiles, GPS ns.
+    tiles : tuple of int
+        Indices of the store's tiles joined, in order.
+    """
+
+    image: Image
+    track: ReferenceTrack
+    t0_ns: int
+    t1_ns: int
+    tiles: tuple[int, ...]
+
+
+def segment_images(store: RunStore) -> list[SegmentImage]:
+    """Every reference-track segment's tiles joined along track, in time order.
+
+    Raises
+    ------
+    RecorderError
+        A tile lacks its ``reference_track``, or tiles of a segment differ in width.
+    """
+    groups: dict[int, list[tuple[int, Image, dict[str, object]]]] = {}
+    for k in range(store.n_images):
+        image, attrs = store.image(k)
+        where = f"{store.path}/{schema.IMAGES_GROUP}/{schema.tile_name(k)}"
+        track_attr = schema.read_attr(attrs, schema.REFERENCE_TRACK_ATTR, dict, where)
+        t0 = schema.read_attr(track_attr, "t0_ns", int, f"{where}.{schema.REFERENCE_TRACK_ATTR}")
+        groups.setdefault(t0, []).append((k, image, attrs))
+    out = []
+    for t0 in sorted(groups):
+        parts = sorted(groups[t0], key=lambda p: float(p[1].axis0_m[0]))
+        first_k, first, attrs = parts[0]
+        where = f"{store.path}/{schema.IMAGES_GROUP}/{schema.tile_name(first_k)}"
+        if any(p[1].data.shape[1] != first.data.shape[1] for p in parts):
+            raise RecorderError(f"{where}: tiles of one reference track differ in width")
+        track = schema.decode_reference_track(
+            attrs[schema.REFERENCE_TRACK_ATTR],  # type: ignore[arg-type]
+            f"{where}.{schema.REFERENCE_TRACK_ATTR}",
+        )
+        image = Image(
+            np.concatenate([p[1].data for p in parts], axis=0),
+            np.concatenate([p[1].axis0_m for p in parts]),
+            first.axis1_m,
+            first.frame,
+        )
+        t0s = [schema.read_attr(p[2], "t0_ns", int, where) for p in parts]
+        t1s = [schema.read_attr(p[2], "t1_ns", int, where) for p in parts]
+        out.append(SegmentImage(image, track, min(t0s), max(t1s), tuple(p[0] for p in parts)))
+    return out
+
+
+def grid_points(image: Image, track: ReferenceTrack, ground_depth_m: float) -> FloatArray:
+    """Run-frame positions (n0, n1, 3) of a ground-plane image's pixel centres, m.
+
+    Parameters
+    ----------
+    image : Image
+        Of frame ``"ground"``: axis 0 along-track x, axis 1 ground range y of ``track``'s
+        imaging frame.
+    track : ReferenceTrack
+        The image's reference track.
+    ground_depth_m : float
+        Depth of the ground below the reference track (imaging-frame z), m.
+
+    Raises
+    ------
+    RecorderError
+        The image is not in the ground plane.
+    """
+    if image.frame != "ground":
+        raise RecorderError(f"image frame {image.frame!r}: only 'ground' images are georeferenced")
+    x, y = np.meshgrid(image.axis0_m, image.axis1_m, indexing="ij")
+    pts = np.stack([x, y, np.full_like(x, ground_depth_m)], axis=-1)
+    return np.asarray(track.origin_ned + pts @ track.rotation)

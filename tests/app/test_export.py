@@ -1,0 +1,150 @@
+"""Georeferencing and ``sarmoco export --sicd`` on a simulated scene (issue 15).
+
+A scene is written by ``sarmoco sim --out`` (ideal INS grade, so that the georeferencing
+error is ours alone) and replayed from its SBG log into a store: the store carries the
+INS's geodetic positions and the run's geodetic origin; the focused targets land where
+the simulator put them on the WGS-84 ellipsoid; the SICD written passes sarkit's
+``SicdConsistency`` with no failures and holds our pixels.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import lxml.etree
+import numpy as np
+import pytest
+import sarkit.sicd as sksicd
+import sarkit.verification as skver
+
+from sarmoco.app.cli import main
+from sarmoco.app.export import failures
+from sarmoco.app.sicd import sicd_product, write_sicd
+from sarmoco.daemon import schema
+from sarmoco.daemon.config import load_config
+from sarmoco.daemon.georeference import georeference, grid_points, segment_images
+from sarmoco.daemon.recorder import Recorder
+from sarmoco.daemon.runner import replay_files
+from sarmoco.daemon.store import RunStore, open_store
+from sarmoco.geodesy import geodetic_to_ned
+from sarmoco.sim.insfeed import GEODETIC_ORIGIN
+
+PIXEL_M = 0.1
+"""Grid spacing of the scene's tiles (``imaging.pixel_m``), m."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Scene:
+    store: RunStore
+    truth: dict
+    out: Path
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory: pytest.TempPathFactory) -> Scene:
+    """The ku-vehicle scene at scale 0.05 (3 point targets), replayed from its SBG log."""
+    out = tmp_path_factory.mktemp("export")
+    subprocess.run(
+        [sys.executable, "-m", "sarmoco", "sim", "--preset", "ku-vehicle", "--scale", "0.05",
+         "--ins-grade", "ideal", "--out", str(out / "sim")],
+        check=True, capture_output=True,
+    )  # fmt: skip
+    text = (out / "sim" / "sarmoco.toml").read_text()
+    text = text.replace('protocol = "mavlink"', 'protocol = "sbg"').replace("nav.tlog", "ins.sbg")
+    (out / "sbg.toml").write_text(text)
+    cfg = load_config(out / "sbg.toml")
+    store = out / "run.zarr"
+    replay_files(cfg, out / "sim" / "radar.vrt", out / "sim" / "ins.sbg", store, False)
+    truth = json.loads((out / "sim" / "truth.json").read_text())
+    return Scene(open_store(store), truth, out)
+
+
+def test_the_store_keeps_the_sbg_position_and_the_geodetic_origin(scene: Scene) -> None:
+    nav = scene.store.read("nav")
+    vel = nav["kind"] == schema.NAV_KIND_VELOCITY
+    assert vel.sum() > 100
+    assert np.isfinite(nav["lla"][vel]).all() and np.isfinite(nav["pos_ned"][vel]).all()
+    assert np.isnan(nav["lla"][~vel]).all()
+    origin = schema.decode_geodetic_origin(scene.store.attrs, "run")
+    first = int(np.argmax(vel & (nav["result"] == 0)))
+    assert origin.t_ns == nav["t_ns"][first] and origin.source == "sbg.EKF_NAV"
+    assert origin.lla == tuple(nav["lla"][first])
+    assert np.allclose(nav["pos_ned"][first], 0.0)  # NED about the first fix
+    # the origin is where the simulator's INS was at its first sample (scenario NED)
+    start = geodetic_to_ned(np.asarray(origin.lla), GEODETIC_ORIGIN)
+    apc0 = np.asarray(scene.truth["pulses"]["apc_ned"][0])
+    assert np.linalg.norm(start[1:] - (apc0 - scene.truth["scenario"]["lever_arm_m"])[1:]) < 0.01
+
+
+def test_targets_are_georeferenced_within_a_pixel(scene: Scene) -> None:
+    """Each target's brightest pixel, through georeference(), lands within half a pixel
+    of the simulator's position for it (ideal INS: the error is the georeferencing's)."""
+    geo = georeference(scene.store)
+    cfg = load_config(scene.out / "sbg.toml")
+    seg = segment_images(scene.store)[0]
+    pts = grid_points(seg.image, seg.track, cfg.geometry.height_m)
+    ned = geodetic_to_ned(geo.geodetic(pts), GEODETIC_ORIGIN)
+    mag = np.abs(seg.image.data)
+    errors = []
+    for target in scene.truth["targets"]:
+        t = np.asarray(target["pos_ned"])
+        near = np.linalg.norm(ned[..., :2] - t[:2], axis=-1) < 2.0
+        k = np.unravel_index(np.argmax(np.where(near, mag, 0.0)), mag.shape)
+        errors.append(np.linalg.norm(ned[k] - t))
+    print(f"georeferencing errors (m): {np.round(errors, 4).tolist()}, fit rms {geo.fit_rms_m}")
+    assert len(errors) == 3
+    assert max(errors) < PIXEL_M / 2
+
+
+def test_sicd_export_passes_the_consistency_check_and_holds_our_pixels(
+    scene: Scene, capsys: pytest.CaptureFixture[str]
+) -> None:
+    out = scene.out / "scene.nitf"
+    status = main(["export", str(scene.store.path), "--sicd", str(out)])
+    assert status == 0, capsys.readouterr().err
+    assert failures(skver.SicdConsistency.from_file, out) == []
+    with out.open("rb") as f, sksicd.NitfReader(f) as reader:
+        pixels = reader.read_image()
+        xml = reader.metadata.xmltree
+    seg = segment_images(scene.store)[0]
+    assert np.array_equal(pixels, seg.image.data.T)  # rows: ground range, columns: along track
+    helper = sksicd.XmlHelper(xml)
+    assert helper.load("./{*}SCPCOA/{*}SideOfTrack") == "R"
+    start = helper.load("./{*}Timeline/{*}CollectStart")
+    assert start.year == 2024  # GPS 1.4e18 ns, as UTC
+    procs = [p.findtext("{*}Type") for p in xml.findall("./{*}ImageFormation/{*}Processing")]
+    assert any("INS motion compensation" in p for p in procs)
+    # the scene centre point is the pixel at SCPPixel, on the ground below the track
+    graze = helper.load("./{*}SCPCOA/{*}GrazeAng")
+    assert graze == pytest.approx(np.degrees(np.arctan2(100.0, 894.43)), abs=0.1)
+
+
+def test_the_checker_fails_a_sicd_whose_geometry_is_wrong(scene: Scene) -> None:
+    """The consistency check can fail: the ARP velocity reversed (the SCPCOA computed from the
+    original no longer matches it) is reported."""
+    product = sicd_product(scene.store)
+    xml = lxml.etree.ElementTree(lxml.etree.fromstring(lxml.etree.tostring(product.xml)))
+    helper = sksicd.XmlHelper(xml)
+    arp = helper.load("./{*}Position/{*}ARPPoly")
+    arp[1] = -arp[1]
+    helper.set("./{*}Position/{*}ARPPoly", arp)
+    bad = scene.out / "bad.nitf"
+    write_sicd(dataclasses.replace(product, xml=xml), bad)
+    found = failures(skver.SicdConsistency.from_file, bad)
+    assert any(f.startswith("check_scpcoa") for f in found), found
+
+
+def test_export_refuses_a_store_without_absolute_position(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    path = tmp_path / "noabs.zarr"
+    Recorder(path, n_samples=8).close()
+    status = main(["export", str(path), "--sicd", str(tmp_path / "x.nitf")])
+    err = capsys.readouterr().err
+    assert status == 2
+    assert "geodetic_origin: no absolute position" in err and str(path) in err
+    assert not (tmp_path / "x.nitf").exists()
