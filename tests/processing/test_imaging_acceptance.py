@@ -110,6 +110,13 @@ def _ground_grid(d: Compressed, n: int, spacing_m: float) -> PlaneGrid:
 
 
 def _check(m: PointTargetMetrics, irw_theory: tuple[float, float], label: str) -> None:
+    """Assert the sinc limits, and print the README's row (``pytest -s``): PSLR / ISLR in dB,
+    IRW in cm with theory in brackets, azimuth then range."""
+    cells = [
+        f"{cut.pslr_db:.2f} / {cut.islr_db:.2f} | {100 * cut.irw_m:.2f} ({100 * th:.2f})"
+        for cut, th in ((m.axis0, irw_theory[0]), (m.axis1, irw_theory[1]))
+    ]
+    print(f"\n| {label} | {' | '.join(cells)} |")
     for name, cut, th in (("azimuth", m.axis0, irw_theory[0]), ("range", m.axis1, irw_theory[1])):
         msg = f"{label} {name}: PSLR {cut.pslr_db:.2f} dB, IRW {cut.irw_m:.4f} m vs {th:.4f} m"
         assert abs(cut.pslr_db - PSLR_SINC_DB) <= 0.3, msg

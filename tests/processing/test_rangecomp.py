@@ -71,6 +71,7 @@ def test_point_target_peak_phase_irw_pslr(chain: str) -> None:
     axis = range_axis_m(radar)
     spacing = float(axis[1] - axis[0])
     irw_theory = 0.886 * radar.range_resolution_m
+    seen = []
     for p, r in enumerate(ranges):
         i = int(np.argmin(np.abs(axis - r)))
         cut = rc[p, i - CUT_HALF_BINS : i + CUT_HALF_BINS + 1]
@@ -80,6 +81,13 @@ def test_point_target_peak_phase_irw_pslr(chain: str) -> None:
         assert abs(phase_err) < 0.05, (chain, r, phase_err)
         assert abs(m.irw_m / irw_theory - 1.0) < 0.05, (chain, m.irw_m, irw_theory)
         assert abs(m.pslr_db - SINC_PSLR_DB) < 0.3, (chain, m.pslr_db)
+        seen.append((m.pslr_db, m.irw_m / irw_theory, abs(m.peak_m - r) / spacing, phase_err))
+    pslr, irw, cells, phase = np.array(seen).T
+    print(  # the README's figures (pytest -s)
+        f"\n{chain}: PSLR {pslr.min():.2f} to {pslr.max():.2f} dB, IRW {irw.min():.3f}-"
+        f"{irw.max():.3f} x 0.886 c/2B, peak within {cells.max():.4f} bin, phase within "
+        f"{np.abs(phase).max():.4f} rad"
+    )
 
 
 @pytest.mark.parametrize("chain", ["ku-matched", "thz-dechirp"])
