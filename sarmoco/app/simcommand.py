@@ -53,8 +53,10 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
+from sarmoco.app.simarray import add_array_arguments, check_array_arguments, run_array
 from sarmoco.drivers.clock import GPS_LEAP_SECONDS_DEFAULT
 from sarmoco.errors import ConfigError
+from sarmoco.sim.array_scenario import ARRAY_PRESET
 from sarmoco.sim.emit_radar import RadarEmitter
 from sarmoco.sim.emitter import Emitter, WireTime
 from sarmoco.sim.extended import SCENES, load_scene
@@ -73,7 +75,9 @@ from sarmoco.sim.trajectory import MotionSpec
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """Add the arguments of ``sarmoco sim`` to its parser (with this module's text as help)."""
     p.description = __doc__
-    p.add_argument("--preset", required=True, choices=PRESETS, help="scenario preset")
+    p.add_argument(
+        "--preset", required=True, choices=(*PRESETS, ARRAY_PRESET), help="scenario preset"
+    )
     p.add_argument("--scale", type=float, default=1.0, help="scenario scale in (0, 1] (default 1)")
     p.add_argument(
         "--scene", default="points", choices=SCENES,
@@ -115,6 +119,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--truth", type=Path, help="live: also write the truth record here")
     p.add_argument("--leap-s", type=int, default=GPS_LEAP_SECONDS_DEFAULT, help="GPS - UTC, s")
     add_platform_arguments(p)
+    add_array_arguments(p)
 
 
 def add_platform_arguments(p: argparse.ArgumentParser) -> None:
@@ -292,6 +297,9 @@ def run_command(args: argparse.Namespace) -> int:
     """Handler of ``sarmoco sim``; returns the exit status."""
     if args.serve and args.out is not None:
         raise ConfigError("sim: --out and --serve exclude each other")
+    check_array_arguments(args)
+    if args.preset == ARRAY_PRESET:
+        return run_array(args)
     faults = parse_faults(args.fault)
     run = build_run(args, faults)
     if args.out is not None:

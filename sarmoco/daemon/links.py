@@ -36,7 +36,9 @@ def vita_decoder(cfg: Config) -> VitaDecoder:
         leap_s=cfg.ins.gps_minus_utc_s,
         expect=ContextExpectation(r.bandwidth_hz, r.carrier_hz, r.sample_rate_hz),
         link=r.link,
-        stream_id=0,  # radar.channels is 1 (config refuses more): channel 0 only
+        # single mode: channel 0 only (radar.channels is 1); array mode: every stream (the
+        # pulses are grouped by channel, sarmoco.daemon.channelgroup)
+        stream_id=None if r.mode == "array" else 0,
     )
 
 

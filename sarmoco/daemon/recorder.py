@@ -473,6 +473,34 @@ class Recorder(Closing):
         column[lo:hi] = span
         self._maybe_sync()
 
+    def add_dem(
+        self,
+        name: str,
+        arrays: Mapping[str, tuple[tuple[str, ...], npt.NDArray[Any]]],
+        attrs: Mapping[str, Any],
+    ) -> None:
+        """Record a DEM product as ``dem/<name>`` (content from
+        :func:`~sarmoco.daemon.schema.encode_dem`).
+
+        Parameters
+        ----------
+        name : str
+            Product name (``compensated``, ``uncompensated``).
+        arrays : mapping
+            Array name to (dimension names, values).
+        attrs : mapping
+            The product's attributes (JSON-able).
+        """
+        dems = self.root.require_group(schema.DEM_GROUP)
+        group = dems.create_group(name)
+        for key, (dims, value) in arrays.items():
+            arr = group.create_array(
+                key, shape=value.shape, chunks=value.shape, dtype=value.dtype, dimension_names=dims
+            )
+            arr[...] = value
+        group.update_attributes(json.loads(json.dumps(dict(attrs))))
+        self._maybe_sync()
+
     def set_metrics(self, metrics: Mapping[str, Any]) -> None:
         """Store run-level metrics (JSON-able) in the root ``metrics`` attribute."""
         self.set_attribute("metrics", metrics)

@@ -32,6 +32,10 @@ dimension, plus a ``committed`` attribute counting the rows that are complete)::
                   data (axis0, axis1) complex64, axis0_m (axis0), axis1_m (axis1),
                   attrs frame, t0_ns, t1_ns, metrics, reference_track (the segment's
                   track, :func:`encode_reference_track`: the axes are in its frame)
+      dem/        array mode only (:func:`encode_dem`): compensated/ and uncompensated/,
+                  each height_m (x, y) float64 m up, x_m (x), y_m (y) imaging-frame m;
+                  attrs reference_track, compensated, blocks, height_resolution_m,
+                  datum_depth_m (an optional group: stores without it read as before)
 
 Names: times are integers in ns with the unit in the name (``t_ns``, ``rx_ns``);
 scalar physical columns carry their unit (``d_los_m``, ``a_y_mps2``); NED vectors
@@ -55,6 +59,7 @@ from sarmoco.daemon.flags import FLAG_DTYPE, PulseFlag
 from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.drivers.samples import AttitudeSample, EchoPacket, Validity, VelocitySample
 from sarmoco.errors import RecorderError
+from sarmoco.processing.array.imaging3d import DemProduct
 from sarmoco.processing.autofocus.report import SubapertureReport
 from sarmoco.processing.geometry import ReferenceTrack
 
@@ -225,6 +230,14 @@ TILE_DIMS = ("axis0", "axis1")
 """Dimensions of a tile's ``data``: along the reference track, then ground range."""
 TILE_COORDS = ("axis0_m", "axis1_m")
 """A tile's coordinate arrays (imaging-frame metres, one per entry of :data:`TILE_DIMS`)."""
+
+DEM_GROUP = "dem"
+"""Group of an array run's DEM products (not a table: one sub-group per product)."""
+DEM_DIMS = ("x", "y")
+"""Dimensions of a DEM's ``height_m``: along the reference track, then across it."""
+DEM_ARRAYS = {"height_m": DEM_DIMS, "x_m": ("x",), "y_m": ("y",)}
+"""A DEM product's arrays and their dimensions: heights (m, up, NaN where no echo) and the
+imaging-frame axes (m) of its reference track."""
 
 
 def encode_tile_attrs(
@@ -458,6 +471,76 @@ def decode_reference_track(value: Mapping[str, Any], where: str) -> ReferenceTra
         v0_mps=float(read_attr(value, "v0_mps", (float, int), where)),
         t0_ns=read_attr(value, "t0_ns", int, where),
     )
+
+
+def encode_dem(
+    dem: DemProduct, height_resolution_m: float, datum_depth_m: float
+) -> tuple[dict[str, tuple[tuple[str, ...], npt.NDArray[np.float64]]], dict[str, Any]]:
+    """A DEM product of the array imager as a :data:`DEM_GROUP` sub-group's content.
+
+    Parameters
+    ----------
+    dem : DemProduct
+        Heights on (along-track, cross-track) imaging-frame axes of its reference track.
+    height_resolution_m : float
+        The height (slant-range) resolution cell, m (half of it is the evaluation's bar).
+    datum_depth_m : float
+        Depth of the height datum below the first pulse's reference point, m.
+
+    Returns
+    -------
+    arrays : dict
+        Name to (dimension names, float64 array), the entries of :data:`DEM_ARRAYS`.
+    attrs : dict
+        ``reference_track`` (:func:`encode_reference_track`), ``compensated``, ``blocks``,
+        ``height_resolution_m``, ``datum_depth_m``.
+    """
+    values = {"height_m": dem.height_m, "x_m": dem.x_m, "y_m": dem.y_m}
+    arrays = {k: (dims, np.asarray(values[k], dtype=np.float64)) for k, dims in DEM_ARRAYS.items()}
+    attrs = {
+        "reference_track": encode_reference_track(dem.track),
+        "compensated": bool(dem.compensated),
+        "blocks": [int(b) for b in dem.blocks],
+        "height_resolution_m": float(height_resolution_m),
+        "datum_depth_m": float(datum_depth_m),
+    }
+    return arrays, attrs
+
+
+def decode_dem(
+    arrays: Mapping[str, npt.NDArray[Any]], attrs: Mapping[str, Any], where: str
+) -> tuple[DemProduct, float]:
+    """A DEM product back from its group (:func:`encode_dem` inverted).
+
+    Returns
+    -------
+    dem : DemProduct
+    height_resolution_m : float
+
+    Raises
+    ------
+    RecorderError
+        Naming ``where`` and the array or attribute that is missing, mistyped or of a
+        shape that does not fit the axes.
+    """
+    h, x, y = (np.asarray(arrays[k], dtype=np.float64) for k in DEM_ARRAYS)
+    if h.shape != (x.size, y.size) or x.ndim != 1 or y.ndim != 1:
+        raise RecorderError(
+            f"{where}: height_m {h.shape} does not fit x_m {x.shape}, y_m {y.shape}"
+        )
+    blocks = read_attr(attrs, "blocks", list, where)
+    if len(blocks) != 2 or not all(isinstance(b, int) and not isinstance(b, bool) for b in blocks):
+        raise RecorderError(f"{where}.blocks: {blocks!r} is not two integers")
+    track = decode_reference_track(read_attr(attrs, "reference_track", dict, where), where)
+    dem = DemProduct(
+        height_m=h,
+        x_m=x,
+        y_m=y,
+        track=track,
+        compensated=read_attr(attrs, "compensated", bool, where),
+        blocks=(blocks[0], blocks[1]),
+    )
+    return dem, float(read_attr(attrs, "height_resolution_m", (float, int), where))
 
 
 @dataclass(frozen=True)

@@ -31,6 +31,7 @@ from sarmoco.daemon.schema import COMMITTED_ATTR
 from sarmoco.drivers.samples import EchoPacket, Sample
 from sarmoco.drivers.source import Source
 from sarmoco.errors import RecorderError
+from sarmoco.processing.array.imaging3d import DemProduct
 from sarmoco.processing.types import Image
 
 _P = ParamSpec("_P")
@@ -200,6 +201,23 @@ class RunStore:
             frame=schema.read_attr(attrs, "frame", str, f"{self.path}/{name}"),
         )
         return image, attrs
+
+    @_reading
+    def dem(self, name: str) -> tuple[DemProduct, float]:
+        """DEM product ``name`` of an array run and its height resolution cell, m
+        (:func:`~sarmoco.daemon.schema.decode_dem`).
+
+        Raises
+        ------
+        RecorderError
+            The store has no such product (a single-channel run has none) or it is damaged.
+        """
+        where = f"{schema.DEM_GROUP}/{name}"
+        if schema.DEM_GROUP not in self.root or name not in self.root[schema.DEM_GROUP]:
+            raise RecorderError(f"{self.path}: no DEM product {where!r} (not an array run?)")
+        group = self._group(where)
+        arrays = {k: np.asarray(_array(group, k)[...]) for k in schema.DEM_ARRAYS}
+        return schema.decode_dem(arrays, dict(group.attrs), f"{self.path}/{where}")
 
     def ins_bytes(self, index: int | None = None) -> bytes:
         """Raw INS bytes: chunk ``index`` as read, or all committed bytes in order."""

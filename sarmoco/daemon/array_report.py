@@ -1,0 +1,209 @@
+"""Report of an array run: its DEMs against the true terrain (issue 13, the paper's Table 2).
+
+``sarmoco report RUN.zarr --truth DIR/truth.json --json`` compares each DEM product of the
+store (``compensated``: roll compensated; ``uncompensated``: imaged as if the wing were
+level) with the DEM of a simulated run's ``truth.json``:
+
+- registration: the store's DEMs sit in a frame whose origin is the INS reference point at
+  the first imaged pulse (:mod:`sarmoco.daemon.array_pipeline`); the truth's reference
+  point at that pulse time moves them onto the truth's north/east (the INS gives no
+  absolute position, as for the single-channel tiles);
+- the truth is cut to the scene (its imaged strip along track, the swath
+  ``|east| <= scene_half_width_m`` across) and the statistics of imaged minus true height
+  are :func:`sarmoco.processing.array.dem.evaluate_dem`'s: mean, standard deviation, the
+  share of cells within half a height resolution cell ``c / 4B`` (the paper's bar), the
+  range [min, max], and the coverage (the share of the scene's cells the DEM has a
+  height for);
+- a plot ``dem.png``: the true DEM, the imaged (compensated) DEM, and both differences.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from sarmoco.daemon.store import RunStore
+from sarmoco.errors import DataFileError, ProcessingError, RecorderError
+from sarmoco.processing.array.dem import evaluate_dem, truth_on_product
+from sarmoco.processing.array.imaging3d import DemProduct
+from sarmoco.processing.types import FloatArray
+
+DEM_PRODUCTS = {"dem": "compensated", "dem_uncompensated": "uncompensated"}
+"""Report key of each DEM product of the store."""
+PLOT_FILE = "dem.png"
+
+
+def read_truth(path: Path) -> dict[str, Any]:
+    """A simulated array run's ``truth.json``: its ``dem``, ``pulses`` and ``scenario``.
+
+    Raises
+    ------
+    DataFileError
+        Naming the file and the key when it cannot be read or lacks the array run's parts.
+    """
+    try:
+        truth = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise DataFileError(f"--truth {path}: cannot read as JSON: {exc}") from exc
+    for key, sub in (
+        ("dem", "height_m"),
+        ("dem", "spacing_m"),
+        ("dem", "origin_ne_m"),
+        ("pulses", "t_ns"),
+        ("pulses", "pos_ned"),
+        ("scenario", "scene_north_m"),
+        ("scenario", "scene_half_width_m"),
+    ):
+        if not isinstance(truth, dict) or sub not in truth.get(key, {}):
+            raise DataFileError(f"--truth {path}: no {key}.{sub} (not an array run's truth?)")
+    return dict(truth)
+
+
+@dataclass(frozen=True)
+class TruthDem:
+    """The true terrain of the scene, in the frame of one DEM product.
+
+    Attributes
+    ----------
+    height_m : ndarray, shape (n_north, n_east)
+        True heights (up) over the scene (the truth's strip along track, the swath across), m.
+    north_m, east_m : ndarray
+        The samples' north and east in the product's frame (registered), m.
+    """
+
+    height_m: FloatArray
+    north_m: FloatArray
+    east_m: FloatArray
+
+
+def truth_for(dem: DemProduct, truth: dict[str, Any]) -> TruthDem:
+    """The truth's scene registered onto ``dem``'s frame by the first imaged pulse."""
+    t = truth["dem"]
+    h = np.asarray(t["height_m"], dtype=np.float64)
+    dx = float(t["spacing_m"])
+    n0, e0 = (float(v) for v in t["origin_ne_m"])
+    north = n0 + dx * np.arange(h.shape[0])
+    east = e0 + dx * np.arange(h.shape[1])
+    scn = truth["scenario"]
+    lo, hi = (float(v) for v in scn["scene_north_m"])
+    half = float(scn["scene_half_width_m"])
+    rows = (north >= lo) & (north <= hi)
+    cols = np.abs(east) <= half
+    pulses_t = np.asarray(truth["pulses"]["t_ns"], dtype=np.int64)
+    pulses_pos = np.asarray(truth["pulses"]["pos_ned"], dtype=np.float64)
+    since = (pulses_t - pulses_t[0]).astype(np.float64)
+    t0 = float(dem.track.t0_ns - pulses_t[0])
+    off = [np.interp(t0, since, pulses_pos[:, i]) - dem.track.origin_ned[i] for i in (0, 1)]
+    return TruthDem(h[np.ix_(rows, cols)], north[rows] - off[0], east[cols] - off[1])
+
+
+def dem_report(store: RunStore, truth_path: Path, out_dir: Path) -> dict[str, Any]:
+    """Statistics of every DEM product of ``store`` against the truth, and ``dem.png``.
+
+    Returns
+    -------
+    dict
+        ``dem`` and ``dem_uncompensated`` (when recorded): the
+        :class:`~sarmoco.processing.array.dem.DemStats` of the product over the scene plus
+        its ``blocks``; ``plot``: the PNG's path.
+
+    Raises
+    ------
+    RecorderError
+        The store holds no compensated DEM (not an array run).
+    DataFileError
+        The truth cannot be read or shares no cell with the DEM.
+    """
+    truth = read_truth(truth_path)
+    out: dict[str, Any] = {}
+    panels: list[tuple[str, DemProduct, FloatArray, FloatArray]] = []
+    for key, name in DEM_PRODUCTS.items():
+        try:
+            dem, resolution = store.dem(name)
+        except RecorderError:
+            if name == "compensated":
+                raise
+            continue
+        t = truth_for(dem, truth)
+        try:
+            stats = evaluate_dem(dem, t.height_m, t.north_m, t.east_m, 0.5 * resolution)
+        except ProcessingError as exc:
+            raise DataFileError(f"--truth {truth_path}: {name} DEM: {exc}") from exc
+        out[key] = stats.as_dict() | {"blocks": list(dem.blocks)}
+        truth_h = truth_on_product(dem, t.height_m, t.north_m, t.east_m)
+        panels.append((name, dem, truth_h, dem.height_m - truth_h))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    out["plot"] = str(_plot(panels, out_dir / PLOT_FILE))
+    return out
+
+
+def _plot(panels: list[tuple[str, DemProduct, FloatArray, FloatArray]], path: Path) -> Path:
+    """True DEM, imaged DEM (compensated) and each product's difference, on imaging axes."""
+    name, dem, truth_h, _ = panels[0]
+    extent = (float(dem.y_m[0]), float(dem.y_m[-1]), float(dem.x_m[-1]), float(dem.x_m[0]))
+    lo, hi = np.nanmin(truth_h), np.nanmax(truth_h)
+    shown = [
+        ("true DEM (m)", truth_h, "terrain", (lo, hi)),
+        (f"imaged, {name} (m)", dem.height_m, "terrain", (lo, hi)),
+    ]
+    for label, _, _, diff in panels:
+        lim = (
+            max(1.0, float(np.nanpercentile(np.abs(diff), 99))) if np.isfinite(diff).any() else 1.0
+        )
+        shown.append((f"imaged - true, {label} (m)", diff, "RdBu_r", (-lim, lim)))
+    fig = Figure(figsize=(4.0 * len(shown), 4.0), layout="constrained")
+    for i, (title, data, cmap, (vmin, vmax)) in enumerate(shown):
+        ax = fig.add_subplot(1, len(shown), i + 1)
+        im = ax.imshow(data, extent=extent, cmap=cmap, vmin=vmin, vmax=vmax, aspect="auto")
+        ax.set_title(title, fontsize=9)
+        ax.set_xlabel("cross-track y (m)")
+        if i == 0:
+            ax.set_ylabel("along-track x (m)")
+        fig.colorbar(im, ax=ax, shrink=0.8)
+    fig.savefig(path, dpi=100)
+    return path
+
+
+def is_array_store(store: RunStore) -> bool:
+    """Whether ``store`` was written in array mode (its configuration's ``radar.mode``)."""
+    config = store.attrs.get("config", {})
+    radar = config.get("radar", {}) if isinstance(config, dict) else {}
+    return isinstance(radar, dict) and radar.get("mode") == "array"
+
+
+def write_array_report(store: RunStore, out_dir: Path, truth_path: Path | None) -> dict[str, Any]:
+    """The summary of an array run (``report.json`` in ``out_dir``); with a truth, the DEM
+    statistics and plot of :func:`dem_report`."""
+    attrs = store.attrs
+    summary: dict[str, Any] = {
+        "store": str(store.path),
+        "complete": bool(attrs.get("complete", False)),
+        "run": attrs.get("metrics", {}),
+    }
+    if truth_path is not None:
+        summary |= dem_report(store, truth_path, out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / "report.json").write_text(json.dumps(summary, indent=1))
+    return summary
+
+
+def summary_text(summary: dict[str, Any]) -> str:
+    """A few lines for the terminal: per DEM product its statistics against the truth."""
+    lines = [
+        f"{summary['store']}: array run, {summary['run'].get('pulses_imaged', 0)} pulses imaged"
+    ]
+    for key in DEM_PRODUCTS:
+        s = summary.get(key)
+        if s is not None:
+            lines.append(
+                f"{key}: mean {s['mean_m']:+.3f} m, std {s['std_m']:.3f} m, "
+                f"{100 * s['within_half_cell']:.2f} % within {s['half_cell_m']:.2f} m, "
+                f"range [{s['range_m'][0]:.2f}, {s['range_m'][1]:.2f}] m, "
+                f"coverage {100 * s['coverage']:.1f} %"
+            )
+    return "\n".join(lines) + "\n"
