@@ -4,7 +4,7 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench clean install uninstall
+.PHONY: demo test bench figures clean install uninstall
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -21,6 +21,18 @@ BENCHES := bench_mocomp bench_imaging bench_autofocus bench_drivers bench_sim th
 
 bench: $(STAMP)
 	for b in $(BENCHES); do $(BIN)/python -m bench.$$b || exit 1; done
+
+# Print the README's "Measured" figures of issues 3, 4 and 6 (focusing core, range compression,
+# throughput, the autofocus table, replay), each by the command the README names beside it.
+figures: $(STAMP)
+	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/processing/test_imaging_acceptance.py
+	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/processing/test_rangecomp.py -k point_target_peak
+	$(BIN)/python -m bench.bench_mocomp
+	$(BIN)/python -m bench.bench_imaging
+	$(BIN)/python -m bench.ku_vehicle_table --scale 0.2
+	$(BIN)/python -m bench.ku_vehicle_table --range-orders --scale 0.2
+	$(BIN)/python -m bench.ku_vehicle_table --streaming --scale 0.2
+	$(BIN)/python -m bench.bench_daemon --skip-live --profile
 
 clean:
 	rm -rf $(VENV) demo-out
