@@ -7,6 +7,7 @@ never loads the simulator, whose modules are imported by ``sim`` and ``demo`` on
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import sys
 from collections.abc import Callable, Sequence
@@ -14,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from sarmoco import __version__
-from sarmoco.daemon.config import keys_markdown, load_config
+from sarmoco.daemon.config import Config, keys_markdown, load_config
 from sarmoco.errors import ConfigError, SarmocoError
 
 
@@ -81,6 +82,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
     cfg = load_config(args.config)
     out = Path(args.out)
+    if cfg.radar.mode == "array":
+        return _replay_array(args, cfg, out)
     if args.recording:
         summary = replay_store(cfg, Path(args.recording), out, progress=not args.quiet)
     elif args.radar and args.nav:
@@ -88,6 +91,17 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     else:
         raise ConfigError("replay: give --recording STORE, or both --radar FILE.vrt and --nav FILE")
     print(f"{out}: {summary.pulses_processed} pulses focused, {summary.tiles} tiles")
+    return 0
+
+
+def _replay_array(args: argparse.Namespace, cfg: Config, out: Path) -> int:
+    from sarmoco.daemon.array_pipeline import replay_array_files
+
+    if args.recording or not (args.radar and args.nav):
+        raise ConfigError("replay: array mode replays files: give --radar FILE.vrt and --nav FILE")
+    s = replay_array_files(cfg, Path(args.radar), Path(args.nav), out)
+    dems = ", ".join(f"{k} {int(v['valid_cells'])} cells" for k, v in s.dems.items())
+    print(f"{out}: {s.pulses_imaged} of {s.pulses} array pulses imaged; DEM {dems}")
     return 0
 
 
@@ -128,11 +142,22 @@ def _cmd_import_cphd(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
+    from sarmoco.daemon.array_report import is_array_store, summary_text, write_array_report
     from sarmoco.daemon.report import write_report
+    from sarmoco.daemon.store import open_store
 
     store = Path(args.store)
     out = Path(args.out) if args.out else store.with_suffix(".report")
-    write_report(store, out)
+    if is_array_store(open_store(store)):
+        summary = write_array_report(open_store(store), out, args.truth and Path(args.truth))
+        print(json.dumps(summary) if args.json else summary_text(summary).rstrip("\n"))
+        return 0
+    if args.truth is not None:
+        raise ConfigError("report --truth: only an array run's DEM is compared with a truth")
+    summary = write_report(store, out)
+    if args.json:
+        print(json.dumps(summary))
+        return 0
     print((out / "report.txt").read_text(), end="")
     print(f"quicklooks and report.json in {out}")
     return 0
@@ -148,7 +173,7 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     from sarmoco.app.simcommand import run_command, scenario_overrides
 
     status = run_command(args)
-    if status == 0 and args.out is not None:
+    if status == 0 and args.out is not None and args.preset != "mimo-array":  # writes its own
         from sarmoco.app.simconfig import config_table, write_config
         from sarmoco.sim.outfiles import NAV_FILES, RADAR_FILE
         from sarmoco.sim.scenario import load_preset
@@ -249,6 +274,8 @@ def build_parser() -> argparse.ArgumentParser:
     report = sub.add_parser("report", help="quicklook PNGs and metrics of a store")
     report.add_argument("store", help="a run or replay store")
     report.add_argument("--out", help="output folder (default: STORE with suffix .report)")
+    report.add_argument("--truth", help="array run: truth.json of the simulated run (DEM stats)")
+    report.add_argument("--json", action="store_true", help="print the summary as one JSON")
     report.set_defaults(func=_cmd_report)
 
     sim = sub.add_parser(
