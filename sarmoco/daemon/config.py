@@ -260,6 +260,12 @@ class ImagingConfig:
     prefilter_oversampling: float = _key(
         1.25, "Pulse rate after the pre-filter over the two-sided Doppler band it keeps", gt=1
     )
+    presum_first: bool = _key(
+        False,
+        "Run the pre-filter on the raw echoes, after the per-pulse scene-centre D_los phase "
+        "and before range compression: range compression, envelope shift, per-bin D_los, "
+        "autofocus and imaging then run at the decimated pulse rate (with prefilter on)",
+    )
 
 
 @dataclass(frozen=True)

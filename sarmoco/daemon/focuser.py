@@ -41,7 +41,10 @@ from sarmoco.processing.mocomp import (
     LosGeometry,
     LosState,
     MocompSolution,
+    correct_los,
     integrate_los,
+    los_solution,
+    remove_centre_phase,
 )
 from sarmoco.processing.segments import Segmenter, SegmentLimits
 from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, IntArray, RadarParams
@@ -217,19 +220,70 @@ class _Segment:
             if im.prefilter and doppler_hz > 0
             else None
         )
+        self.presum_first = im.presum_first and self.prefilter is not None
+        """The pre-filter runs on raw echoes, before range compression (``imaging.presum_first``):
+        pushed pulses are raw, and everything after the pre-filter runs at its output rate."""
+        if self.presum_first:
+            assert self.prefilter is not None
+            d = self.prefilter.decimation
+            self._period_ns = round(1e9 * d / radar.prf_hz)
+            self._max_fill_slots = max(1, round(af.subaperture_s * radar.prf_hz / d))
+        self._radar = radar
+        self._window = None if im.window == "none" else im.window
+        self._disp_t_ns = np.zeros(0, np.int64)
+        self._disp_m = np.zeros((0, 2))
+        """Imaging time (GPS ns) and (ΔY, ΔZ) (m) of raw pulses not yet range-compressed."""
 
     def push(
-        self, rc: ComplexArray, t_ns: IntArray, vel_ned: FloatArray
+        self, pulses: ComplexArray, t_ns: IntArray, vel_ned: FloatArray
     ) -> tuple[MocompSolution, list[Tile]]:
-        """Compensate, autofocus and image range-compressed pulses of this segment."""
-        rc, motion = self.mocomp.compensate(rc, t_ns, vel_ned)
+        """Compensate, autofocus and image pulses of this segment.
+
+        ``pulses`` are range-compressed, or raw with :attr:`presum_first` (then: the
+        scene-centre D_los phase per pulse, the pre-filter, range compression, and the
+        envelope shift and per-bin D_los at the pre-filter's output times).
+        """
+        if self.presum_first:
+            motion = los_solution(
+                t_ns, self.mocomp.displacement(t_ns, vel_ned), self.mocomp.geometry
+            )
+            raw = remove_centre_phase(pulses, motion.phase_rad, self._radar.iq_conjugate)
+        else:
+            rc, motion = self.mocomp.compensate(pulses, t_ns, vel_ned)
         t_ns = self._along_track_time(t_ns, vel_ned)
         if self._eq29:
             self._dy_t_ns = np.concatenate([self._dy_t_ns, t_ns])
             self._dy_m = np.concatenate([self._dy_m, motion.disp_yz_m[:, 0]])
+        if self.presum_first:
+            assert self.prefilter is not None
+            self._disp_t_ns = np.concatenate([self._disp_t_ns, t_ns])
+            self._disp_m = np.concatenate([self._disp_m, motion.disp_yz_m])
+            return motion, self._compress_focus(*self.prefilter.push(raw, t_ns))
+        return motion, self._focus(rc, t_ns)
+
+    def _focus(self, rc: ComplexArray, t_ns: IntArray) -> list[Tile]:
+        """Autofocus (when on) and image compensated, range-compressed pulses."""
         if self.autofocus is None:
-            return motion, self._image(rc, t_ns)
-        return motion, self._autofocus_image(rc, t_ns)
+            return self._image(rc, t_ns)
+        return self._autofocus_image(rc, t_ns)
+
+    def _compress_focus(self, raw: ComplexArray, t_ns: IntArray) -> list[Tile]:
+        """Range-compress pre-filtered raw pulses, shift their envelopes, remove the per-bin
+        D_los (``mocomp.order`` 2), then autofocus and image them (:attr:`presum_first`).
+
+        (ΔY, ΔZ) (smooth) is interpolated to the pre-filter's output times from the raw
+        pulses'; those before the last output are then dropped.
+        """
+        if t_ns.size == 0:
+            return []
+        rc = rangecomp.compress(self._radar, raw, self._window)
+        base = self.track.t0_ns
+        t_rel, held = t_ns - base, self._disp_t_ns - base
+        disp = np.stack([np.interp(t_rel, held, self._disp_m[:, k]) for k in (0, 1)], axis=1)
+        keep = max(0, int(np.searchsorted(self._disp_t_ns, t_ns[-1], side="right")) - 1)
+        self._disp_t_ns, self._disp_m = self._disp_t_ns[keep:], self._disp_m[keep:]
+        rc, _ = correct_los(rc, t_ns, disp, self.mocomp.geometry, centre_phase=False)
+        return self._focus(rc, t_ns)
 
     def _autofocus_image(self, rc: ComplexArray, t_ns: IntArray) -> list[Tile]:
         """Autofocus and image pulses, with zero rows in the PRF slots of missing ones.
@@ -268,10 +322,13 @@ class _Segment:
     def finish(self) -> list[Tile]:
         """Release what autofocus and the pre-filter still hold; close every tile."""
         tiles: list[Tile] = []
+        if self.presum_first:
+            assert self.prefilter is not None
+            tiles = self._compress_focus(*self.prefilter.flush())
         if self.autofocus is not None:
             focused, corr = self.autofocus.flush()
-            tiles = self._image(focused, corr.t_ns)
-        if self.prefilter is not None:
+            tiles += self._image(focused, corr.t_ns)
+        if self.prefilter is not None and not self.presum_first:
             tiles += self._backproject(*self.prefilter.flush())
         return tiles + self._refine(self.imager.close(), last=True)
 
@@ -300,7 +357,7 @@ class _Segment:
         return tau
 
     def _image(self, rc: ComplexArray, t_ns: IntArray) -> list[Tile]:
-        if self.prefilter is not None:
+        if self.prefilter is not None and not self.presum_first:
             rc, t_ns = self.prefilter.push(rc, t_ns)
         return self._backproject(rc, t_ns)
 
@@ -447,7 +504,8 @@ class Focuser:
             Antenna phase centre velocity at the pulses (the aligner adds the lever
             arm's rate to the IMU velocity), NED, m/s.
         """
-        rc = rangecomp.compress(self.radar, raw, self.window)
+        # range compression here, or after the pre-filter (imaging.presum_first)
+        rc = raw if self._last.presum_first else rangecomp.compress(self.radar, raw, self.window)
         n = t_ns.shape[0]
         out = FocusOutput(turn=np.zeros(n, dtype=bool))
         if self.segmenter is None:

@@ -270,8 +270,71 @@ def _bin_rotation(geom: LosGeometry, dy: FloatArray, dz: FloatArray) -> ComplexA
     return np.conj(rot, out=rot)
 
 
+def los_solution(t_ns: IntArray, disp_yz_m: FloatArray, geom: LosGeometry) -> MocompSolution:
+    """The scene-centre D_los, its phase and the envelope shift of known APC deviations.
+
+    Parameters
+    ----------
+    t_ns : ndarray of int64, shape (P,)
+        Pulse times, GPS ns.
+    disp_yz_m : ndarray of float64, shape (P, 2)
+        APC deviation (ΔY, ΔZ) from the reference track, imaging frame, m.
+    geom : LosGeometry
+        Radar and scene constants.
+
+    Returns
+    -------
+    MocompSolution
+        ``range_shift_m`` is D_los where |D_los| exceeds ``geom.envelope_fraction`` of a
+        range cell (0 elsewhere, and everywhere when that is None).
+    """
+    dy, dz = disp_yz_m[:, 0], disp_yz_m[:, 1]
+    d_c = dy * np.sin(geom.beta_c_rad) + dz * np.cos(geom.beta_c_rad)
+    shift_m = np.zeros_like(d_c)
+    if geom.envelope_fraction is not None:
+        rows = np.abs(d_c) > geom.envelope_fraction * geom.range_cell_m
+        shift_m[rows] = d_c[rows]
+    return MocompSolution(
+        t_ns=np.asarray(t_ns, dtype=np.int64),
+        disp_yz_m=np.asarray(disp_yz_m, dtype=np.float64),
+        d_los_m=d_c,
+        phase_rad=4.0 * np.pi / geom.wavelength_m * d_c,
+        range_shift_m=shift_m,
+    )
+
+
+def remove_centre_phase(
+    echo: ComplexArray, phase_rad: FloatArray, conjugate: bool = False
+) -> ComplexArray:
+    """Multiply each pulse by exp(-j phase): the first-order D_los phase, one scalar a pulse.
+
+    A scalar per pulse commutes with range compression (linear, pulse by pulse), so it
+    can be removed from raw echoes before slow-time presumming.
+
+    Parameters
+    ----------
+    echo : ndarray of complex, shape (P, S)
+        Pulses, raw or range-compressed.
+    phase_rad : ndarray of float64, shape (P,)
+        ``MocompSolution.phase_rad``, rad (computed in float64, applied in complex64).
+    conjugate : bool
+        The pulses are the conjugate of the baseband (raw I/Q of a receiver with
+        ``radar.iq_conjugate``, conjugated by range compression): exp(+j phase) then.
+
+    Returns
+    -------
+    ndarray of complex64, shape (P, S)
+    """
+    rot = np.exp((1j if conjugate else -1j) * phase_rad).astype(np.complex64)
+    return np.asarray(echo, dtype=np.complex64) * rot[:, None]
+
+
 def correct_los(
-    echo: ComplexArray, t_ns: IntArray, disp_yz_m: FloatArray, geom: LosGeometry
+    echo: ComplexArray,
+    t_ns: IntArray,
+    disp_yz_m: FloatArray,
+    geom: LosGeometry,
+    centre_phase: bool = True,
 ) -> tuple[ComplexArray, MocompSolution]:
     """Apply the envelope shift and the phase of a known APC deviation.
 
@@ -285,6 +348,10 @@ def correct_los(
         APC deviation (ΔY, ΔZ) from the reference track, imaging frame, m.
     geom : LosGeometry
         Radar and scene constants.
+    centre_phase : bool
+        Remove the scene-centre phase too (False: it was removed before range
+        compression, :func:`remove_centre_phase`; the envelope and, with ``order=2``,
+        the per-bin remainder are applied).
 
     Returns
     -------
@@ -301,30 +368,19 @@ def correct_los(
         raise ProcessingError(
             f"correct_los: {echo.shape[1]} range bins but the axis has {geom.range_axis_m.shape[0]}"
         )
-    dy, dz = disp_yz_m[:, 0], disp_yz_m[:, 1]
-    d_c = dy * np.sin(geom.beta_c_rad) + dz * np.cos(geom.beta_c_rad)
+    solution = los_solution(t_ns, disp_yz_m, geom)
     out: ComplexArray = np.asarray(echo, dtype=np.complex64)
-    shift_m = np.zeros_like(d_c)
-    if geom.envelope_fraction is not None:
-        rows = np.flatnonzero(np.abs(d_c) > geom.envelope_fraction * geom.range_cell_m)
-        if rows.size:
-            shift_m[rows] = d_c[rows]
-            out = out.copy() if out is echo else out  # never write into the caller's array
-            out[rows] = shift_range(out[rows], d_c[rows] / geom.bin_spacing_m)
-    phase_c = 4.0 * np.pi / geom.wavelength_m * d_c
-    if geom.order == 1:
-        out = out * np.exp(-1j * phase_c).astype(np.complex64)[:, None]
-    else:
-        rot = _bin_rotation(geom, dy, dz)
-        rot *= np.exp(-1j * phase_c).astype(np.complex64)[:, None]
+    rows = np.flatnonzero(solution.range_shift_m)
+    if rows.size:
+        out = out.copy() if out is echo else out  # never write into the caller's array
+        out[rows] = shift_range(out[rows], solution.range_shift_m[rows] / geom.bin_spacing_m)
+    if geom.order == 2:
+        rot = _bin_rotation(geom, disp_yz_m[:, 0], disp_yz_m[:, 1])
+        if centre_phase:
+            rot *= np.exp(-1j * solution.phase_rad).astype(np.complex64)[:, None]
         out = out * rot
-    solution = MocompSolution(
-        t_ns=np.asarray(t_ns, dtype=np.int64),
-        disp_yz_m=np.asarray(disp_yz_m, dtype=np.float64),
-        d_los_m=d_c,
-        phase_rad=phase_c,
-        range_shift_m=shift_m,
-    )
+    elif centre_phase:
+        out = remove_centre_phase(out, solution.phase_rad)
     return out, solution
 
 
