@@ -76,8 +76,10 @@ def test_backprojection_matches_float64_reference(gotcha: GotchaPass) -> None:
     grid = _grid(gotcha, CAL_TARGET, 16, 0.1)
     fast = _bp(gotcha, grid).data.ravel()
     ref = _exact_reference(gotcha, grid.positions().reshape(-1, 3))
-    # measured 0.63 % (range upsampling 8, linear interpolation, complex64)
-    assert np.linalg.norm(fast - ref) / np.linalg.norm(ref) < 0.01
+    err = np.linalg.norm(fast - ref) / np.linalg.norm(ref)
+    print(f"\nbackprojection vs float64 exact DFT: {100 * err:.2f} % relative L2")
+    # measured 0.58 % (range upsampling 8, linear interpolation, complex64)
+    assert err < 0.01
 
 
 def _theory_irw(d: GotchaPass) -> tuple[float, float]:
@@ -95,6 +97,11 @@ def test_calibration_target_focuses(gotcha: GotchaPass) -> None:
     img = _bp(gotcha, _grid(gotcha, CAL_TARGET, 64, 0.1))
     m = point_target_metrics(img, (0.0, 0.0), search_radius_m=1.0)
     th = _theory_irw(gotcha)
+    print(
+        f"\nbrightest reflector IRW: cross range {m.axis0.irw_m:.3f} m (theory {th[0]:.3f}), "
+        f"ground range {m.axis1.irw_m:.3f} m (theory {th[1]:.3f}); PSLR "
+        f"{m.axis0.pslr_db:.1f} / {m.axis1.pslr_db:.1f} dB"
+    )
     # measured: cross range 0.570 m vs 0.569 m, ground range 0.312 m vs 0.305 m;
     # PSLR -12.3 / -11.7 dB (a real reflector on clutter)
     assert abs(m.axis0.irw_m / th[0] - 1.0) < 0.10, (m.axis0.irw_m, th[0])
@@ -110,11 +117,14 @@ def test_polar_format_agrees_with_backprojection(gotcha: GotchaPass) -> None:
     pfa = polar_format(d.phase_history, d.freq_hz, d.apc_m, grid)
     bp = _bp(d, grid)
     a, b = np.abs(pfa.data), np.abs(bp.data)
-    # measured 0.979 (PFA keeps the inscribed rectangle of the annulus: slightly wider IRW,
-    # different clutter speckle)
-    assert np.sum(a * b) / np.linalg.norm(a) / np.linalg.norm(b) > 0.95
+    corr = np.sum(a * b) / np.linalg.norm(a) / np.linalg.norm(b)
     mp = point_target_metrics(pfa, None)
     mb = point_target_metrics(bp, None)
+    shift = np.hypot(mp.axis0.peak_m - mb.axis0.peak_m, mp.axis1.peak_m - mb.axis1.peak_m)
+    print(f"\npolar format vs backprojection: magnitude correlation {corr:.3f}, peak {shift:.3f} m")
+    # measured 0.979 (PFA keeps the inscribed rectangle of the annulus: slightly wider IRW,
+    # different clutter speckle)
+    assert corr > 0.95
     assert abs(mp.axis0.peak_m - mb.axis0.peak_m) < 0.1
     assert abs(mp.axis1.peak_m - mb.axis1.peak_m) < 0.1
     th = _pfa_theory_irw(d)
