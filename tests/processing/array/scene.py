@@ -30,12 +30,16 @@ class Scene:
     echoes: np.ndarray
     strip_north_m: tuple[float, float]
 
-    def image(self, quat: np.ndarray | None = None, **options: object) -> DemProduct:
-        """The DEM imaged with ``quat`` (default: the true attitude) and ``options``."""
+    def image(
+        self,
+        quat: np.ndarray | None = None,
+        compensate_attitude: bool = True,
+        blocks: tuple[int, int] = (1, 8),
+    ) -> DemProduct:
+        """The DEM imaged with ``quat`` (default: the true attitude), default options otherwise."""
         att = self.quat if quat is None else quat
-        return form_dem(
-            self.echoes, self.t_ns, self.pos_ned, att, self.system, Array3dOptions(**options)
-        )  # type: ignore[arg-type]
+        opt = Array3dOptions(compensate_attitude=compensate_attitude, blocks=blocks)
+        return form_dem(self.echoes, self.t_ns, self.pos_ned, att, self.system, opt)
 
     def errors(self, product: DemProduct) -> np.ndarray:
         """Imaged minus true height on the product grid inside the strip, NaN elsewhere."""
@@ -54,10 +58,11 @@ class Scene:
         )  # fmt: skip
 
 
-def band_bias(scene: Scene, product: DemProduct, y_min: float, y_max: float) -> float:
-    """Mean height error of the cells with y_min <= |y| < y_max (both sides together), m."""
+def band_bias(scene: Scene, product: DemProduct, y_min: float, y_max: float, side: int) -> float:
+    """Mean height error of the cells with y_min <= side * y < y_max (side ±1), m."""
     err = scene.errors(product)
-    sel = (np.abs(product.y_m) >= y_min) & (np.abs(product.y_m) < y_max)
+    y = side * product.y_m
+    sel = (y >= y_min) & (y < y_max)
     e = err[:, sel]
     return float(np.nanmean(e))
 
