@@ -189,6 +189,7 @@ class Table:
                 dimension_names=(spec.row_dim, *col.dims),
                 fill_value=np.nan if col.dtype.kind == "f" else 0,
                 compressors=None if name in spec.uncompressed else "auto",
+                attributes=spec.column_attrs(name),
             )
         self.group.update_attributes({COMMITTED_ATTR: 0})
 

@@ -20,13 +20,13 @@ dimension, plus a ``committed`` attribute counting the rows that are complete)::
                   kind (nav) uint8                receive clock, -1 unknown); kind
                   vel_ned (nav, ned) m/s          NAV_KIND_VELOCITY or NAV_KIND_ATTITUDE;
                   pos_ned (nav, ned) m            fields a sample lacks are NaN;
-                  quat (nav, quat) wxyz           result: PushResult of the nav buffer;
+                  quat (nav, wxyz)                result: PushResult of the nav buffer;
                   result (nav) int8               lla: the INS's valid geodetic position
                   lla (nav, lla) deg, deg, m      (lat, lon WGS-84, altitude)
       ins_raw/    rx_ns, offset, length (raw_chunk) int64: raw INS bytes as read,
       ins_bytes/  byte (byte) uint8                so a log can be decoded again
       motion/     pulse_id, t_ns (motion) int64; pos_ned m, vel_ned m/s (motion, ned);
-                  quat (motion, quat); d_los_m m, phase_rad rad, range_shift_m m (motion)
+                  quat (motion, wxyz); d_los_m m, phase_rad rad, range_shift_m m (motion)
       autofocus/  one row per subaperture estimate (:data:`AUTOFOCUS_COLUMNS`)
       images/     attrs committed = tiles complete; tile_000000/ ... each with
                   data (axis0, axis1) complex64, axis0_m (axis0), axis1_m (axis1),
@@ -133,6 +133,10 @@ class TableSpec:
     uncompressed : tuple of str
         Columns stored without compression (raw echoes: noise does not compress, and
         the CPU is needed for focusing).
+    coords : tuple of str
+        Columns that are coordinates of the others (times along the row dimension): every
+        other column names them in its ``coordinates`` attribute (CF and xarray
+        convention), so ``xarray.open_zarr(store, group=table)`` makes them coordinates.
     """
 
     name: str
@@ -141,6 +145,13 @@ class TableSpec:
     per_pulse: bool = False
     chunk_rows: int | None = None
     uncompressed: tuple[str, ...] = ()
+    coords: tuple[str, ...] = ()
+
+    def column_attrs(self, name: str) -> dict[str, str]:
+        """Attributes of column ``name``: the ``coordinates`` it has (none for a coordinate)."""
+        if name in self.coords or not self.coords:
+            return {}
+        return {"coordinates": " ".join(self.coords)}
 
 
 def pulses_table(n_samples: int, sample_format: SampleFormat, raw_echoes: bool) -> TableSpec:
@@ -155,7 +166,9 @@ def pulses_table(n_samples: int, sample_format: SampleFormat, raw_echoes: bool) 
         dims = ("sample",) if sample_format == "complex64" else ("sample", "iq")
         shape = sample_shape(n_samples, sample_format)
         columns["echo"] = _col(sample_dtype(sample_format), shape, dims)
-    return TableSpec("pulses", "pulse", columns, per_pulse=True, uncompressed=("echo",))
+    return TableSpec(
+        "pulses", "pulse", columns, per_pulse=True, uncompressed=("echo",), coords=("t_ns",)
+    )
 
 
 NAV = TableSpec(
@@ -167,10 +180,11 @@ NAV = TableSpec(
         "kind": _col(np.uint8),
         "vel_ned": _col(np.float64, (3,), ("ned",)),
         "pos_ned": _col(np.float64, (3,), ("ned",)),
-        "quat": _col(np.float64, (4,), ("quat",)),
+        "quat": _col(np.float64, (4,), ("wxyz",)),
         "result": _col(np.int8),
         "lla": _col(np.float64, (3,), ("lla",)),
     },
+    coords=("t_ns",),
 )
 INS_RAW = TableSpec(
     "ins_raw",
@@ -186,12 +200,13 @@ MOTION = TableSpec(
         "t_ns": _col(np.int64),
         "pos_ned": _col(np.float64, (3,), ("ned",)),
         "vel_ned": _col(np.float64, (3,), ("ned",)),
-        "quat": _col(np.float64, (4,), ("quat",)),
+        "quat": _col(np.float64, (4,), ("wxyz",)),
         "d_los_m": _col(np.float64),
         "phase_rad": _col(np.float64),
         "range_shift_m": _col(np.float64),
     },
     per_pulse=True,
+    coords=("t_ns",),
 )
 
 AUTOFOCUS_COLUMNS: Mapping[str, tuple[Column, Callable[[SubapertureReport], Any]]] = {
@@ -211,7 +226,10 @@ its residual (Hz/s), and whether the corrections were applied (False where they 
 have lowered the focus of the block released with them: the autofocus never makes it
 worse). A new column is one entry here."""
 AUTOFOCUS = TableSpec(
-    "autofocus", "subaperture", {name: col for name, (col, _) in AUTOFOCUS_COLUMNS.items()}
+    "autofocus",
+    "subaperture",
+    {name: col for name, (col, _) in AUTOFOCUS_COLUMNS.items()},
+    coords=("t_center_s",),
 )
 
 FIXED_TABLES = ("pulses", NAV.name, INS_RAW.name, INS_BYTES.name, MOTION.name)
