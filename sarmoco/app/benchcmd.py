@@ -361,6 +361,7 @@ def bench(
     scale: float = 1.0,
     record: bool = True,
     autofocus: bool = True,
+    presum_first: bool = False,
     work: Path | None = None,
     keep: bool = False,
 ) -> dict[str, Any]:
@@ -379,6 +380,8 @@ def bench(
     autofocus : bool
         Autofocus on (``autofocus.enabled``; the scenario may have it off when its
         aperture holds fewer than two subapertures).
+    presum_first : bool
+        Pre-filter before range compression (``imaging.presum_first``).
     work : Path, optional
         Where the temporary run folder is made (default: the system's temporary folder).
     keep : bool
@@ -398,7 +401,10 @@ def bench(
     if work is not None:
         work.mkdir(parents=True, exist_ok=True)
     out = Path(tempfile.mkdtemp(prefix=f"sarmoco-bench-{preset}-", dir=work))
-    sections: dict[str, dict[str, Any]] = {"recorder": {"raw_echoes": record}}
+    sections: dict[str, dict[str, Any]] = {
+        "recorder": {"raw_echoes": record},
+        "imaging": {"presum_first": presum_first},
+    }
     if not autofocus:
         sections["autofocus"] = {"enabled": False}
     load_start = os.getloadavg()[0]
@@ -425,6 +431,7 @@ def bench(
         "daemon_cpu_s": run.cpu_s,
         "fft_cpu_s_per_pulse": fft_s,
         "record_raw_echoes": record,
+        "presum_first": presum_first,
         "bytes_written": written,
         "exit_status": run.exit_status,
         "load_average": [load_start, os.getloadavg()[0]],
@@ -446,6 +453,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--keep", action="store_true", help="keep the run folder (store, log)")
     p.add_argument("--no-record", action="store_true", help="raw echoes not recorded")
     p.add_argument("--no-autofocus", action="store_true", help="autofocus off")
+    p.add_argument(
+        "--presum-first", action="store_true", help="pre-filter before range compression"
+    )
     p.add_argument("--work", type=Path, help="folder for the temporary run folder")
 
 
@@ -457,6 +467,7 @@ def run_command(args: argparse.Namespace) -> int:
         scale=args.scale,
         record=not args.no_record,
         autofocus=not args.no_autofocus,
+        presum_first=args.presum_first,
         work=args.work,
         keep=args.keep,
     )
