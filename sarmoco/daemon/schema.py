@@ -147,7 +147,7 @@ class TableSpec:
     uncompressed: tuple[str, ...] = ()
     coords: tuple[str, ...] = ()
 
-    def column_attrs(self, name: str) -> dict[str, str]:
+    def column_attrs(self, name: str) -> dict[str, Any]:
         """Attributes of column ``name``: the ``coordinates`` it has (none for a coordinate)."""
         if name in self.coords or not self.coords:
             return {}
