@@ -50,7 +50,7 @@ from sarmoco.daemon.focuser import radar_params, tile_imaging
 from sarmoco.daemon.pipeline import RunSummary, tile_metrics
 from sarmoco.daemon.recorder import create_tile, write_tile
 from sarmoco.daemon.runner import replay_files, replay_store
-from sarmoco.errors import ConfigError
+from sarmoco.errors import ConfigError, ProcessingError
 
 LOOPBACK = "127.0.0.1"
 """The only address a local cluster binds."""
@@ -194,7 +194,19 @@ def plan_blocks(result: FrontEnd, tiles_per_block: int) -> list[ImageBlock]:
 
 def finish_store(result: FrontEnd, written: dict[int, dict[str, float]]) -> RunSummary:
     """Commit the tiles, write the run metrics with them, mark the store complete, and
-    remove the scratch store; the run's summary."""
+    remove the scratch store; the run's summary.
+
+    Raises
+    ------
+    ProcessingError
+        A tile created by :func:`plan_blocks` was not written by any block.
+    """
+    planned = sum(len(stream.tiles) for stream in result.streams)
+    missing = sorted(set(range(planned)) - set(written))
+    if missing:
+        raise ProcessingError(
+            f"batch: {result.recording.out}: tiles {missing} were not formed by their blocks"
+        )
     summary = replace(
         result.summary,
         tiles=len(written),
@@ -223,8 +235,7 @@ def run_batch(
     """
     from distributed import as_completed
 
-    if tiles_per_block < 1:
-        raise ConfigError(f"batch: --tiles-per-block {tiles_per_block} is not >= 1")
+    at_least_one("--tiles-per-block", tiles_per_block)
     fronts = [client.submit(front_end, cfg, r, pure=False) for r in recordings]
     owner: dict[Any, int] = {f: i for i, f in enumerate(fronts)}
     results: list[FrontEnd | None] = [None] * len(recordings)
@@ -267,8 +278,7 @@ def cluster_client(scheduler: str | None, workers: int, dashboard: bool = True) 
         with Client(scheduler) as client:
             yield client
         return
-    if workers < 1:
-        raise ConfigError(f"batch: --workers {workers} is not >= 1")
+    at_least_one("--workers", workers)
     with (
         LocalCluster(
             n_workers=workers,
@@ -280,6 +290,12 @@ def cluster_client(scheduler: str | None, workers: int, dashboard: bool = True) 
         Client(cluster) as client,
     ):
         yield client
+
+
+def at_least_one(option: str, value: int) -> None:
+    """Refuse a count below 1 (ConfigError naming the option)."""
+    if value < 1:
+        raise ConfigError(f"batch: {option} {value} is not >= 1")
 
 
 def dashboard_text(client: Any) -> str:
@@ -341,8 +357,10 @@ def recordings_of(args: argparse.Namespace) -> list[Recording]:
 
 def run_command(args: argparse.Namespace) -> int:
     """Run ``sarmoco batch``."""
-    cfg = load_config(args.config)
     recordings = recordings_of(args)
+    at_least_one("--tiles-per-block", args.tiles_per_block)
+    at_least_one("--workers", args.workers)
+    cfg = load_config(args.config)
     start = time.monotonic()
     with cluster_client(args.scheduler, args.workers) as client:
         print(dashboard_text(client), file=sys.stderr)
