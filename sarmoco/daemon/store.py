@@ -169,17 +169,21 @@ class RunStore:
         arrays of a table may have been grown to different lengths (growth happens
         before rows are written), which ``xarray.open_zarr`` on the group would refuse.
         The chunks are read when the Dataset is computed: a damaged chunk raises then, from
-        zarr or numcodecs.
+        zarr or numcodecs. The columns the others name in their ``coordinates`` attribute
+        (``t_ns``...) are coordinates, as ``xarray.open_zarr`` makes them.
         """
         n = self.committed(table)
         group = self._group(table)
         data_vars = {}
+        coords: set[str] = set()
         for name, arr in sorted(group.arrays()):
             if not isinstance(arr.metadata, ArrayV3Metadata):
                 raise RecorderError(f"{self.path}: {table}/{name} is not a zarr v3 array")
             dims = tuple(str(d) for d in arr.metadata.dimension_names or ())
             data_vars[name] = (dims, da.from_zarr(arr)[:n])
-        return xr.Dataset(data_vars)
+            named = arr.attrs.get("coordinates", "")
+            coords.update(named.split() if isinstance(named, str) else ())
+        return xr.Dataset(data_vars).set_coords(sorted(coords & data_vars.keys()))
 
     @property
     def n_images(self) -> int:
