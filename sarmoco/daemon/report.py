@@ -32,6 +32,7 @@ import numpy.typing as npt
 from sarmoco.daemon.config import Config, parse_config
 from sarmoco.daemon.echoring import to_complex64
 from sarmoco.daemon.focuser import imaged_beam_rad, radar_params
+from sarmoco.daemon.geotiff import write_geotiffs
 from sarmoco.daemon.quicklook import plot_cuts, plot_image, plot_panels, plot_series
 from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.errors import ProcessingError, RecorderError
@@ -411,6 +412,10 @@ def write_report(
             "contrast": image_contrast(image.data),
             "points": bright_points(image),
         }
+        try:  # the georeferenced quicklook, one GeoTIFF per reference-track segment
+            summary["geotiff"] = [g.path.name for g in write_geotiffs(store, out_dir)]
+        except RecorderError as exc:  # no absolute position, or not a ground-plane image
+            summary["geotiff_skipped"] = str(exc)
     if store.committed("motion"):
         m = store.read("motion", ["t_ns", "d_los_m", "phase_rad", "range_shift_m"])
         t = (m["t_ns"] - m["t_ns"][0]) * 1e-9

@@ -20,6 +20,7 @@ import numpy as np
 import pytest
 import sarkit.sicd as sksicd
 import sarkit.verification as skver
+import tifffile
 
 from sarmoco.app.cli import main
 from sarmoco.app.export import failures
@@ -27,6 +28,7 @@ from sarmoco.app.sicd import sicd_product, write_sicd
 from sarmoco.daemon import schema
 from sarmoco.daemon.config import load_config
 from sarmoco.daemon.georeference import georeference, grid_points, segment_images
+from sarmoco.daemon.geotiff import write_geotiffs
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.runner import replay_files
 from sarmoco.daemon.store import RunStore, open_store
@@ -98,6 +100,35 @@ def test_targets_are_georeferenced_within_a_pixel(scene: Scene) -> None:
     print(f"georeferencing errors (m): {np.round(errors, 4).tolist()}, fit rms {geo.fit_rms_m}")
     assert len(errors) == 3
     assert max(errors) < PIXEL_M / 2
+
+
+def test_the_geotiff_puts_the_brightest_target_where_the_simulator_did(scene: Scene) -> None:
+    """The GeoTIFF's own tags (read back with tifffile) map its brightest pixel to within
+    one pixel of the nearest simulated target, and its top-left pixel (first along-track,
+    farthest range: the PNG's orientation) to that image pixel's georeferenced position;
+    the affine map fits every pixel to 1 mm."""
+    (tif,) = write_geotiffs(scene.store, scene.out)
+    assert tif.max_residual_m < 1e-3
+    with tifffile.TiffFile(tif.path) as f:
+        page = f.pages[0]
+        raster, tags = page.asarray(), page.geotiff_tags
+    assert tags["GeographicTypeGeoKey"] == 4326 and tags["GTRasterTypeGeoKey"] == 1
+    m = np.asarray(tags["ModelTransformation"])
+    r, c = np.unravel_index(np.argmax(raster), raster.shape)
+    lon, lat = (m[:2, :2] @ [c + 0.5, r + 0.5]) + m[:2, 3]
+    # the pixel's height is the ground's (the image plane): compare horizontally
+    ned = geodetic_to_ned(np.array([lat, lon, GEODETIC_ORIGIN[2]]), GEODETIC_ORIGIN)
+    targets = np.array([t["pos_ned"] for t in scene.truth["targets"]])
+    miss = np.min(np.linalg.norm(targets[:, :2] - ned[:2], axis=1))
+    print(f"GeoTIFF brightest pixel: {miss:.3f} m from the nearest target")
+    assert miss < PIXEL_M
+    seg = segment_images(scene.store)[0]
+    cfg = load_config(scene.out / "sbg.toml")
+    corner = grid_points(seg.image, seg.track, cfg.geometry.height_m)[0, -1]
+    lat0, lon0, h0 = georeference(scene.store).geodetic(corner)
+    lon, lat = (m[:2, :2] @ [0.5, 0.5]) + m[:2, 3]
+    ned = geodetic_to_ned(np.array([lat, lon, h0]), (lat0, lon0, h0))
+    assert np.linalg.norm(ned) < 1e-3
 
 
 def test_sicd_export_passes_the_consistency_check_and_holds_our_pixels(
