@@ -22,7 +22,7 @@ dimension, plus a ``committed`` attribute counting the rows that are complete)::
                   pos_ned (nav, ned) m            fields a sample lacks are NaN;
                   quat (nav, wxyz)                result: PushResult of the nav buffer;
                   result (nav) int8               lla: the INS's valid geodetic position
-                  lla (nav, lla) deg, deg, m      (lat, lon WGS-84, altitude)
+                  lla (nav, lat_lon_alt) deg, deg, m (lat, lon WGS-84, altitude)
       ins_raw/    rx_ns, offset, length (raw_chunk) int64: raw INS bytes as read,
       ins_bytes/  byte (byte) uint8                so a log can be decoded again
       motion/     pulse_id, t_ns (motion) int64; pos_ned m, vel_ned m/s (motion, ned);
@@ -182,7 +182,7 @@ NAV = TableSpec(
         "pos_ned": _col(np.float64, (3,), ("ned",)),
         "quat": _col(np.float64, (4,), ("wxyz",)),
         "result": _col(np.int8),
-        "lla": _col(np.float64, (3,), ("lla",)),
+        "lla": _col(np.float64, (3,), ("lat_lon_alt",)),
     },
     coords=("t_ns",),
 )
