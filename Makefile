@@ -23,15 +23,19 @@ bench: $(STAMP)
 	for b in $(BENCHES); do $(BIN)/python -m bench.$$b || exit 1; done
 
 # Print the README's "Measured" figures of issues 3, 4 and 6 (focusing core, range compression,
-# throughput, the autofocus table, replay), each by the command the README names beside it.
+# GOTCHA, THz Table 2, throughput, the autofocus tables and CPU time, replay), each by the
+# command the README names beside it (about 10 minutes on 2 cores).
 figures: $(STAMP)
 	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/processing/test_imaging_acceptance.py
 	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/processing/test_rangecomp.py -k point_target_peak
+	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/processing/test_gotcha.py
+	$(BIN)/python -m bench.thz_table2 --sweep-seeds 6
 	$(BIN)/python -m bench.bench_mocomp
 	$(BIN)/python -m bench.bench_imaging
 	$(BIN)/python -m bench.ku_vehicle_table --scale 0.2
 	$(BIN)/python -m bench.ku_vehicle_table --range-orders --scale 0.2
 	$(BIN)/python -m bench.ku_vehicle_table --streaming --scale 0.2
+	$(BIN)/python -m bench.bench_autofocus --seconds 3
 	$(BIN)/python -m bench.bench_daemon --skip-live --profile
 
 clean:
