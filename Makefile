@@ -36,6 +36,8 @@ figures: $(STAMP)
 	$(BIN)/python -m bench.ku_vehicle_table --range-orders --scale 0.2
 	$(BIN)/python -m bench.ku_vehicle_table --streaming --scale 0.2
 	$(BIN)/python -m bench.bench_autofocus --seconds 3
+	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/processing/autofocus/test_gotcha_autofocus.py
+	$(BIN)/python -m bench.gotcha_autofocus
 	$(BIN)/python -m bench.bench_daemon --skip-live --profile
 
 clean:

@@ -46,6 +46,7 @@ def test_autofocus_sharpens_provided_data(gotcha_files: list[Path]) -> None:
     )
     h0 = image_entropy(before.data)
     h1 = image_entropy(image(res.apply(d.phase_history, d.freq_hz)).data)
+    print(f"\nentropy as provided {h0:.3f}, after our spotlight autofocus {h1:.3f}")
     # measured: 7.104 as provided, 7.008 after (0.19 rad rms phase removed): the bar is half
     # that drop, so a no-op (or an estimate of the wrong sign) fails
     assert h1 < h0 - 0.05, (h0, h1)
