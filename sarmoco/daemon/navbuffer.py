@@ -191,6 +191,13 @@ class NavStream:
         horizon = self._t[self._hi - 1] - self.history_ns
         self._lo += int(np.searchsorted(self.t_ns, horizon))
 
+    def span_ns(self) -> tuple[int, int] | None:
+        """Times of the oldest and the newest held sample, GPS ns; None when empty."""
+        with self._lock:
+            if self._hi == self._lo:
+                return None
+            return int(self._t[self._lo]), int(self._t[self._hi - 1])
+
     def bracket(self, t_ns: IntArray) -> tuple[IntArray, IntArray]:
         """The held samples around each query time.
 
@@ -289,6 +296,14 @@ class NavBuffer:
             r_att = self.push_attitude(t, nav.quat[k], rx)
             out[k] = max(r_kin, r_att)
         return out
+
+    def span_ns(self) -> tuple[int, int] | None:
+        """Times that both streams hold samples over, GPS ns: from the later of their
+        oldest samples to the earlier of their newest; None while either is empty."""
+        spans = (self.kinematics.span_ns(), self.attitude.span_ns())
+        if spans[0] is None or spans[1] is None:
+            return None
+        return max(spans[0][0], spans[1][0]), min(spans[0][1], spans[1][1])
 
     def counts(self) -> dict[str, int]:
         """Counters of both streams, keys ``kinematics_<name>`` and ``attitude_<name>``."""

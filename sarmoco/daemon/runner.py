@@ -8,6 +8,7 @@ import signal
 import sys
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -210,6 +211,10 @@ class _LiveRun:
         radar = open_radar(cfg)
         ins = open_ins(cfg, keep_raw=cfg.recorder.raw_ins)
         self.pipe = Pipeline(cfg, self.recorder, self.counters)
+        self._ins_file = Path(cfg.ins.link).is_file()
+        """The INS link is a log file, read at its own pace (see :meth:`_now_ns`)."""
+        self._ins_backlog: deque[Sample] = deque()
+        """Samples read from an INS log and not yet offered (:meth:`_read_ins_file`)."""
         record_ins_format(self.recorder, ins)
         self.counters.add_source("radar", radar.decoder.counters.snapshot)
         self.counters.add_source("ins", ins.counters.snapshot)
@@ -259,6 +264,8 @@ class _LiveRun:
     def _read_ins(self, link: _Link) -> int:
         """Offer INS samples and the bytes they came in to the pipeline."""
         assert isinstance(link, Source)
+        if self._ins_file:
+            return self._read_ins_file(link)
         samples = link.poll(POLL_S)
         rx_ns = time.monotonic_ns()
         self.pipe.add_ins_raw(link.take_raw(), rx_ns)
@@ -267,7 +274,77 @@ class _LiveRun:
             self.pipe.add_nav(samples, rx_ns)
         return len(samples)
 
+    def _read_ins_file(self, link: Source) -> int:
+        """Offer an INS log's samples no further ahead of the radar than the nav history.
+
+        A file is read as fast as the disk allows, many seconds of samples in one poll.
+        Offered at once, they would push the samples the waiting pulses need out of the
+        nav buffer's history, so they wait here until the radar comes within half the
+        history (:meth:`_ins_horizon_ns`). The read time of a file says nothing of when
+        the INS sent a sample: no receive time goes with them (no latency check).
+
+        Returns
+        -------
+        int
+            Samples offered plus samples still waiting (non-zero while any wait, so the
+            link is not finished before they are offered).
+        """
+        backlog = self._ins_backlog
+        if not backlog:
+            backlog.extend(link.poll(POLL_S))
+            self.pipe.add_ins_raw(link.take_raw(), None)
+        horizon = self._ins_horizon_ns()
+        offer = []
+        while backlog and (horizon is None or backlog[0].t_gps_ns <= horizon):
+            offer.append(backlog.popleft())
+        if offer:
+            self.st.last_nav_mono = time.monotonic()
+            self.pipe.add_nav(offer, None)
+        elif backlog:
+            self.st.stop.wait(POLL_S)
+        return len(offer) + len(backlog)
+
+    def _ins_horizon_ns(self) -> int | None:
+        """Newest INS time an INS log may be offered up to, GPS ns (None: no limit).
+
+        Half the nav buffer's history past the oldest pulse waiting in the ring (where
+        the aligner stands), else past the newest pulse read, else (before the first
+        pulse) past the oldest sample held or waiting. A finished radar link sets no limit.
+        """
+        if "radar" in self.st.finished:
+            return None
+        waiting = self.pipe.ring.peek_times(1)
+        if waiting.shape[0]:
+            reference = int(waiting[0])
+        else:
+            newest_pulse = self.pipe.now_ns(live=False)
+            span = self.pipe.nav.span_ns()
+            if newest_pulse is not None:
+                reference = newest_pulse
+            elif span is not None:
+                reference = span[0]
+            elif self._ins_backlog:
+                reference = self._ins_backlog[0].t_gps_ns
+            else:
+                return None
+        return reference + self.pipe.nav.kinematics.history_ns // 2
+
     # -- processing loop ----------------------------------------------------------------------
+
+    def _now_ns(self) -> int | None:
+        """The aligner's "now": the radar clock, held back to the INS log's progress.
+
+        :meth:`Pipeline.now_ns` (the newest pulse plus the host time since it came) is
+        "now" for links that deliver data as it happens. An INS log file is read at its
+        own pace: until it ends, a pulse beyond what it has delivered is waiting for the
+        read, not for an INS that is late, so "now" goes no further than the newest
+        sample both INS streams hold (None: wait for the first).
+        """
+        now = self.pipe.now_ns(live=True)
+        if now is None or not self._ins_file or "ins" in self.st.finished:
+            return now
+        span = self.pipe.nav.span_ns()
+        return None if span is None else min(now, span[1])
 
     def supervise(self, idle_exit_s: float | None) -> None:
         """Process, report health and status, until stopped (or idle for ``idle_exit_s``).
@@ -299,7 +376,7 @@ class _LiveRun:
         is counted and reported unhealthy until a pass succeeds.
         """
         try:
-            released = self.pipe.process(self.pipe.now_ns(live=True))
+            released = self.pipe.process(self._now_ns())
         except SarmocoError as exc:
             self.counters.inc("processing_errors")
             self.health.set("processing", False, str(exc))

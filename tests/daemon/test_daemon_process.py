@@ -52,6 +52,7 @@ from sarmoco.app.simconfig import write_config
 from sarmoco.daemon.config import Config, load_config
 from sarmoco.daemon.flags import NAV_UNUSABLE, PulseFlag
 from sarmoco.daemon.links import open_ins, vita_decoder
+from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.daemon.runner import replay_store
 from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.drivers.radar import RadarFileSource
@@ -163,11 +164,17 @@ def free_port(kind: socket.SocketKind) -> int:
 
 
 class Daemon:
-    """A ``sarmoco run`` subprocess; stderr (the JSON log) goes to ``<store>.log``."""
+    """A ``sarmoco run`` subprocess; stderr (the JSON log) goes to ``log`` (``<store>.log``)."""
 
-    def __init__(self, config: Path, store: Path, env: dict[str, str] | None = None) -> None:
+    def __init__(
+        self,
+        config: Path,
+        store: Path,
+        env: dict[str, str] | None = None,
+        log: Path | None = None,
+    ) -> None:
         self.store = store
-        self.log = store.with_suffix(".log")
+        self.log = log or store.with_suffix(".log")
         with self.log.open("w") as err:
             self.proc = subprocess.Popen(
                 [*PY, "run", "--config", str(config), "--store", str(store)],
@@ -597,7 +604,13 @@ def test_file_links_that_end_are_finished_not_failed(sim: SimFiles, tmp_path: Pa
 
 def test_a_file_longer_than_the_ring_is_read_at_the_processing_pace(tmp_path: Path) -> None:
     """A ``.vrt`` of 3000 pulses (the echo ring holds 1024) as the radar file link: the
-    reader waits for room instead of dropping, so every pulse is recorded, none flagged."""
+    reader waits for room instead of dropping, so every pulse is recorded, none flagged.
+
+    The ``.tlog`` of the same 17 s is read many times faster than the radar file: its
+    samples are offered no further ahead of the pulses than the nav buffer keeps, and with
+    no receive time (a file's read time is not the INS's send time), so every sample is
+    accepted and every pulse leaves the aligner with navigation, as in a replay.
+    """
     n_pulses = 3000
     simulate_files(tmp_path, n_pulses)
     table = tomllib.loads((tmp_path / "sarmoco.toml").read_text())
@@ -612,6 +625,10 @@ def test_a_file_longer_than_the_ring_is_read_at_the_processing_pace(tmp_path: Pa
     np.testing.assert_array_equal(got["t_ns"], t_ns)
     np.testing.assert_array_equal(got["echo"], echo)
     assert not (got["flags"] & np.uint32(PulseFlag.DROPPED_BEFORE)).any()
+    nav_flags = np.uint32(PulseFlag.NAV_GAP | PulseFlag.NAV_TIMEOUT)
+    assert not (got["flags"] & nav_flags).any(), "pulses released without navigation"
+    results = store.read("nav", ["result"])["result"]
+    assert results.size and (results == PushResult.ACCEPTED).all(), np.unique(results)
 
 
 @pytest.mark.parametrize("protocol", ["mavlink", "sbg", "sbg-can"])
