@@ -1,0 +1,91 @@
+"""Ground reprocessing with dask (issue 15): wall time against workers and block size.
+
+Run as ``.venv/bin/python -m bench.bench_batch [--scale 0.05] [--pulses 3000]``.
+
+A ku-vehicle run is simulated as files (``sarmoco sim --out``), replayed once in one
+process (the reference and the baseline), then reprocessed by :func:`run_batch` on a
+local cluster of 1 and of 2 worker processes (one thread each, 127.0.0.1) at several
+tile counts per imaging block. Each batch store is compared with the single-process
+replay (largest relative L2 difference of a tile). The cluster is started before the
+clock starts (its start-up is printed apart); worker processes load the numba kernels
+from the on-disk cache on their first block.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from sarmoco.app.batch import Recording, cluster_client, run_batch
+from sarmoco.daemon.config import load_config
+from sarmoco.daemon.runner import replay_files
+from sarmoco.daemon.store import open_store
+
+
+def worst_difference(single: Path, batch: Path) -> float:
+    """Largest relative L2 difference of a tile between two stores."""
+    a, b = open_store(single), open_store(batch)
+    if a.n_images != b.n_images:
+        return float("inf")
+    worst = 0.0
+    for k in range(a.n_images):
+        x, y = a.image(k)[0].data, b.image(k)[0].data
+        norm = float(np.linalg.norm(x)) or 1.0
+        worst = max(worst, float(np.linalg.norm(x - y)) / norm)
+    return worst
+
+
+def main() -> None:
+    """Run the bench and print a JSON line per configuration."""
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scale", type=float, default=0.05)
+    ap.add_argument("--pulses", type=int, default=3000)
+    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--tiles-per-block", type=int, nargs="+", default=[1, 4, 16])
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        sim = work / "sim"
+        subprocess.run(
+            [sys.executable, "-m", "sarmoco", "sim", "--preset", "ku-vehicle", "--scale",
+             str(args.scale), "--pulses", str(args.pulses), "--motion", "turbulence",
+             "--motion-seed", "1", "--ins-grade", "tactical", "--out", str(sim)],
+            check=True, capture_output=True,
+        )  # fmt: skip
+        cfg = load_config(sim / "sarmoco.toml")
+        radar, nav = sim / "radar.vrt", sim / "nav.tlog"
+        single = work / "single.zarr"
+        start = time.perf_counter()
+        summary = replay_files(cfg, radar, nav, single, progress=False)
+        single_s = time.perf_counter() - start
+        print(json.dumps({"single_process_s": round(single_s, 2), "tiles": summary.tiles,
+                          "pulses": args.pulses, "scale": args.scale}), flush=True)  # fmt: skip
+        for workers in args.workers:
+            start = time.perf_counter()
+            with cluster_client(None, workers, dashboard=False) as client:
+                startup_s = time.perf_counter() - start
+                for tiles_per_block in args.tiles_per_block:
+                    out = work / f"batch-{workers}-{tiles_per_block}.zarr"
+                    start = time.perf_counter()
+                    run_batch(client, cfg, [Recording(out, radar=radar, nav=nav)],
+                              tiles_per_block, progress=False)  # fmt: skip
+                    wall_s = time.perf_counter() - start
+                    print(json.dumps({
+                        "workers": workers, "tiles_per_block": tiles_per_block,
+                        "wall_s": round(wall_s, 2), "cluster_start_s": round(startup_s, 2),
+                        "speedup_vs_single": round(single_s / wall_s, 2),
+                        "worst_tile_rel_l2": worst_difference(single, out),
+                    }), flush=True)  # fmt: skip
+                    shutil.rmtree(out)
+
+
+if __name__ == "__main__":
+    main()
