@@ -24,8 +24,9 @@ from sarmoco.drivers.can_source import CanLogSource, CanSource
 from sarmoco.drivers.clock import gps_ns_to_unix_ns
 from sarmoco.drivers.samples import AttitudeSample, EventSample, Validity, VelocitySample
 from sarmoco.drivers.sbg_can import SbgCanDecoder
+from tests.conftest import SHARED_DATA
 
-DBC = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "can" / "sbgCan.dbc"
+DBC = SHARED_DATA / "can" / "sbgCan.dbc"
 LEAP = 18
 G0 = 1_400_000_000_000_000_000  # GPS ns at D0 (whole ms)
 D0_US = 50_000_000

@@ -20,8 +20,9 @@ from sarmoco.drivers.clock import unix_ns_to_gps_ns
 from sarmoco.drivers.dataflash import DataflashSource
 from sarmoco.drivers.mavlink import MavlinkSource, mavlink2, mavutil
 from sarmoco.drivers.samples import AttitudeSample, VelocitySample
+from tests.conftest import SHARED_DATA
 
-DATA = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "mavlink"
+DATA = SHARED_DATA / "mavlink"
 TLOG = DATA / "arduplane_quadplane_sitl.tlog"
 DFBIN = DATA / "arduplane_sitl_dataflash.bin"
 KEY = bytes(range(32))

@@ -12,7 +12,6 @@ waited for).
 
 from __future__ import annotations
 
-from pathlib import Path
 from typing import Any
 
 import cantools
@@ -24,10 +23,11 @@ from sarmoco.drivers import sbg_can as sc
 from sarmoco.drivers import sbg_codec as codec
 from sarmoco.drivers.sbg import SbgDecoder
 from sarmoco.errors import ProtocolError
+from tests.conftest import SHARED_DATA
 from tests.fuzz.bounds import assert_named_error, bounded_allocation
 from tests.fuzz.edits import edited
 
-DBC = Path(__file__).resolve().parents[2] / ".." / "shared" / "data" / "can" / "sbgCan.dbc"
+DBC = SHARED_DATA / "can" / "sbgCan.dbc"
 FUZZ = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 
 u32 = st.integers(0, 2**32 - 1)

@@ -4,7 +4,6 @@ truth (its speed is measured by ``bench/bench_sim.py``, not asserted here)."""
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,15 +12,9 @@ from sarmoco.processing.rangecomp import compress, range_axis_m
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
 from sarmoco.sim.trajectory import MotionSpec
+from tests.conftest import SHARED_DATA
 
-TLOG = (
-    Path(__file__).resolve().parents[2]
-    / ".."
-    / "shared"
-    / "data"
-    / "mavlink"
-    / "arduplane_quadplane_sitl.tlog"
-)
+TLOG = SHARED_DATA / "mavlink" / "arduplane_quadplane_sitl.tlog"
 
 
 @pytest.mark.parametrize("name", ["thz-spotlight", "ku-vehicle", "ku-microuav"])

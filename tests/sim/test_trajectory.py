@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import itertools
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,15 +21,9 @@ from sarmoco.sim.trajectory import (
     lowpass2_psd,
     true_trajectory,
 )
+from tests.conftest import SHARED_DATA
 
-TLOG = (
-    Path(__file__).resolve().parents[2]
-    / ".."
-    / "shared"
-    / "data"
-    / "mavlink"
-    / "arduplane_quadplane_sitl.tlog"
-)
+TLOG = SHARED_DATA / "mavlink" / "arduplane_quadplane_sitl.tlog"
 
 SPECS = {
     "ideal": MotionSpec(),
