@@ -30,9 +30,10 @@ import numpy.typing as npt
 import sarkit.cphd as skcphd
 
 from sarmoco import __version__
-from sarmoco.drivers.clock import unix_ns_to_gps_ns
+from sarmoco.daemon.store import RunStore
+from sarmoco.drivers.clock import gps_ns_to_unix_ns, unix_ns_to_gps_ns
 from sarmoco.drivers.gotcha import GotchaPass
-from sarmoco.errors import DataFileError
+from sarmoco.errors import DataFileError, RecorderError
 from sarmoco.geodesy import ecef_to_geodetic, geodetic_to_ecef, ned_rotation
 from sarmoco.processing.imaging import (
     PlaneGrid,
@@ -78,6 +79,9 @@ class FxPhaseHistory:
         Transmit and receive polarization (``"H"``, ``"V"``...).
     notes : tuple of (str, str)
         Provenance stated in the file (``CollectionID/Parameter``).
+    toa_span_s : tuple of 2 float or None
+        Times of arrival saved about the SRP's, s (None: the widest the sampling allows,
+        ``±1 / (2 FX_OVERSAMPLING SCSS)``).
     """
 
     signal: npt.NDArray[np.complex64]
@@ -89,6 +93,15 @@ class FxPhaseHistory:
     collection_start: datetime.datetime
     polarization: tuple[str, str] = ("H", "H")
     notes: tuple[tuple[str, str], ...] = ()
+    toa_span_s: tuple[float, float] | None = None
+
+    def toa_span(self) -> tuple[float, float]:
+        """The TOA span saved (see ``toa_span_s``), s."""
+        if self.toa_span_s is not None:
+            return self.toa_span_s
+        half = 0.5 / (FX_OVERSAMPLING * float(self.freq_hz[-1] - self.freq_hz[0]))
+        half *= self.freq_hz.size - 1
+        return (-half, half)
 
     def scene(self, ecef_m: FloatArray) -> FloatArray:
         """ECEF points (..., 3) → the scene frame: east, north, up about the IARP, m."""
@@ -150,6 +163,87 @@ FX_OVERSAMPLING = 1.25
 """Ratio of the unambiguous time span ``1 / SCSS`` to the TOA span saved (CPHD asks >= 1.1)."""
 
 
+def from_store(store: RunStore, segment: int = 0) -> FxPhaseHistory:
+    """The recorded echoes of one reference-track segment as a phase history on the Earth.
+
+    Each pulse is range compressed (unweighted) and turned into its range spectrum
+    deramped to the segment's scene centre point (SRP: the centre pixel of its image, on
+    the ground) from the antenna position the INS gave (the trapezoid-integrated INS
+    velocity of the antenna, :func:`~sarmoco.daemon.georeference.run_track`, the position
+    the INS-only compensation uses). The data are thus compensated to the SRP by the INS;
+    the PVP positions are those antenna positions, in ECEF through the store's
+    georeference. The TOA swath saved is the segment image's slant-range extent about the
+    SRP.
+
+    Raises
+    ------
+    RecorderError
+        No absolute position, no raw echoes, or no such segment.
+    """
+    from sarmoco.daemon import schema
+    from sarmoco.daemon.config import parse_config
+    from sarmoco.daemon.echoring import to_complex64
+    from sarmoco.daemon.focuser import radar_params
+    from sarmoco.daemon.georeference import georeference, grid_points, run_track, segment_images
+    from sarmoco.processing import rangecomp
+    from sarmoco.processing.imaging.phase_history import phase_history_from_compressed
+
+    geo = georeference(store)
+    cfg = parse_config(store.attrs["config"])
+    radar = radar_params(cfg)
+    segments = segment_images(store)
+    if not 0 <= segment < len(segments):
+        raise RecorderError(f"{store.path}: segment {segment} (the store has {len(segments)})")
+    seg = segments[segment]
+    t, pos, _ = run_track(store)
+    keep = (t >= seg.t0_ns) & (t <= seg.t1_ns)
+    t, pos = t[keep], pos[keep]
+    pulses = store.read("pulses", ["t_ns"])
+    rows = np.searchsorted(pulses["t_ns"], t)
+    if not np.array_equal(pulses["t_ns"][np.minimum(rows, pulses["t_ns"].size - 1)], t):
+        raise RecorderError(f"{store.path}: motion rows without their recorded pulse")
+    try:
+        raw = store.read("pulses", ["echo"], int(rows[0]), int(rows[-1]) + 1)["echo"]
+    except RecorderError as exc:
+        raise RecorderError(f"{store.path}: no raw echoes recorded ({exc})") from exc
+    echo = to_complex64(raw)
+    echo = echo[rows - rows[0]]
+    pts = grid_points(seg.image, seg.track, cfg.geometry.height_m)
+    srp = pts[pts.shape[0] // 2, pts.shape[1] // 2]
+    ref = np.linalg.norm(pos - srp, axis=1)
+    rc = rangecomp.compress(radar, echo)
+    ph, freq = phase_history_from_compressed(
+        rc, rangecomp.range_axis_m(radar), radar.carrier_hz, radar.bandwidth_hz, ref
+    )
+    corners = pts[[0, 0, -1, -1], [0, -1, 0, -1]]
+    extent = np.linalg.norm(pos[:, None, :] - corners[None], axis=2) - ref[:, None]
+    apc = geo.ecef(pos)
+    start = _gps_utc(int(t[0]), cfg.ins.gps_minus_utc_s)
+    return FxPhaseHistory(
+        signal=np.ascontiguousarray(ph, dtype=np.complex64),
+        freq_hz=freq,
+        tx_time_s=(t - t[0]) * 1e-9,
+        apc_ecef_m=apc,
+        srp_ecef_m=np.tile(geo.ecef(srp), (t.size, 1)),
+        iarp_lla=tuple(float(v) for v in geo.geodetic(srp)),  # type: ignore[arg-type]
+        collection_start=start,
+        polarization=("UNSPECIFIED", "UNSPECIFIED"),
+        notes=(
+            ("source", f"{store.path.name}: segment {segment}, {t.size} pulses"),
+            ("compensation", "deramped to the SRP from the INS-integrated antenna track"),
+            ("height", schema.HEIGHT_NOTE),
+        ),
+        toa_span_s=(2.0 * float(extent.min()) / C_MPS, 2.0 * float(extent.max()) / C_MPS),
+    )
+
+
+def _gps_utc(t_ns: int, gps_minus_utc_s: int) -> datetime.datetime:
+    """A GPS time (ns) as a UTC datetime (µs)."""
+    unix_ns = gps_ns_to_unix_ns(t_ns, gps_minus_utc_s)
+    epoch = datetime.datetime(1970, 1, 1, tzinfo=datetime.UTC)
+    return epoch + datetime.timedelta(microseconds=unix_ns // 1000)
+
+
 def _pvp_xml() -> dict[str, Any]:
     out, offset = {}, 0
     xyz = np.dtype([("X", "f8"), ("Y", "f8"), ("Z", "f8")])
@@ -162,7 +256,8 @@ def _pvp_xml() -> dict[str, Any]:
 def _xml(ph: FxPhaseHistory, pvps: npt.NDArray[Any], core_name: str) -> Any:
     v, s = ph.signal.shape
     fx1, fx2 = float(ph.freq_hz[0]), float(ph.freq_hz[-1])
-    toa = 0.5 / (FX_OVERSAMPLING * float(pvps["SCSS"][0]))
+    toa1, toa2 = ph.toa_span()
+    srp_fixed = bool(np.all(ph.srp_ecef_m == ph.srp_ecef_m[0]))
     iarp = geodetic_to_ecef(np.asarray(ph.iarp_lla))
     rot = ned_rotation(ph.iarp_lla[0], ph.iarp_lla[1])
     east, north = rot[1], rot[0]
@@ -191,7 +286,7 @@ def _xml(ph: FxPhaseHistory, pvps: npt.NDArray[Any], core_name: str) -> Any:
             "TxTime2": duration,
         },
         "FxBand": {"FxMin": fx1, "FxMax": fx2},
-        "TOASwath": {"TOAMin": -toa, "TOAMax": toa},
+        "TOASwath": {"TOAMin": toa1, "TOAMax": toa2},
     }
     cphd["SceneCoordinates"] = {
         "EarthModel": "WGS_84",
@@ -224,18 +319,18 @@ def _xml(ph: FxPhaseHistory, pvps: npt.NDArray[Any], core_name: str) -> Any:
         "RefChId": "1",
         "FXFixedCPHD": True,
         "TOAFixedCPHD": True,
-        "SRPFixedCPHD": False,
+        "SRPFixedCPHD": srp_fixed,
         "Parameters": [
             {
                 "Identifier": "1",
                 "RefVectorIndex": v // 2,
                 "FXFixed": True,
                 "TOAFixed": True,
-                "SRPFixed": False,
+                "SRPFixed": srp_fixed,
                 "Polarization": {"TxPol": ph.polarization[0], "RcvPol": ph.polarization[1]},
                 "FxC": (fx1 + fx2) / 2.0,
                 "FxBW": fx2 - fx1,
-                "TOASaved": 2.0 * toa,
+                "TOASaved": toa2 - toa1,
                 "DwellTimes": {"CODId": "cod", "DwellId": "dwell"},
             }
         ],
@@ -271,8 +366,7 @@ def _pvps(ph: FxPhaseHistory, dtype: np.dtype[Any]) -> npt.NDArray[Any]:
     pvp["FX2"] = ph.freq_hz[-1]
     pvp["SC0"] = ph.freq_hz[0]
     pvp["SCSS"] = (ph.freq_hz[-1] - ph.freq_hz[0]) / (s - 1)
-    toa = 0.5 / (FX_OVERSAMPLING * float(pvp["SCSS"][0]))
-    pvp["TOA1"], pvp["TOA2"] = -toa, toa
+    pvp["TOA1"], pvp["TOA2"] = ph.toa_span()
     return pvp
 
 

@@ -1,8 +1,10 @@
 """``sarmoco export``: a store's products in the NGA standards, each checked by sarkit.
 
-    sarmoco export STORE --sicd OUT.nitf [--segment K]
+    sarmoco export STORE [--sicd OUT.nitf] [--cphd OUT.cphd] [--segment K]
 
-The SICD holds the focused image of one reference-track segment (:mod:`sarmoco.app.sicd`).
+The SICD holds the focused image of one reference-track segment (:mod:`sarmoco.app.sicd`),
+the CPHD its recorded echoes as a phase history compensated to the segment's scene centre
+by the INS (:func:`sarmoco.app.cphd.from_store`).
 Every file written is read back and run through sarkit's consistency checker; a file with
 a failure is an error (exit status 2), never a silent product.
 """
@@ -24,8 +26,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     """The arguments of ``sarmoco export``."""
     parser.add_argument("store", help="a run or replay store")
     parser.add_argument("--sicd", metavar="OUT.nitf", help="SICD of the focused image")
+    parser.add_argument("--cphd", metavar="OUT.cphd", help="CPHD of the recorded echoes")
     parser.add_argument(
-        "--segment", type=int, default=0, help="reference-track segment of the SICD (0: first)"
+        "--segment", type=int, default=0, help="reference-track segment (0: the first)"
     )
 
 
@@ -58,18 +61,27 @@ def _checked(checker: Callable[[BinaryIO], Any], path: Path) -> None:
 
 def run_command(args: argparse.Namespace) -> int:
     """Write the products asked for; 0 when each passed its consistency check."""
+    from sarmoco.app.cphd import from_store, write_cphd
     from sarmoco.app.sicd import sicd_product, write_sicd
 
-    if args.sicd is None:
-        raise ConfigError("export: nothing to write (give --sicd)")
+    if args.sicd is None and args.cphd is None:
+        raise ConfigError("export: nothing to write (give --sicd and/or --cphd)")
     store = open_store(args.store)
-    product = sicd_product(store, args.segment)
-    out = Path(args.sicd)
-    write_sicd(product, out)
-    _checked(skver.SicdConsistency.from_file, out)
-    rows, cols = product.pixels.shape
-    print(
-        f"{out}: SICD {rows} x {cols} (tiles {product.segment.tiles[0]}.."
-        f"{product.segment.tiles[-1]}), sarkit SicdConsistency: no failures"
-    )
+    if args.sicd is not None:
+        product = sicd_product(store, args.segment)
+        out = Path(args.sicd)
+        write_sicd(product, out)
+        _checked(skver.SicdConsistency.from_file, out)
+        rows, cols = product.pixels.shape
+        print(
+            f"{out}: SICD {rows} x {cols} (tiles {product.segment.tiles[0]}.."
+            f"{product.segment.tiles[-1]}), sarkit SicdConsistency: no failures"
+        )
+    if args.cphd is not None:
+        ph = from_store(store, args.segment)
+        out = Path(args.cphd)
+        write_cphd(ph, out, f"{store.path.name} segment {args.segment}")
+        _checked(skver.CphdConsistency.from_file, out)
+        vectors, samples = ph.signal.shape
+        print(f"{out}: CPHD {vectors} vectors x {samples} samples, CphdConsistency: no failures")
     return 0
