@@ -166,7 +166,8 @@ def run_loopback(
             if proc is not None and proc.poll() is None:
                 proc.kill()
                 proc.wait()
+    truth = out / "truth.json"
     if scn.clutter is None:
-        return write_report(out / "run.zarr", out / "report")
+        return write_report(out / "run.zarr", out / "report", truth_path=truth)
     half = 0.5 * float(np.ptp(scn.clutter.x_m)) + PATCH_MARGIN_M
-    return write_report(out / "run.zarr", out / "report", compare_half_m=(half, half))
+    return write_report(out / "run.zarr", out / "report", (half, half), truth)

@@ -116,6 +116,40 @@ def plot_series(
     return path
 
 
+def plot_overlays(
+    panels: Mapping[str, Mapping[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]],
+    path: Path,
+    title: str,
+) -> Path:
+    """Several named curves per panel, each on its own time axis, one panel per quantity.
+
+    Parameters
+    ----------
+    panels : mapping of str to mapping of str to (ndarray, ndarray)
+        Panel label (with unit) to curve name to (time s, values); a curve of fewer than
+        50 points is drawn with markers (e.g. one value per autofocus subaperture).
+    path : Path
+        PNG to write.
+    title : str
+        Figure title.
+    """
+    n = max(len(panels), 1)
+    fig = Figure(figsize=(8, 2.3 * n + 0.8), dpi=100)
+    axes = fig.subplots(n, 1, sharex=True, squeeze=False)
+    for ax, (label, curves) in zip(axes[:, 0], panels.items(), strict=False):
+        for name, (t, v) in curves.items():
+            style = "o-" if len(t) < 50 else "-"
+            ax.plot(t, v, style, linewidth=0.9, markersize=3, label=name)
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    axes[-1, 0].set_xlabel("time (s)")
+    axes[0, 0].set_title(title)
+    fig.tight_layout()
+    fig.savefig(path)
+    return path
+
+
 def _db(data: npt.NDArray[np.generic], reference: float) -> npt.NDArray[np.float64]:
     """Intensity of ``data`` in dB re the power ``reference``, floored at -DYNAMIC_RANGE_DB."""
     power = np.abs(np.asarray(data)) ** 2 / reference

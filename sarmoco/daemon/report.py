@@ -33,11 +33,17 @@ from sarmoco.daemon.config import Config, parse_config
 from sarmoco.daemon.echoring import to_complex64
 from sarmoco.daemon.focuser import imaged_beam_rad, radar_params
 from sarmoco.daemon.geotiff import write_geotiffs
-from sarmoco.daemon.quicklook import plot_cuts, plot_image, plot_panels, plot_series
+from sarmoco.daemon.quicklook import (
+    plot_cuts,
+    plot_image,
+    plot_overlays,
+    plot_panels,
+    plot_series,
+)
 from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.errors import ProcessingError, RecorderError
 from sarmoco.processing import rangecomp
-from sarmoco.processing.geometry import ReferenceTrack, vector_to_imaging
+from sarmoco.processing.geometry import ReferenceTrack, look_angle, vector_to_imaging
 from sarmoco.processing.imaging.backprojection import (
     DEFAULT_UPSAMPLE,
     RangeLines,
@@ -374,14 +380,130 @@ def write_comparison(
     return {"decimation": k, "ideal_resolution_m": [res_az, res_rg], "panels": stats}
 
 
+def _smooth(values: npt.NDArray[np.float64], n: int) -> npt.NDArray[np.float64]:
+    """Moving average of ``n`` samples (same length; the ends average what they have)."""
+    kernel = np.ones(max(n, 1))
+    num = np.convolve(values, kernel, mode="same")
+    return np.asarray(num / np.convolve(np.ones_like(values), kernel, mode="same"))
+
+
+def _detrend(t: npt.NDArray[np.float64], v: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """``v`` less its least-squares line over ``t`` (what no Doppler rate can see)."""
+    return np.asarray(v - np.polyval(np.polyfit(t, v, 1), t))
+
+
+def _los_acceleration(
+    t_s: npt.NDArray[np.float64], d_los_m: npt.NDArray[np.float64], window_s: float
+) -> npt.NDArray[np.float64]:
+    """Second derivative of a LOS displacement (m/s²), averaged over ``window_s`` as a
+    subaperture's Doppler rate averages it."""
+    acc = np.gradient(np.gradient(d_los_m, t_s), t_s)
+    return _smooth(acc, round(window_s / float(np.median(np.diff(t_s)))))
+
+
+def motion_comparison(
+    store: RunStore, truth: Mapping[str, Any] | None = None
+) -> tuple[dict[str, dict[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]],
+           dict[str, float]]:  # fmt: skip
+    """The INS's LOS motion beside the autofocus's residual estimate (and the truth's).
+
+    The autofocus estimates the LOS acceleration left after the INS compensation,
+    ``a_los = a_y sin β_c + a_z cos β_c`` at the scene centre's look angle β_c (docs/
+    methods.md §3; positive toward the scene, as ``d_los``), one per subaperture; its
+    double integral (trapezoid over the subaperture centres) is the residual displacement
+    it found, shown less its best line (a Doppler rate sees neither offset nor drift).
+    With the simulator's truth (``truth.json``: true APC velocities per pulse, GPS time
+    shifted by ``wire.shift_ns``) the true LOS displacement is integrated as the daemon
+    integrates the INS's, and the residual the autofocus should find is true − INS.
+    Times: s from the first compensated pulse; the autofocus's time axis starts at the
+    first pulse it was given, the same pulse for a run of one segment.
+
+    Returns
+    -------
+    panels : dict
+        Panel label to curve name to (t s, values), for :func:`plot_overlays`.
+    stats : dict
+        ``ins_d_los_rms_m``; with autofocus estimates ``autofocus_residual_rms_m``; with the
+        truth also ``true_residual_rms_m`` and ``autofocus_error_rms_m`` (autofocus − true
+        residual, both detrended, over the subaperture centres), m.
+
+    Raises
+    ------
+    RecorderError
+        No compensated pulse recorded.
+    """
+    cfg = parse_config(store.attrs["config"])
+    motion = store.read("motion", ["t_ns", "d_los_m"])
+    rows = np.flatnonzero(np.isfinite(motion["d_los_m"]))
+    if rows.size < 3:
+        raise RecorderError(f"{store.path}: no compensated pulses to plot the motion of")
+    t0 = int(motion["t_ns"][rows[0]])
+    t = (motion["t_ns"][rows] - t0) * 1e-9
+    ins = motion["d_los_m"][rows]
+    beta = float(look_angle(cfg.geometry.center_slant_range_m, cfg.geometry.height_m))
+    window = cfg.autofocus.subaperture_s
+    disp: dict[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] = {
+        "INS d_los": (t, ins)
+    }
+    resid: dict[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] = {}
+    accel: dict[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]] = {
+        "INS d_los''": (t, _los_acceleration(t, ins, window))
+    }
+    stats = {"ins_d_los_rms_m": float(np.sqrt(np.mean(ins**2)))}
+    true_resid = None
+    if truth is not None:
+        tt = np.asarray(truth["pulses"]["t_ns"], dtype=np.int64) + int(truth["wire"]["shift_ns"])
+        track = _track(store.attrs["reference_track"])
+        vel = vector_to_imaging(np.asarray(truth["pulses"]["vel_ned"], dtype=np.float64), track)
+        keep = tt >= t0
+        yz, _ = integrate_los(tt[keep], vel[keep][:, 1:], LosState())
+        true_los = np.interp(t, (tt[keep] - t0) * 1e-9,
+                             yz[:, 0] * math.sin(beta) + yz[:, 1] * math.cos(beta))  # fmt: skip
+        true_resid = true_los - ins
+        disp["true d_los"] = (t, true_los)
+        resid["true residual (true - INS)"] = (t, _detrend(t, true_resid) * 1e3)
+        accel["true residual''"] = (t, _los_acceleration(t, true_resid, window))
+        stats["true_residual_rms_m"] = float(np.std(_detrend(t, true_resid)))
+    if "autofocus" in store.tables() and store.committed("autofocus") >= 3:
+        a = store.read("autofocus", ["t_center_s", "a_y_mps2", "a_z_mps2"])
+        ok = np.isfinite(a["a_y_mps2"]) & np.isfinite(a["a_z_mps2"])
+        ta = a["t_center_s"][ok]
+        a_los = a["a_y_mps2"][ok] * math.sin(beta) + a["a_z_mps2"][ok] * math.cos(beta)
+        if ta.size >= 3:
+            vel_af = np.concatenate(
+                [[0.0], np.cumsum(0.5 * (a_los[1:] + a_los[:-1]) * np.diff(ta))]
+            )
+            d_af = np.concatenate(
+                [[0.0], np.cumsum(0.5 * (vel_af[1:] + vel_af[:-1]) * np.diff(ta))]
+            )
+            d_af = _detrend(ta, d_af)
+            accel["autofocus a_los"] = (ta, a_los)
+            resid["autofocus residual"] = (ta, d_af * 1e3)
+            stats["autofocus_residual_rms_m"] = float(np.std(d_af))
+            if true_resid is not None:
+                inside = (ta >= t[0]) & (ta <= t[-1])
+                truth_at = _detrend(ta[inside], np.interp(ta[inside], t, true_resid))
+                err = _detrend(ta[inside], d_af[inside]) - truth_at
+                stats["autofocus_error_rms_m"] = float(np.sqrt(np.mean(err**2)))
+    panels = {"LOS displacement (m)": disp, "LOS acceleration (m/s²)": accel}
+    if resid:
+        panels = {"LOS displacement (m)": disp,
+                  "residual LOS displacement, detrended (mm)": resid,
+                  "LOS acceleration (m/s²)": accel}  # fmt: skip
+    return panels, stats
+
+
 def write_report(
     store_path: Path,
     out_dir: Path,
     compare_half_m: tuple[float, float] = (COMPARE_HALF_M, COMPARE_HALF_M),
+    truth_path: Path | None = None,
 ) -> dict[str, Any]:
     """Write the quicklooks and the summary of a store; returns the summary.
 
     ``compare_half_m``: half size of the comparison window (:func:`write_comparison`), m.
+    ``truth_path``: the simulator's ``truth.json`` of the run, for the true motion in
+    ``motion_estimates.png`` (:func:`motion_comparison`).
 
     Raises
     ------
@@ -389,6 +511,7 @@ def write_report(
         If the store cannot be opened or holds no pulses.
     """
     store = open_store(store_path)
+    truth = None if truth_path is None else _read_truth(truth_path)
     out_dir.mkdir(parents=True, exist_ok=True)
     attrs = store.attrs
     summary: dict[str, Any] = {
@@ -432,6 +555,14 @@ def write_report(
                                        "κ0 (Hz/s)": a["kappa"][:, 0]},
                     out_dir / "autofocus.png", "autofocus estimates per subaperture")  # fmt: skip
         summary["autofocus"] = {"subapertures": int(a["t_center_s"].shape[0])}
+    if store.committed("motion"):
+        try:
+            panels, summary["motion_estimates"] = motion_comparison(store, truth)
+            plot_overlays(panels, out_dir / "motion_estimates.png",
+                          "LOS motion: the INS solution and the autofocus's estimate"
+                          + ("" if truth is None else " (and the truth)"))  # fmt: skip
+        except RecorderError as exc:
+            summary["motion_estimates_skipped"] = str(exc)
     if image is not None and store.committed("motion") and _has_echoes(store):
         try:
             summary["comparison"] = write_comparison(store, out_dir, compare_half_m)
@@ -442,6 +573,28 @@ def write_report(
     (out_dir / "report.txt").write_text(text)
     (out_dir / "index.html").write_text(_html(summary, text, out_dir))
     return summary
+
+
+def _read_truth(path: Path) -> dict[str, Any]:
+    """The simulator's truth record (JSON object with ``pulses`` and ``wire``).
+
+    Raises
+    ------
+    RecorderError
+        Unreadable, not JSON, or without the keys the motion plot reads.
+    """
+    try:
+        truth = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise RecorderError(f"{path}: not a simulator truth record ({exc})") from exc
+    pulses = truth.get("pulses") if isinstance(truth, dict) else None
+    wire = truth.get("wire") if isinstance(truth, dict) else None
+    if not (isinstance(pulses, dict) and {"t_ns", "vel_ned"} <= pulses.keys()
+            and isinstance(wire, dict) and "shift_ns" in wire):  # fmt: skip
+        raise RecorderError(
+            f"{path}: not a simulator truth record (pulses.t_ns, pulses.vel_ned, wire.shift_ns)"
+        )
+    return dict(truth)
 
 
 def _has_echoes(store: RunStore) -> bool:
@@ -457,6 +610,7 @@ PICTURES = (
     ("compare.png", "Before and after: raw, INS only, INS + autofocus"),
     ("cuts.png", "Point-target cuts against the ideal sinc"),
     ("motion.png", "INS motion solution"),
+    ("motion_estimates.png", "LOS motion: INS solution beside the autofocus's estimate"),
     ("autofocus.png", "Autofocus estimates"),
 )
 """The report's pictures, in page order, with their headings."""
@@ -494,6 +648,10 @@ def _text(summary: dict[str, Any]) -> str:
         mo = summary["motion"]
         lines.append(f"d_los            rms {mo['d_los_rms_m']:.3f} m, "
                      f"peak-to-peak {mo['d_los_peak_to_peak_m']:.3f} m")  # fmt: skip
+    if "motion_estimates" in summary:
+        me = summary["motion_estimates"]
+        parts = [f"{k.removesuffix('_m')} {1e3 * v:.1f} mm" for k, v in me.items()]
+        lines.append("LOS motion (rms) " + ", ".join(parts))
     if "image" in summary:
         im = summary["image"]
         lines.append(f"image            {im['shape'][0]} x {im['shape'][1]} px, entropy "
