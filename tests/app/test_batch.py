@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 
 from sarmoco.app.batch import LOOPBACK, Recording, run_batch
+from sarmoco.app.cli import main
 from sarmoco.daemon.config import Config, load_config
 from sarmoco.daemon.runner import replay_files, replay_store
 from sarmoco.daemon.store import RunStore, open_store
@@ -107,7 +108,9 @@ def test_blocks_on_two_workers_give_the_single_process_replay(
     assert not any(r.scratch.exists() for r in recordings)
 
 
-def test_batch_command_refuses_what_it_cannot_run(tmp_path: Path) -> None:
+def test_batch_command_refuses_what_it_cannot_run(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
     """Errors name what is wrong, before any cluster is started."""
     cfg = tmp_path / "c.toml"
     cfg.write_text("")
@@ -115,10 +118,8 @@ def test_batch_command_refuses_what_it_cannot_run(tmp_path: Path) -> None:
         ([], "give recordings"),
         (["--radar", "r.vrt"], "both --radar"),
         (["--tiles-per-block", "0", "--radar", "r.vrt", "--nav", "n.tlog"], "--tiles-per-block"),
+        (["--workers", "0", "--radar", "r.vrt", "--nav", "n.tlog"], "--workers"),
     ):
-        run = subprocess.run(
-            [sys.executable, "-m", "sarmoco", "batch", "--config", str(cfg),
-             "--out", str(tmp_path / "o.zarr"), "--workers", "1", *argv],
-            capture_output=True, text=True, timeout=120,
-        )  # fmt: skip
-        assert run.returncode == 2 and words in run.stderr, (argv, run.stderr)
+        status = main(["batch", "--config", str(cfg), "--out", str(tmp_path / "o.zarr"), *argv])
+        err = capsys.readouterr().err
+        assert status == 2 and words in err, (argv, err)
