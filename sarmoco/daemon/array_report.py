@@ -146,7 +146,7 @@ def _plot(panels: list[tuple[str, DemProduct, FloatArray, FloatArray]], path: Pa
     """True DEM, imaged DEM (compensated) and each product's difference, on imaging axes."""
     name, dem, truth_h, _ = panels[0]
     extent = (float(dem.y_m[0]), float(dem.y_m[-1]), float(dem.x_m[-1]), float(dem.x_m[0]))
-    lo, hi = np.nanmin(truth_h), np.nanmax(truth_h)
+    lo, hi = float(np.nanmin(truth_h)), float(np.nanmax(truth_h))
     shown = [
         ("true DEM (m)", truth_h, "terrain", (lo, hi)),
         (f"imaged, {name} (m)", dem.height_m, "terrain", (lo, hi)),

@@ -217,7 +217,8 @@ class RunStore:
             The store has no such product (a single-channel run has none) or it is damaged.
         """
         where = f"{schema.DEM_GROUP}/{name}"
-        if schema.DEM_GROUP not in self.root or name not in self.root[schema.DEM_GROUP]:
+        dems = self.root.get(schema.DEM_GROUP)
+        if not isinstance(dems, zarr.Group) or name not in dems:
             raise RecorderError(f"{self.path}: no DEM product {where!r} (not an array run?)")
         group = self._group(where)
         arrays = {k: np.asarray(_array(group, k)[...]) for k in schema.DEM_ARRAYS}

@@ -59,14 +59,6 @@ class Terrain:
     spacing_m: float
     origin_ne_m: tuple[float, float]
 
-    def axes(self) -> tuple[FloatArray, FloatArray]:
-        """North (n_north,) and east (n_east,) of the grid samples, m."""
-        n0, n1 = self.height_m.shape
-        return (
-            self.origin_ne_m[0] + self.spacing_m * np.arange(n0),
-            self.origin_ne_m[1] + self.spacing_m * np.arange(n1),
-        )
-
 
 @dataclass(frozen=True)
 class ArrayScenario:

@@ -70,7 +70,7 @@ def test_dem_file_is_read_and_bad_ones_are_refused(tmp_path: Path) -> None:
         ("coarse.npz", {"height_m": heights, "spacing_m": 30.0}, "is not the preset's terrain"),
         ("small.npz", {"height_m": heights[:20], "spacing_m": 0.5}, "smaller than"),
     ):
-        np.savez(tmp_path / name, **arrays)  # type: ignore[arg-type]
+        np.savez(tmp_path / name, **arrays)
         with pytest.raises(DataFileError, match=message):
             load_array_preset(0.1, dem=tmp_path / name)
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
