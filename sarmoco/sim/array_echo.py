@@ -23,6 +23,8 @@ call.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numba
 import numpy as np
@@ -306,3 +308,84 @@ def level_strip(
     pos[:, 2] = -altitude_m
     roll = np.broadcast_to(np.asarray(roll_rad, dtype=np.float64), (n_pulses,))
     return t_ns, pos, euler_to_quat(roll, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class ArrayStrip:
+    """A simulated pass of the array over a DEM.
+
+    Parameters
+    ----------
+    t_ns : ndarray of int64, shape (P,)
+        Pulse times, GPS ns.
+    pos_ned : ndarray of float64, shape (P, 3)
+        True INS reference-point positions, NED, m.
+    quat : ndarray of float64, shape (P, 4)
+        True attitude, scalar-first body-to-NED.
+    echoes : ndarray of complex64, shape (P, M N, S)
+        Raw echoes [pulse, channel (tx-major), fast time].
+    """
+
+    t_ns: np.ndarray
+    pos_ned: FloatArray
+    quat: FloatArray
+    echoes: ComplexArray
+
+
+def aperture_m(wavelength_m: float, antenna_length_m: float, far_range_m: float) -> float:
+    """Along-track extent over which a point at ``far_range_m`` is in the main lobe, m."""
+    return 2.0 * far_range_m * wavelength_m / antenna_length_m
+
+
+def simulate_strip(
+    radar: RadarParams,
+    layout: ArrayLayout,
+    antenna_length_m: float,
+    max_look_rad: float,
+    speed_mps: float,
+    height_m: FloatArray,
+    spacing_m: float,
+    origin_ne_m: tuple[float, float],
+    altitude_m: float,
+    north_range_m: tuple[float, float],
+    roll_rad: float | Callable[[np.ndarray], np.ndarray],
+    per_cell: int = 2,
+    seed: int = 0,
+) -> ArrayStrip:
+    """Echoes of a level pass due north (east 0) over a DEM, covering ``north_range_m``.
+
+    The pass starts and ends half an aperture beyond ``north_range_m`` (so every point in
+    it is seen over the whole main lobe); only scatterers within that reach are simulated.
+
+    Parameters
+    ----------
+    radar, layout, antenna_length_m, max_look_rad
+        As :func:`synthesize_array`.
+    speed_mps : float
+        Ground speed, m/s.
+    height_m, spacing_m, origin_ne_m, per_cell
+        The DEM and scatterer density, as :func:`terrain_scatterers`.
+    altitude_m : float
+        Platform height above the NED origin, m.
+    north_range_m : (float, float)
+        North extent of the strip to image, m.
+    roll_rad : float or callable
+        True roll, rad: constant, or a function of the time since the first pulse (s, array)
+        returning one roll per pulse.
+    seed : int
+        Seed of the scatterers' positions and reflectivities.
+    """
+    rng = np.random.default_rng(seed)
+    targets, amp = terrain_scatterers(height_m, spacing_m, origin_ne_m, per_cell, rng)
+    far = (altitude_m - float(np.min(height_m))) / math.cos(max_look_rad) + 10.0
+    half = 0.5 * aperture_m(radar.wavelength_m, antenna_length_m, far)
+    lo, hi = north_range_m
+    keep = (targets[:, 0] >= lo - half) & (targets[:, 0] <= hi + half)
+    step = speed_mps / radar.prf_hz
+    n_p = int((hi - lo + 2.0 * half) / step) + 1
+    roll = roll_rad(np.arange(n_p) / radar.prf_hz) if callable(roll_rad) else roll_rad
+    t, pos, quat = level_strip(n_p, radar.prf_hz, speed_mps, altitude_m, lo - half, roll)
+    echoes = synthesize_array(
+        radar, layout, pos, quat, targets[keep], amp[keep], antenna_length_m, max_look_rad
+    )
+    return ArrayStrip(t, pos, quat, echoes)

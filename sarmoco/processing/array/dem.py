@@ -80,6 +80,63 @@ def truth_on_product(
     return np.asarray(interp(product.points_ned()), dtype=np.float64)
 
 
+def height_errors(
+    product: DemProduct,
+    truth_height_m: FloatArray,
+    north_m: FloatArray,
+    east_m: FloatArray,
+    margin_m: float = 0.0,
+) -> tuple[FloatArray, np.ndarray]:
+    """Imaged minus true height per product cell, and where the truth exists.
+
+    Parameters
+    ----------
+    product, truth_height_m, north_m, east_m
+        As :func:`truth_on_product`.
+    margin_m : float
+        Cells closer than this to the truth's border count as outside it, m (the terrain's
+        edge is a cliff to the zero-reflectivity outside).
+
+    Returns
+    -------
+    errors : ndarray of float64, shape (n_x, n_y)
+        Imaged minus true height, m; NaN where either is missing.
+    in_truth : ndarray of bool, shape (n_x, n_y)
+        Cells inside the truth (less the margin).
+    """
+    truth = truth_on_product(product, truth_height_m, north_m, east_m)
+    if margin_m > 0.0:
+        ne = product.points_ned()
+        n0, n1 = float(np.min(north_m)) + margin_m, float(np.max(north_m)) - margin_m
+        e0, e1 = float(np.min(east_m)) + margin_m, float(np.max(east_m)) - margin_m
+        inside = (ne[..., 0] >= n0) & (ne[..., 0] <= n1) & (ne[..., 1] >= e0) & (ne[..., 1] <= e1)
+        truth = np.where(inside, truth, np.nan)
+    return np.asarray(product.height_m - truth, dtype=np.float64), np.isfinite(truth)
+
+
+def error_stats(errors: FloatArray, in_truth: np.ndarray, half_cell_m: float) -> DemStats:
+    """The statistics of the finite cells of ``errors`` (coverage against ``in_truth``).
+
+    Raises
+    ------
+    ProcessingError
+        If no cell is finite.
+    """
+    both = np.isfinite(errors) & in_truth
+    if not np.any(both):
+        raise ProcessingError("DEM evaluation: the imaged DEM and the truth share no cell")
+    err = errors[both]
+    return DemStats(
+        mean_m=float(np.mean(err)),
+        std_m=float(np.std(err)),
+        within_half_cell=float(np.mean(np.abs(err) <= half_cell_m)),
+        range_m=(float(np.min(err)), float(np.max(err))),
+        half_cell_m=float(half_cell_m),
+        n_cells=int(err.size),
+        coverage=float(err.size / np.count_nonzero(in_truth)),
+    )
+
+
 def evaluate_dem(
     product: DemProduct,
     truth_height_m: FloatArray,
@@ -88,7 +145,7 @@ def evaluate_dem(
     half_cell_m: float,
     margin_m: float = 0.0,
 ) -> DemStats:
-    """Imaged minus true height over the cells where both exist.
+    """Imaged minus true height over the cells where both exist (module docstring).
 
     Parameters
     ----------
@@ -99,32 +156,12 @@ def evaluate_dem(
     half_cell_m : float
         Half the height resolution, m (``ArraySystem.height_resolution_m / 2``).
     margin_m : float
-        Cells closer than this to the truth's border are left out, m (the terrain's edge is
-        a cliff to the zero-reflectivity outside).
+        Cells closer than this to the truth's border are left out, m.
 
     Raises
     ------
     ProcessingError
         If no cell can be compared.
     """
-    truth = truth_on_product(product, truth_height_m, north_m, east_m)
-    if margin_m > 0.0:
-        ne = product.points_ned()
-        n0, n1 = float(np.min(north_m)) + margin_m, float(np.max(north_m)) - margin_m
-        e0, e1 = float(np.min(east_m)) + margin_m, float(np.max(east_m)) - margin_m
-        inside = (ne[..., 0] >= n0) & (ne[..., 0] <= n1) & (ne[..., 1] >= e0) & (ne[..., 1] <= e1)
-        truth = np.where(inside, truth, np.nan)
-    in_truth = np.isfinite(truth)
-    both = in_truth & np.isfinite(product.height_m)
-    if not np.any(both):
-        raise ProcessingError("evaluate_dem: the imaged DEM and the truth share no cell")
-    err = product.height_m[both] - truth[both]
-    return DemStats(
-        mean_m=float(np.mean(err)),
-        std_m=float(np.std(err)),
-        within_half_cell=float(np.mean(np.abs(err) <= half_cell_m)),
-        range_m=(float(np.min(err)), float(np.max(err))),
-        half_cell_m=float(half_cell_m),
-        n_cells=int(err.size),
-        coverage=float(np.count_nonzero(both) / np.count_nonzero(in_truth)),
-    )
+    errors, in_truth = height_errors(product, truth_height_m, north_m, east_m, margin_m)
+    return error_stats(errors, in_truth, half_cell_m)

@@ -18,10 +18,16 @@ Chain, on echoes [pulse, channel, fast time] with per-pulse INS position and att
 5. cross-track beamforming in the range-frequency domain, steering
    ``exp(-j k_r y_c sin θ)`` per frequency (k_r = 4π f / c), which also aligns the range
    envelopes across the array (up to 0.55 m apart at 20° for a 3.2 m array);
-6. per along-track position and angle, the surface range is the peak of the upsampled range
-   profile (parabolic interpolation); (r, θ) maps to ``y = r sin θ``, ``z = r cos θ`` in the
-   imaging frame, height ``h = -(D_origin + z)``; the heights are interpolated per pulse onto
-   a regular cross-track grid, NaN where the profile's peak is below the echo threshold.
+6. per along-track position and angle, the range-profile intensities of ``looks`` neighbouring
+   pulses are averaged and the surface range is the intensity centroid of the upsampled
+   profile over ``centroid_cells`` resolution cells about its peak (intensity above
+   ``centroid_floor`` of the peak): on a slope the beam's footprint spreads over several
+   range cells and speckle moves the peak within it, while the centroid stays near the
+   footprint's centre (on the paper's terrain, full array, steepest strip: std 0.25 m with the
+   parabolic peak, 0.175 m with a 4-cell centroid); (r, θ) maps to ``y = r sin θ``,
+   ``z = r cos θ`` in the imaging frame, height ``h = -(D_origin + z)``; the heights are
+   interpolated per pulse onto a regular cross-track grid, NaN where the profile's peak is
+   below the echo threshold.
 """
 
 from __future__ import annotations
@@ -102,6 +108,11 @@ class Array3dOptions:
     looks : int
         Along-track pulses whose range-profile intensities are averaged (odd, >= 1) before
         the peak search: fewer speckle errors, coarser along-track resolution.
+    centroid_cells : float
+        Width of the window around each profile's peak, in range resolution cells, over which
+        the surface range is the intensity centroid; 0: the parabolic peak instead.
+    centroid_floor : float
+        Intensity below this fraction of the peak is left out of the centroid.
     threshold_db : float
         A profile whose peak is this far below the 90th percentile of all peaks is "no echo".
     ground_height_m : float
@@ -115,6 +126,8 @@ class Array3dOptions:
     angle_oversample: float = 2.0
     cross_window: str | None = None
     looks: int = 3
+    centroid_cells: float = 4.0
+    centroid_floor: float = 0.1
     threshold_db: float = -15.0
     ground_height_m: float = 0.0
 
@@ -252,6 +265,7 @@ def _surface_ranges(
     n_up = n_s * up
     half = n_s // 2
     halo = opt.looks // 2
+    res_bins = system.radar.range_resolution_m / (C_MPS / (2.0 * system.radar.sample_rate_hz))
     pos = np.empty((n_p, sines.size))
     power = np.empty((n_p, sines.size))
     for p0 in range(0, n_p, chunk):
@@ -270,11 +284,19 @@ def _surface_ranges(
             prof = (csum[:, b_i] - csum[:, a_i]) / (b_i - a_i)[None, :, None]
         prof = prof[:, p0 - lo : p0 - lo + min(chunk, n_p - p0)]
         i = np.argmax(prof, axis=0)
-        a = np.take_along_axis(prof, np.clip(i - 1, 0, n_up - 1)[None], 0)[0]
         b = np.take_along_axis(prof, i[None], 0)[0]
-        c = np.take_along_axis(prof, np.clip(i + 1, 0, n_up - 1)[None], 0)[0]
-        den = a - 2.0 * b + c
-        frac = np.where(den < 0.0, 0.5 * (a - c) / np.where(den < 0.0, den, -1.0), 0.0)
+        if opt.centroid_cells > 0.0:
+            half_w = round(opt.centroid_cells * up * res_bins / 2.0)
+            offs = np.arange(-half_w, half_w + 1)
+            idx = np.clip(i[None] + offs[:, None, None], 0, n_up - 1)
+            vals = np.take_along_axis(prof, idx, 0)
+            vals = np.maximum(vals - opt.centroid_floor * b[None], 0.0)
+            frac = np.sum(vals * offs[:, None, None], axis=0) / np.sum(vals, axis=0)
+        else:
+            a = np.take_along_axis(prof, np.clip(i - 1, 0, n_up - 1)[None], 0)[0]
+            c = np.take_along_axis(prof, np.clip(i + 1, 0, n_up - 1)[None], 0)[0]
+            den = a - 2.0 * b + c
+            frac = np.where(den < 0.0, 0.5 * (a - c) / np.where(den < 0.0, den, -1.0), 0.0)
         pos[p0 : p0 + chunk] = (i + frac) / up
         power[p0 : p0 + chunk] = b
     return pos, power
