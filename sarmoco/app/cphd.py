@@ -109,6 +109,10 @@ class FxPhaseHistory:
         ned = (np.asarray(ecef_m) - geodetic_to_ecef(np.asarray(self.iarp_lla))) @ rot.T
         return np.asarray(ned @ _ENU_FROM_NED)
 
+    def ecef(self, enu_m: FloatArray) -> FloatArray:
+        """Scene-frame points (..., 3): east, north, up about the IARP, m → ECEF, m."""
+        return _scene_to_ecef(enu_m, self.iarp_lla)
+
     @property
     def ref_range_m(self) -> FloatArray:
         """Deramp range of each vector, ``|APC - SRP|``, m."""
@@ -218,7 +222,7 @@ def from_store(store: RunStore, segment: int = 0) -> FxPhaseHistory:
     corners = pts[[0, 0, -1, -1], [0, -1, 0, -1]]
     extent = np.linalg.norm(pos[:, None, :] - corners[None], axis=2) - ref[:, None]
     apc = geo.ecef(pos)
-    start = _gps_utc(int(t[0]), cfg.ins.gps_minus_utc_s)
+    start = gps_utc(int(t[0]), cfg.ins.gps_minus_utc_s)
     return FxPhaseHistory(
         signal=np.ascontiguousarray(ph, dtype=np.complex64),
         freq_hz=freq,
@@ -237,7 +241,7 @@ def from_store(store: RunStore, segment: int = 0) -> FxPhaseHistory:
     )
 
 
-def _gps_utc(t_ns: int, gps_minus_utc_s: int) -> datetime.datetime:
+def gps_utc(t_ns: int, gps_minus_utc_s: int) -> datetime.datetime:
     """A GPS time (ns) as a UTC datetime (µs)."""
     unix_ns = gps_ns_to_unix_ns(t_ns, gps_minus_utc_s)
     epoch = datetime.datetime(1970, 1, 1, tzinfo=datetime.UTC)
@@ -429,12 +433,16 @@ def read_cphd(path: Path) -> FxPhaseHistory:
 def focus(ph: FxPhaseHistory, size: int, pixel_m: float) -> Image:
     """Backprojection of a phase history on a ``size`` x ``size`` ground grid of the scene
     frame centred on the IARP, axis 1 along the mean look direction, ``pixel_m`` apart."""
-    apc = ph.scene(ph.apc_ecef_m)
-    grid = PlaneGrid.centred(
-        (0.0, 0.0, 0.0), size, size, pixel_m, pixel_m, facing_heading(apc, (0.0, 0.0, 0.0))
-    )
+    grid = PlaneGrid.centred((0.0, 0.0, 0.0), size, size, pixel_m, pixel_m, grid_heading(ph))
     rc, r_axis, fc = compressed_from_phase_history(ph.signal, ph.freq_hz)
+    apc = ph.scene(ph.apc_ecef_m)
     return backproject(rc, r_axis, apc, C_MPS / fc, grid, ref_range_m=ph.ref_range_m)
+
+
+def grid_heading(ph: FxPhaseHistory) -> float:
+    """Heading of :func:`focus`'s grid: axis 1 along the mean look direction to the IARP
+    (axis 0 from east toward north), rad."""
+    return facing_heading(ph.scene(ph.apc_ecef_m), (0.0, 0.0, 0.0))
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -443,15 +451,24 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--out", required=True, help="store to create")
     parser.add_argument("--size", type=int, default=256, help="image pixels per side")
     parser.add_argument("--pixel-m", type=float, default=0.2, help="ground pixel spacing, m")
+    parser.add_argument("--sicd", metavar="OUT.nitf", help="also write the image as SICD")
 
 
 def run_command(args: argparse.Namespace) -> int:
-    """Read a CPHD, focus it, and store the image (``sarmoco import-cphd``)."""
+    """Read a CPHD, focus it, store the image and optionally write it as SICD
+    (``sarmoco import-cphd``); the SICD must pass sarkit's check with no error."""
+    import sarkit.verification as skver
+
+    from sarmoco.app.export import checked
+    from sarmoco.app.sicd import spotlight_product, write_sicd
     from sarmoco.daemon.recorder import Recorder
 
     path = Path(args.cphd)
     ph = read_cphd(path)
     image = focus(ph, args.size, args.pixel_m)
+    if args.sicd is not None:
+        write_sicd(spotlight_product(ph, image, grid_heading(ph)), Path(args.sicd))
+        checked(skver.SicdConsistency.from_file, Path(args.sicd))
     start_ns = unix_ns_to_gps_ns(round(ph.collection_start.timestamp() * 1e9))
     with Recorder(Path(args.out), n_samples=ph.signal.shape[1], raw_echoes=False) as rec:
         rec.set_attribute(

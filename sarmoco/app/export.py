@@ -32,7 +32,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def failures(checker: Callable[[BinaryIO], Any], path: Path) -> list[str]:
+def failures(checker: Callable[[BinaryIO], Any], path: Path, warnings: bool = False) -> list[str]:
     """What sarkit's consistency checker finds wrong in a file ("check: detail" each).
 
     Parameters
@@ -41,19 +41,23 @@ def failures(checker: Callable[[BinaryIO], Any], path: Path) -> list[str]:
         ``from_file`` of a sarkit consistency class (e.g. ``SicdConsistency.from_file``).
     path : Path
         The file.
+    warnings : bool
+        Also the failed recommendations (severity ``Warning``), not only the errors.
     """
     with path.open("rb") as f:
         con = checker(f)
         con.check()
+    kinds = ("Error", "Warning") if warnings else ("Error",)
     return [
         f"{name}: {d['details']}"
         for name, result in con.failures().items()
         for d in result["details"]
-        if not d["passed"]
+        if not d["passed"] and d["severity"] in kinds
     ]
 
 
-def _checked(checker: Callable[[BinaryIO], Any], path: Path) -> None:
+def checked(checker: Callable[[BinaryIO], Any], path: Path) -> None:
+    """Raise a DataFileError naming the file and the checks it fails (errors only)."""
     found = failures(checker, path)
     if found:
         raise DataFileError(f"{path}: fails sarkit's consistency check: " + "; ".join(found))
@@ -71,17 +75,16 @@ def run_command(args: argparse.Namespace) -> int:
         product = sicd_product(store, args.segment)
         out = Path(args.sicd)
         write_sicd(product, out)
-        _checked(skver.SicdConsistency.from_file, out)
+        checked(skver.SicdConsistency.from_file, out)
         rows, cols = product.pixels.shape
         print(
-            f"{out}: SICD {rows} x {cols} (tiles {product.segment.tiles[0]}.."
-            f"{product.segment.tiles[-1]}), sarkit SicdConsistency: no failures"
+            f"{out}: SICD {rows} x {cols} ({product.source}), sarkit SicdConsistency: no failures"
         )
     if args.cphd is not None:
         ph = from_store(store, args.segment)
         out = Path(args.cphd)
         write_cphd(ph, out, f"{store.path.name} segment {args.segment}")
-        _checked(skver.CphdConsistency.from_file, out)
+        checked(skver.CphdConsistency.from_file, out)
         vectors, samples = ph.signal.shape
         print(f"{out}: CPHD {vectors} vectors x {samples} samples, CphdConsistency: no failures")
     return 0

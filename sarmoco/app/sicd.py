@@ -1,7 +1,9 @@
-"""SICD (NGA.STND.0024, version 1.4.0) of a store's focused images, written with sarkit.
+"""SICD (NGA.STND.0024, version 1.4.0) of our focused images, written with sarkit.
 
-One SICD holds the tiles of one reference-track segment joined along track
-(:func:`~sarmoco.daemon.georeference.segment_images`). The pixels are ours, unchanged:
+A store's SICD (:func:`sicd_product`) holds the tiles of one reference-track segment joined
+along track (:func:`~sarmoco.daemon.georeference.segment_images`); a phase history's
+(:func:`spotlight_product`, e.g. GOTCHA through CPHD) its backprojection on a ground grid
+about the image-area reference point. The pixels are ours, unchanged: for a store
 SICD rows are our axis 1 (ground range y), columns our axis 0 (along-track x; reversed for
 a left-looking radar, so that the grid normal points away from the Earth), i.e. the SICD
 array is ``data.T`` (``data.T[:, ::-1]`` looking left).
@@ -17,6 +19,11 @@ The geometry the metadata states (docs/methods.md §1, :mod:`sarmoco.daemon.geor
   line in ECEF.
 * ``ImageFormation``: ImageFormAlgo OTHER (time-domain backprojection), with the INS
   motion compensation and the autofocus in ``Processing`` elements.
+
+A spotlight image (:func:`spotlight_product`) has rows along the grid's axis 1 (the mean
+look direction) and columns along its axis 0 reversed (so the normal points up), i.e.
+``data.T[:, ::-1]``; its TimeCOAPoly is the aperture's middle, its ARPPoly a fifth-order
+fit to the antenna positions, its bandwidths those of the band and of the azimuth span.
 """
 
 from __future__ import annotations
@@ -34,6 +41,7 @@ import sarkit.sicd as sksicd
 from scipy.signal import get_window
 
 from sarmoco import __version__
+from sarmoco.app.cphd import FxPhaseHistory, gps_utc
 from sarmoco.daemon.config import Config, parse_config
 from sarmoco.daemon.focuser import radar_params
 from sarmoco.daemon.georeference import (
@@ -44,9 +52,9 @@ from sarmoco.daemon.georeference import (
     segment_images,
 )
 from sarmoco.daemon.store import RunStore
-from sarmoco.drivers.clock import gps_ns_to_unix_ns
 from sarmoco.errors import RecorderError
-from sarmoco.processing.types import FloatArray
+from sarmoco.geodesy import ecef_to_geodetic
+from sarmoco.processing.types import FloatArray, Image
 
 SICD_NS = "urn:SICD:1.4.0"
 """Namespace of the SICD version written."""
@@ -63,13 +71,39 @@ class SicdProduct:
         The SICD XML.
     pixels : ndarray of complex64, shape (NumRows, NumCols)
         The image as SICD orders it (see the module docstring).
-    segment : SegmentImage
-        The store's image it holds.
+    source : str
+        What it holds, for messages.
     """
 
     xml: lxml.etree._ElementTree
     pixels: npt.NDArray[np.complex64]
-    segment: SegmentImage
+    source: str
+
+
+@dataclass(frozen=True)
+class _Description:
+    """Everything a SICD states, computed by a product (strip or spotlight)."""
+
+    core_name: str
+    mode: str
+    scp_px: tuple[int, int]
+    shape: tuple[int, int]
+    scp_ecf: FloatArray
+    scp_llh: FloatArray
+    corners: FloatArray
+    row: dict[str, Any]
+    col: dict[str, Any]
+    time_coa_poly: FloatArray
+    start: datetime.datetime
+    n_pulses: int
+    ipp_poly: FloatArray
+    arp_poly: FloatArray
+    band_hz: tuple[float, float]
+    waveform: dict[str, Any]
+    polarization: tuple[str, str]
+    t_end_proc: float
+    az_autofocus: str
+    processing: list[dict[str, Any]]
 
 
 def irw_factor(window: str) -> float:
@@ -87,12 +121,6 @@ def irw_factor(window: str) -> float:
     k = int(np.argmax(spec < half))
     frac = (spec[k - 1] - half) / (spec[k - 1] - spec[k])
     return 2.0 * (k - 1 + frac) / pad
-
-
-def _gps_datetime(t_ns: int, gps_minus_utc_s: int) -> datetime.datetime:
-    unix_ns = gps_ns_to_unix_ns(t_ns, gps_minus_utc_s)
-    epoch = datetime.datetime(1970, 1, 1, tzinfo=datetime.UTC)
-    return epoch + datetime.timedelta(microseconds=unix_ns // 1000)
 
 
 def _grid_dim(uvect: FloatArray, ss: float, bw: float, kctr: float, window: str) -> dict[str, Any]:
@@ -160,17 +188,18 @@ def sicd_product(store: RunStore, segment: int = 0) -> SicdProduct:
     if not 0 <= segment < len(segments):
         raise RecorderError(f"{store.path}: segment {segment} (the store has {len(segments)})")
     seg = segments[segment]
-    return SicdProduct(_xml(store, cfg, geo, seg), _pixels(seg, cfg), seg)
-
-
-def _pixels(seg: SegmentImage, cfg: Config) -> npt.NDArray[np.complex64]:
-    out = seg.image.data.T
+    pixels = seg.image.data.T
     if cfg.geometry.look_side == "left":
-        out = out[:, ::-1]
-    return np.ascontiguousarray(out, dtype=np.complex64)
+        pixels = pixels[:, ::-1]
+    source = f"tiles {seg.tiles[0]}..{seg.tiles[-1]}"
+    return SicdProduct(
+        _sicd_xml(_strip(store, cfg, geo, seg)),
+        np.ascontiguousarray(pixels, dtype=np.complex64),
+        source,
+    )
 
 
-def _xml(store: RunStore, cfg: Config, geo: Georeference, seg: SegmentImage) -> Any:
+def _strip(store: RunStore, cfg: Config, geo: Georeference, seg: SegmentImage) -> _Description:
     radar = radar_params(cfg)
     image, track = seg.image, seg.track
     left = cfg.geometry.look_side == "left"
@@ -184,41 +213,143 @@ def _xml(store: RunStore, cfg: Config, geo: Georeference, seg: SegmentImage) -> 
         """Run-frame position of SICD pixel (row, col), m."""
         return np.asarray(pts[cols - 1 - col if left else col, row])
 
-    i_scp = cols - 1 - scp_px[1] if left else scp_px[1]
-    scp_ecf = geo.ecef(pixel(*scp_px))
-    scp_llh = geo.geodetic(pixel(*scp_px))
     last = (rows - 1, cols - 1)
     corner_px = [(0, 0), (0, last[1]), last, (last[0], 0)]  # FRFC, FRLC, LRLC, LRFC
-    corners = np.array([geo.geodetic(pixel(*rc))[:2] for rc in corner_px])
-
     t0_s = (seg.t0_ns - track.t0_ns) * 1e-9  # collect start on the track's clock
     duration = (seg.t1_ns - seg.t0_ns) * 1e-9
-    x_scp = float(image.axis0_m[i_scp])
+    x_scp = float(image.axis0_m[cols - 1 - scp_px[1] if left else scp_px[1]])
     arp0 = geo.ecef(track.origin_ned + track.x_hat * track.v0_mps * t0_s)
     arp_vel = geo.ecef_vector(track.x_hat * track.v0_mps)
-    t_scp = x_scp / track.v0_mps - t0_s
-
-    depth = cfg.geometry.height_m
     y_scp = float(image.axis1_m[scp_px[0]])
-    cos_graze = y_scp / math.hypot(y_scp, depth)
+    cos_graze = y_scp / math.hypot(y_scp, cfg.geometry.height_m)
     k_c = 2.0 * radar.carrier_hz / SPEED_OF_LIGHT_MPS
     row_bw = 2.0 * radar.bandwidth_hz / SPEED_OF_LIGHT_MPS * cos_graze
     beam = math.radians(cfg.imaging.azimuth_beamwidth_deg)
     col_bw = 4.0 / radar.wavelength_m * math.sin(beam / 2.0)
     ss0, ss1 = image.spacing_m
     f_lo = radar.carrier_hz - radar.bandwidth_hz / 2.0
-    f_hi = radar.carrier_hz + radar.bandwidth_hz / 2.0
-    n_pulses = math.floor(duration * radar.prf_hz) + 1
-    collect_s = n_pulses / radar.prf_hz  # the last pulse's interval ends after duration
-    start = _gps_datetime(seg.t0_ns, cfg.ins.gps_minus_utc_s)
+    window = cfg.imaging.window
+    return _Description(
+        core_name=f"{store.path.name}:tile{seg.tiles[0]}",
+        mode="STRIPMAP",
+        scp_px=scp_px,
+        shape=(rows, cols),
+        scp_ecf=geo.ecef(pixel(*scp_px)),
+        scp_llh=geo.geodetic(pixel(*scp_px)),
+        corners=np.array([geo.geodetic(pixel(*rc))[:2] for rc in corner_px]),
+        row=_grid_dim(geo.ecef_vector(track.y_hat), ss1, row_bw, k_c * cos_graze, window),
+        col=_grid_dim(geo.ecef_vector(sign * track.x_hat), ss0, col_bw, 0.0, "none"),
+        time_coa_poly=np.array([[x_scp / track.v0_mps - t0_s, sign / track.v0_mps]]),
+        start=gps_utc(seg.t0_ns, cfg.ins.gps_minus_utc_s),
+        n_pulses=math.floor(duration * radar.prf_hz) + 1,
+        ipp_poly=np.array([0.0, radar.prf_hz]),
+        arp_poly=np.stack([arp0, arp_vel]),
+        band_hz=(f_lo, f_lo + radar.bandwidth_hz),
+        waveform={
+            "TxPulseLength": radar.pulse_width_s,
+            "TxRFBandwidth": radar.bandwidth_hz,
+            "TxFreqStart": f_lo,
+            "TxFMRate": radar.bandwidth_hz / radar.pulse_width_s,
+            "RcvDemodType": "CHIRP",
+            "ADCSampleRate": radar.sample_rate_hz,
+        },
+        polarization=("UNKNOWN", "UNKNOWN"),
+        t_end_proc=duration,
+        az_autofocus="SV" if cfg.autofocus.enabled else "NO",
+        processing=_processing(cfg, store),
+    )
 
+
+def spotlight_product(ph: FxPhaseHistory, image: Image, heading_rad: float) -> SicdProduct:
+    """The SICD of a phase history's backprojection (:func:`sarmoco.app.cphd.focus`).
+
+    Parameters
+    ----------
+    ph : FxPhaseHistory
+        The phase history (geometry in ECEF, times from its collection start).
+    image : Image
+        Its image on a centred ground grid of the IARP's east-north-up frame.
+    heading_rad : float
+        The grid's heading (axis 0 from east toward north), rad.
+    """
+    n0, n1 = image.data.shape
+    rows, cols = n1, n0
+    scp_px = (rows // 2, cols // 2)
+    e0 = np.array([math.cos(heading_rad), math.sin(heading_rad), 0.0])
+    e1 = np.array([-math.sin(heading_rad), math.cos(heading_rad), 0.0])
+
+    def pixel(row: int, col: int) -> FloatArray:
+        """ECEF position of SICD pixel (row, col), m (columns run along -axis 0)."""
+        enu = image.axis0_m[cols - 1 - col] * e0 + image.axis1_m[row] * e1
+        return ph.ecef(enu)
+
+    last = (rows - 1, cols - 1)
+    corner_px = [(0, 0), (0, last[1]), last, (last[0], 0)]
+    scp = pixel(*scp_px)
+    t = ph.tx_time_s
+    apc = ph.apc_ecef_m
+    look = scp - apc[apc.shape[0] // 2]
+    cos_graze = float(np.linalg.norm(look - np.dot(look, _unit(scp)) * _unit(scp)))
+    cos_graze /= float(np.linalg.norm(look))
+    f_lo, f_hi = float(ph.freq_hz[0]), float(ph.freq_hz[-1])
+    f_c, bandwidth = (f_lo + f_hi) / 2.0, f_hi - f_lo
+    enu_apc = ph.scene(apc)
+    az = np.unwrap(np.arctan2(enu_apc[:, 1], enu_apc[:, 0]))
+    span = abs(float(az[-1] - az[0])) * t.size / max(t.size - 1, 1)
+    k_c = 2.0 * f_c / SPEED_OF_LIGHT_MPS
+    rate = (t.size - 1) / float(t[-1] - t[0])
+    e0_ecef, e1_ecef = ph.ecef(e0) - ph.ecef(np.zeros(3)), ph.ecef(e1) - ph.ecef(np.zeros(3))
+    tx, rcv = ph.polarization
+    return SicdProduct(
+        _sicd_xml(
+            _Description(
+                core_name="phase history",
+                mode="SPOTLIGHT",
+                scp_px=scp_px,
+                shape=(rows, cols),
+                scp_ecf=scp,
+                scp_llh=ecef_to_geodetic(scp),
+                corners=np.array([ecef_to_geodetic(pixel(*rc))[:2] for rc in corner_px]),
+                row=_grid_dim(
+                    e1_ecef,
+                    image.spacing_m[1],
+                    k_c * bandwidth / f_c * cos_graze,
+                    k_c * cos_graze,
+                    "none",
+                ),
+                col=_grid_dim(-e0_ecef, image.spacing_m[0], k_c * cos_graze * span, 0.0, "none"),
+                time_coa_poly=np.array([[float(t[0] + t[-1]) / 2.0]]),
+                start=ph.collection_start,
+                n_pulses=t.size,
+                ipp_poly=np.array([-rate * float(t[0]), rate]),
+                arp_poly=np.asarray(np.polynomial.polynomial.polyfit(t, apc, 5), np.float64),
+                band_hz=(f_lo, f_hi),
+                waveform={"TxRFBandwidth": bandwidth, "TxFreqStart": f_lo},
+                polarization=(tx, f"{tx}:{rcv}"),
+                t_end_proc=float(t[-1]),
+                az_autofocus="NO",
+                processing=[{"Type": "backprojection of the FX phase history", "Applied": True}],
+            )
+        ),
+        np.ascontiguousarray(image.data.T[:, ::-1], dtype=np.complex64),
+        f"{t.size} vectors",
+    )
+
+
+def _unit(v: FloatArray) -> FloatArray:
+    return np.asarray(v / np.linalg.norm(v))
+
+
+def _sicd_xml(d: _Description) -> Any:
+    rows, cols = d.shape
+    collect_s = float(d.n_pulses / d.ipp_poly[1])  # the last pulse's interval ends here
     root = lxml.etree.Element(f"{{{SICD_NS}}}SICD")
     sicd = sksicd.ElementWrapper(root)
     sicd["CollectionInfo"] = {
         "CollectorName": "sarmoco",
-        "CoreName": f"{store.path.name}:segment{seg.tiles[0]}",
+        "CoreName": d.core_name,
         "CollectType": "MONOSTATIC",
-        "RadarMode": {"ModeType": "STRIPMAP"},
+        "RadarMode": {"ModeType": d.mode},
         "Classification": "UNCLASSIFIED",
     }
     sicd["ImageCreation"] = {
@@ -233,74 +364,59 @@ def _xml(store: RunStore, cfg: Config, geo: Georeference, seg: SegmentImage) -> 
         "FirstRow": 0,
         "FirstCol": 0,
         "FullImage": {"NumRows": rows, "NumCols": cols},
-        "SCPPixel": np.array(scp_px),
+        "SCPPixel": np.array(d.scp_px),
     }
     sicd["GeoData"] = {
         "EarthModel": "WGS_84",
-        "SCP": {"ECF": scp_ecf, "LLH": scp_llh},
-        "ImageCorners": corners,
+        "SCP": {"ECF": d.scp_ecf, "LLH": d.scp_llh},
+        "ImageCorners": d.corners,
     }
     sicd["Grid"] = {
         "ImagePlane": "GROUND",
         "Type": "PLANE",
-        "TimeCOAPoly": np.array([[t_scp, sign / track.v0_mps]]),
-        "Row": _grid_dim(
-            geo.ecef_vector(track.y_hat), ss1, row_bw, k_c * cos_graze, cfg.imaging.window
-        ),
-        "Col": _grid_dim(geo.ecef_vector(sign * track.x_hat), ss0, col_bw, 0.0, "none"),
+        "TimeCOAPoly": d.time_coa_poly,
+        "Row": d.row,
+        "Col": d.col,
     }
     sicd["Timeline"] = {
-        "CollectStart": start,
+        "CollectStart": d.start,
         "CollectDuration": collect_s,
         "IPP": {
             "@size": 1,
             "Set": [
                 {
                     "@index": 1,
-                    "TStart": 0.0,
+                    "TStart": float(-d.ipp_poly[0] / d.ipp_poly[1]),
                     "TEnd": collect_s,
                     "IPPStart": 0,
-                    "IPPEnd": n_pulses - 1,
-                    "IPPPoly": np.array([0.0, radar.prf_hz]),
+                    "IPPEnd": d.n_pulses - 1,
+                    "IPPPoly": d.ipp_poly,
                 }
             ],
         },
     }
-    sicd["Position"] = {"ARPPoly": np.stack([arp0, arp_vel])}
+    sicd["Position"] = {"ARPPoly": d.arp_poly}
     sicd["RadarCollection"] = {
-        "TxFrequency": {"Min": f_lo, "Max": f_hi},
-        "Waveform": {
-            "@size": 1,
-            "WFParameters": [
-                {
-                    "@index": 1,
-                    "TxPulseLength": radar.pulse_width_s,
-                    "TxRFBandwidth": radar.bandwidth_hz,
-                    "TxFreqStart": f_lo,
-                    "TxFMRate": radar.bandwidth_hz / radar.pulse_width_s,
-                    "RcvDemodType": "CHIRP",
-                    "ADCSampleRate": radar.sample_rate_hz,
-                }
-            ],
-        },
-        "TxPolarization": "UNKNOWN",
+        "TxFrequency": {"Min": d.band_hz[0], "Max": d.band_hz[1]},
+        "Waveform": {"@size": 1, "WFParameters": [{"@index": 1, **d.waveform}]},
+        "TxPolarization": d.polarization[0],
         "RcvChannels": {
             "@size": 1,
-            "ChanParameters": [{"@index": 1, "TxRcvPolarization": "UNKNOWN"}],
+            "ChanParameters": [{"@index": 1, "TxRcvPolarization": d.polarization[1]}],
         },
     }
     sicd["ImageFormation"] = {
         "RcvChanProc": {"NumChanProc": 1, "ChanIndex": [1]},
-        "TxRcvPolarizationProc": "UNKNOWN",
+        "TxRcvPolarizationProc": d.polarization[1],
         "TStartProc": 0.0,
-        "TEndProc": duration,
-        "TxFrequencyProc": {"MinProc": f_lo, "MaxProc": f_hi},
+        "TEndProc": d.t_end_proc,
+        "TxFrequencyProc": {"MinProc": d.band_hz[0], "MaxProc": d.band_hz[1]},
         "ImageFormAlgo": "OTHER",
         "STBeamComp": "NO",
         "ImageBeamComp": "NO",
-        "AzAutofocus": "SV" if cfg.autofocus.enabled else "NO",
+        "AzAutofocus": d.az_autofocus,
         "RgAutofocus": "NO",
-        "Processing": _processing(cfg, store),
+        "Processing": d.processing,
     }
     tree = root.getroottree()
     root.append(sksicd.compute_scp_coa(tree))
