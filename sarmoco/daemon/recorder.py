@@ -25,7 +25,7 @@ import os
 import platform
 import threading
 import time
-from collections.abc import Coroutine, Mapping
+from collections.abc import Awaitable, Callable, Coroutine, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -47,20 +47,45 @@ _VERSION_PACKAGES = ("sarmoco", "numpy", "scipy", "zarr", "xarray", "pymavlink",
 
 
 class _SyncingStore(LocalStore):
-    """A zarr local store that remembers which files it wrote, for fsync."""
+    """A zarr local store that remembers which files it wrote, for fsync.
+
+    A write or fsync the file system refuses (disk full, read-only, I/O error) raises
+    :class:`~sarmoco.errors.RecorderError` naming the store, the file and the reason;
+    so does a write after the store's directory was removed (zarr would silently
+    recreate the chunk's folders without the store's metadata).
+    """
 
     def __init__(self, root: Path) -> None:
+        root.mkdir(parents=True, exist_ok=True)
         super().__init__(root)
+        self._root = root
         self._dirty: set[str] = set()
         self._dirty_lock = threading.Lock()
 
+    def _refused(self, key: str, exc: OSError) -> RecorderError:
+        return RecorderError(f"recorder: {self._root}: cannot write {key!r}: {exc.strerror}")
+
     async def set(self, key: str, value: Buffer) -> None:
-        await super().set(key, value)
-        with self._dirty_lock:
-            self._dirty.add(key)
+        await self._set_checked(key, value, super().set)
 
     async def set_if_not_exists(self, key: str, value: Buffer) -> None:
-        await super().set_if_not_exists(key, value)
+        await self._set_checked(key, value, super().set_if_not_exists)
+
+    async def delete(self, key: str) -> None:
+        try:
+            await super().delete(key)
+        except OSError as exc:
+            raise self._refused(key, exc) from exc
+
+    async def _set_checked(
+        self, key: str, value: Buffer, write: Callable[[str, Buffer], Awaitable[None]]
+    ) -> None:
+        if key != "zarr.json" and not (self._root / "zarr.json").is_file():
+            raise RecorderError(f"recorder: {self._root}: the store's directory was removed")
+        try:
+            await write(key, value)
+        except OSError as exc:
+            raise self._refused(key, exc) from exc
         with self._dirty_lock:
             self._dirty.add(key)
 
@@ -68,11 +93,15 @@ class _SyncingStore(LocalStore):
         """fsync every file written since the last call, then their directories; returns files."""
         with self._dirty_lock:
             keys, self._dirty = self._dirty, set()
-        root = Path(str(self.root))
         dirs = set()
         for key in keys:
-            path = root / key
-            _fsync_path(path, os.O_RDONLY)
+            path = self._root / key
+            try:
+                _fsync_path(path, os.O_RDONLY)
+            except OSError as exc:
+                with self._dirty_lock:  # fsynced again at the next call
+                    self._dirty |= keys
+                raise self._refused(key, exc) from exc
             dirs.add(path.parent)
         for directory in dirs:
             _fsync_path(directory, os.O_RDONLY | os.O_DIRECTORY)
