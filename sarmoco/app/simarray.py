@@ -42,7 +42,7 @@ def add_array_arguments(p: argparse.ArgumentParser) -> None:
     )  # fmt: skip
     roll.add_argument(
         "--roll-series", action="store_true",
-        help="roll = that mean plus a low-pass random series (0.5 deg rms, 0.5 Hz corner)",
+        help="roll = that mean plus a low-pass random series (0.5 deg rms, 2 Hz corner)",
     )  # fmt: skip
     roll.add_argument("--dem", type=Path, metavar="FILE.npz", help="terrain: height_m, spacing_m")
 
