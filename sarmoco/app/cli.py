@@ -71,6 +71,11 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from sarmoco.daemon.runner import run_live
 
     cfg = load_config(args.config)
+    if cfg.radar.mode == "array":
+        raise ConfigError(
+            'radar.mode: "array" runs are imaged from files (sarmoco replay --radar --nav); '
+            'the live daemon focuses radar.mode = "single"'
+        )
     setup_logging(cfg.status.log_level, "json")
     install_sighup()
     store = Path(args.store) if args.store else None

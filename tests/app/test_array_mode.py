@@ -118,3 +118,18 @@ def test_roll_series_from_the_ins_stream(tmp_path: Path) -> None:
     print(f"\nroll series {roll.min():.2f} .. {roll.max():.2f} deg, --scale 0.1\n" + _table(report))
     assert np.ptp(roll) > 0.5  # the roll does vary over the strip (2.53 .. 3.40 deg)
     _assert_paper_bar(report)
+
+
+def test_live_run_and_store_replay_refuse_array_mode(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    config = tmp_path / "array.toml"
+    config.write_text(
+        '[radar]\nmode = "array"\nchannels = 160\nrange_gate_delay_s = 1e-6\n'
+        "[geometry]\nheight_m = 200.0\n"
+    )
+    assert main(["run", "--config", str(config)]) == 2
+    assert 'radar.mode: "array" runs are imaged from files' in capsys.readouterr().err
+    argv = ["replay", "--config", str(config), "--recording", "x.zarr", "--out", "y.zarr"]
+    assert main(argv) == 2
+    assert "array mode replays files" in capsys.readouterr().err
