@@ -5,8 +5,10 @@ north-west at 45 deg) of the USGS DEM of the Jacksboro fault that matplotlib shi
 data, laid over a square patch of ground centred on the scene centre (track frame: DEM rows
 along track x, columns across it in ground range y). Scatterers sit on a regular grid,
 ``SPACING_RESOLUTIONS`` of the azimuth resolution apart, with amplitude
-``CLUTTER_AMPLITUDE * sqrt(reflectivity)`` (reflectivity: the hillshade to ``SHADE_POWER``) and a uniformly random phase. Corner reflectors
-(:data:`REFLECTORS`) are point targets at the centre and near the corners of the patch.
+``CLUTTER_AMPLITUDE * sqrt(reflectivity)`` (reflectivity: the hillshade to the power
+``SHADE_POWER``) and a uniformly random phase. Corner reflectors (:data:`REFLECTORS`)
+are point targets at the centre and near the corners of the patch; the aperture, PRF and
+range window are those of the preset for the reflectors and the patch's corners.
 
 Echoes of so many scatterers (tens of thousands) are synthesised by binning: per pulse,
 each lit scatterer adds ``a exp(-j 4 pi R / lambda)`` (exact stop-and-hop range) to a delay
