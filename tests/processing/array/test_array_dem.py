@@ -3,7 +3,8 @@
 Scaled from Table 1: 2 Tx × 40 Rx (1.6 m virtual array instead of 3.2 m), a 4 m strip
 across the middle (steepest part) of the 120 m × 120 m three-peak terrain, 200 m altitude.
 The paper's bar for the full array is 91 % of cells within half a cell (0.5 m); the halved
-array's cross-track beam is twice as wide, so the bars here are ours for this scale.
+array's cross-track beam is twice as wide, and the strip is the terrain's steepest, so the
+bars here are ours for this scale (measured: std 0.31 m, 92 %).
 """
 
 from __future__ import annotations
@@ -26,9 +27,11 @@ def roll_scene() -> Scene:
     return simulate(n_rx=40, width_m=120.0, strip_m=4.0, roll_rad=ROLL)
 
 
-def _outer_bias(scene: Scene, product: DemProduct) -> tuple[float, float]:
-    left = band_bias(scene, product, *OUTER, side=-1)
-    right = band_bias(scene, product, *OUTER, side=+1)
+def _outer_bias(
+    scene: Scene, product: DemProduct, band: tuple[float, float] = OUTER
+) -> tuple[float, float]:
+    left = band_bias(scene, product, *band, side=-1)
+    right = band_bias(scene, product, *band, side=+1)
     return left, right
 
 
@@ -42,27 +45,33 @@ def test_roll_compensation_restores_the_dem(roll_scene: Scene) -> None:
     # before: the image is rotated by the roll (10 m across at 200 m)
     assert before.std_m > 5.0 and before.within_half_cell < 0.2
     # after: ΔR1 + ΔR2 with the true attitude
-    assert after.std_m < 0.45 and after.within_half_cell > 0.82
+    assert after.std_m < 0.35 and after.within_half_cell > 0.88
     assert abs(after.mean_m) < 0.08
     # ΔR2's share: without it the outer swath sinks by 0.2-0.4 m
     assert abs(left) < 0.1 and abs(right) < 0.1
 
 
 def test_sub_blocks_one_block_is_worse_than_eight() -> None:
-    flat = simulate(n_rx=20, width_m=120.0, strip_m=4.0, roll_rad=ROLL, height_scale=0.0)
-    one = _outer_bias(flat, flat.image(blocks=(1, 1)))
-    eight = _outer_bias(flat, flat.image(blocks=(1, 8)))
+    flat = simulate(n_rx=40, width_m=120.0, strip_m=4.0, roll_rad=ROLL, height_scale=0.0)
+    band = (40.0, 58.0)  # θ 11°..16° off nadir, ΔR2 up to 2.3 rad at the array's ends
+    one = _outer_bias(flat, flat.image(blocks=(1, 1)), band)
+    eight = _outer_bias(flat, flat.image(blocks=(1, 8)), band)
     print(f"\nflat, outer bias: 1x1 {one[0]:+.3f} {one[1]:+.3f}", end="")
     print(f"  1x8 {eight[0]:+.3f} {eight[1]:+.3f} m")
-    assert max(abs(v) for v in eight) < 0.03
-    assert max(abs(v) for v in one) > 2.0 * max(abs(v) for v in eight) + 0.03
+    # one block applies ΔR2 at the centre wavenumber only: the outer swath is 4-9 cm off
+    # (more on the right, where the roll turns the swath to 23°); eight blocks: about 1 cm
+    one_mean = (abs(one[0]) + abs(one[1])) / 2.0
+    eight_mean = (abs(eight[0]) + abs(eight[1])) / 2.0
+    assert one_mean > 0.045
+    assert eight_mean < 0.025
+    assert one_mean > 3.0 * eight_mean
 
 
 def test_roll_from_a_noisy_ins_series() -> None:
     def truth(t_s: np.ndarray) -> np.ndarray:
         return ROLL + math.radians(0.5) * np.sin(2.0 * math.pi * t_s / 0.4)
 
-    scene = simulate(n_rx=40, width_m=120.0, strip_m=4.0, roll_rad=truth, seed=2)
+    scene = simulate(n_rx=40, width_m=120.0, strip_m=3.0, roll_rad=truth, seed=2)
     rng = np.random.default_rng(9)
     t_s = (scene.t_ns - scene.t_ns[0]) * 1e-9
     ins_roll = truth(t_s) + math.radians(0.01) * rng.standard_normal(t_s.size)
@@ -73,7 +82,7 @@ def test_roll_from_a_noisy_ins_series() -> None:
     left, right = _outer_bias(scene, product)
     print(f"\nINS series {series.as_dict()}\nconstant 3 deg {nominal.as_dict()}")
     print(f"outer bias {left:+.3f} {right:+.3f} m")
-    assert series.std_m < 0.45 and series.within_half_cell > 0.82
+    assert series.std_m < 0.35 and series.within_half_cell > 0.88
     assert abs(left) < 0.1 and abs(right) < 0.1
     # a constant roll known to the processor is not enough when the roll moves by 0.5°
     assert nominal.within_half_cell < series.within_half_cell - 0.1
