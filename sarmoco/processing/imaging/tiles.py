@@ -110,10 +110,20 @@ class TileImager:
         Slant range of each range-compressed bin, m (uniform).
     wavelength_m : float
         Carrier wavelength, m.
+    only : range, optional
+        Form only these tiles (a block of a batch; the others the pulses reach are
+        skipped). Default every tile.
     """
 
-    def __init__(self, layout: TileLayout, range_axis_m: FloatArray, wavelength_m: float) -> None:
+    def __init__(
+        self,
+        layout: TileLayout,
+        range_axis_m: FloatArray,
+        wavelength_m: float,
+        only: range | None = None,
+    ) -> None:
         self.layout = layout
+        self.only = only
         self.range_axis_m = np.asarray(range_axis_m, dtype=np.float64)
         self.wavelength_m = float(wavelength_m)
         self._open: dict[int, Tile] = {}
@@ -150,7 +160,7 @@ class TileImager:
         length = self.layout.tile_length_m
         first = max(math.floor((float(x.min()) - half) / length), self._first_open)
         for k in range(first, math.floor((float(x.max()) + half) / length) + 1):
-            if k not in self._open:
+            if k not in self._open and (self.only is None or k in self.only):
                 grid = self.layout.grid(k)
                 shape = (grid.axis0_m.size, grid.axis1_m.size)
                 self._open[k] = Tile(k, grid, np.zeros(shape, np.complex64), int(t_ns[0]), 0)
