@@ -141,17 +141,17 @@ def block_span_m(block: ImageBlock, with_pga: bool) -> tuple[float, float]:
 def image_block(cfg: Config, block: ImageBlock) -> list[tuple[int, dict[str, float]]]:
     """Form, refine and write one block's tiles (a task); their store indices and metrics.
 
-    The imager replays the segment's calls that reach the block; the tiles it forms
-    outside the block (and its PGA neighbours, which only serve as context) are dropped.
+    The imager replays the segment's calls that reach the block and forms only the
+    block's tiles and, with tile PGA, their neighbours (context only, not written).
     """
     imager, tile_pga = tile_imaging(cfg, radar_params(cfg))
     stream = block.stream
     extra = 1 if tile_pga is not None else 0
-    wanted = range(block.first_tile - extra, block.last_tile + extra + 1)
+    imager.only = range(block.first_tile - extra, block.last_tile + extra + 1)
     formed = []
     for call in stream.calls_within(*block_span_m(block, tile_pga is not None)):
-        formed += [t for t in imager.add(*stream.read(call)) if t.index in wanted]
-    formed += [t for t in imager.close() if t.index in wanted]
+        formed += imager.add(*stream.read(call))
+    formed += imager.close()
     if tile_pga is not None:
         formed = tile_pga.push(formed) + tile_pga.flush()
     images = zarr.open_group(str(block.out / schema.IMAGES_GROUP), mode="r+", zarr_format=3)
