@@ -20,7 +20,19 @@ What is measured (one JSON line with ``--json``):
     CPU seconds per pulse taken in of the whole daemon (every thread: decode, ring,
     alignment, focusing, recording; from ``/proc/PID/stat`` between the daemon's ready
     line and the end of the stream) over the CPU seconds per pulse of a single-threaded
-    ``scipy.fft.fft`` of the pulse length, timed in this process in the same run.
+    ``scipy.fft.fft`` of the pulse length (rounded up to ``scipy.fft.next_fast_len``, as
+    the chain's own FFTs are: 6506 samples, with a prime factor 3253, took 3 times as
+    long), timed in this process in the same run.
+``cpu_realtime_ratio`` (beside the figures)
+    Seconds of data taken in per CPU second of the daemon (all threads): what
+    ``realtime_ratio`` would be if the daemon had one core to itself and used only
+    it. On a machine shared with other work the wall-time ratio measures the share
+    of the cores the daemon got; this one does not.
+``live_page_share``
+    The operator's live page, watched during the run as its browser does (``/``'s data:
+    the tile strip, ``/status`` and ``/live.json`` every :data:`LIVE_PAGE_POLL_S`): the
+    CPU time the daemon spent rendering the strip (``png_render_cpu_s`` of
+    ``/live.json``) over ``processing_busy_seconds``.
 ``latency_p50_s``, ``latency_p99_s``
     Pulse to record: the store's ``pulses`` ``committed`` counter is polled every
     :data:`POLL_S`; the pulses that became committed between two polls get the later
@@ -75,12 +87,18 @@ POLL_S = 0.01
 START_TIMEOUT_S = 900.0
 """Longest wait for the simulator (it synthesises every echo first) or the daemon, s."""
 
-DRAIN_S = 10.0
+DRAIN_S = 60.0
 """After the simulator is done, the daemon is stopped once it has recorded every pulse sent,
 or when no pulse was recorded for this long, s."""
 
 RSS_WARMUP_MAX_S = 30.0
 """Longest warm-up left out of the RSS trend, s."""
+
+LIVE_PAGE_POLL_S = 2.0
+"""The live page's refresh interval (its script's timer), s."""
+
+LIVE_PAGE_PATHS = ("/tiles/latest.png", "/status", "/live.json")
+"""What the live page fetches at each refresh."""
 
 KEYS = (
     "realtime_ratio",
@@ -90,6 +108,7 @@ KEYS = (
     "lost_pulses",
     "peak_rss_mb",
     "rss_growth_mb_per_min",
+    "live_page_share",
 )
 """The figures ``sarmoco bench`` prints (``--json``: with the run's description)."""
 
@@ -174,7 +193,8 @@ def rss_trend_mb_per_min(rss: list[tuple[float, int]], warmup_s: float) -> float
 
 
 def fft_cpu_s_per_pulse(n_samples: int, repeats: int = 20, block: int = 64) -> float:
-    """CPU seconds of one single-threaded ``scipy.fft.fft`` of ``n_samples`` complex64, s.
+    """CPU seconds of one single-threaded ``scipy.fft.fft`` of ``n_samples`` complex64
+    (zero-padded to ``next_fast_len``), s.
 
     A block of pulses is transformed along fast time ``repeats`` times (after one
     warm-up call); the best repetition counts (the floor, as other load only adds).
@@ -182,11 +202,12 @@ def fft_cpu_s_per_pulse(n_samples: int, repeats: int = 20, block: int = 64) -> f
     rng = np.random.default_rng(0)
     x = rng.standard_normal((block, n_samples)) + 1j * rng.standard_normal((block, n_samples))
     x = x.astype(np.complex64)
-    scipy.fft.fft(x, axis=1, workers=1)
+    n_fft = scipy.fft.next_fast_len(n_samples)
+    scipy.fft.fft(x, n_fft, axis=1, workers=1)
     best = float("inf")
     for _ in range(repeats):
         t0 = time.process_time()
-        scipy.fft.fft(x, axis=1, workers=1)
+        scipy.fft.fft(x, n_fft, axis=1, workers=1)
         best = min(best, time.process_time() - t0)
     return best / block
 
@@ -219,6 +240,8 @@ class BenchRun:
     store: Path
     t_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     """Times of the recorded pulses, GPS ns."""
+    live: dict[str, Any] = field(default_factory=dict)
+    """The daemon's ``/live.json`` at the end of the stream (the live page's rendering)."""
 
     @property
     def counters(self) -> dict[str, float]:
@@ -234,8 +257,19 @@ def _http_port() -> int:
         return int(s.getsockname()[1])
 
 
-def _fetch_status(port: int) -> dict[str, Any]:
-    with urllib.request.urlopen(f"http://127.0.0.1:{port}/status", timeout=10) as resp:
+def watch_live_page(port: int, stop: threading.Event) -> None:
+    """Fetch what the live page fetches, every :data:`LIVE_PAGE_POLL_S`, until ``stop``."""
+    while not stop.wait(LIVE_PAGE_POLL_S):
+        for path in LIVE_PAGE_PATHS:
+            try:
+                with urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=10) as r:
+                    r.read()
+            except OSError:  # 404 before the first tile; the daemon busy or stopping
+                pass
+
+
+def _fetch_status(port: int, path: str = "/status") -> dict[str, Any]:
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}{path}", timeout=10) as resp:
         status: dict[str, Any] = json.loads(resp.read())
     return status
 
@@ -295,6 +329,8 @@ def live_run(
         cpu0 = proc_cpu_s(daemon.pid)
         watcher = threading.Thread(target=watch, args=(daemon.pid, store, seen, stop))
         watcher.start()
+        viewer = threading.Thread(target=watch_live_page, args=(http_port, stop))
+        viewer.start()
         if sim.wait(timeout=duration_s + START_TIMEOUT_S) != 0:
             raise SarmocoError(f"bench: the simulator failed (status {sim.returncode})")
         while (  # the daemon records what it still holds
@@ -306,10 +342,12 @@ def live_run(
         if daemon.poll() is not None:
             raise SarmocoError(f"bench: the daemon died (status {daemon.returncode}), see {out}")
         status = _fetch_status(http_port)
+        live = _fetch_status(http_port, "/live.json")
         cpu_s = proc_cpu_s(daemon.pid) - cpu0
         peak_kb = proc_status_kb(daemon.pid, "VmHWM")
         stop.set()
         watcher.join()
+        viewer.join()
         daemon.send_signal(signal.SIGTERM)
         exit_status = daemon.wait(timeout=START_TIMEOUT_S)
     finally:
@@ -331,6 +369,7 @@ def live_run(
         peak_rss_kb=peak_kb,
         exit_status=exit_status,
         store=store,
+        live=live,
         t_ns=open_store(store).read("pulses", ["t_ns"])["t_ns"],
     )
 
@@ -351,6 +390,9 @@ def figures(run: BenchRun, fft_s_per_pulse: float) -> dict[str, float]:
         "lost_pulses": float(run.pulses_sent - run.t_ns.size),
         "peak_rss_mb": run.peak_rss_kb / 1024.0,
         "rss_growth_mb_per_min": rss_trend_mb_per_min(run.watch.rss, warmup),
+        "live_page_share": run.live.get("png_render_cpu_s", 0.0) / busy
+        if busy > 0
+        else float("nan"),
     }
 
 
@@ -429,6 +471,11 @@ def bench(
         "tiles": int(c.get("pipeline_tiles", 0)),
         "processing_busy_s": c.get("processing_busy_seconds", 0.0),
         "daemon_cpu_s": run.cpu_s,
+        "live_page_renders": int(run.live.get("png_renders", 0)),
+        "live_page_cpu_s": run.live.get("png_render_cpu_s", 0.0),
+        "cpu_realtime_ratio": c.get("pipeline_pulses_received", 0.0) / run.prf_hz / run.cpu_s
+        if run.cpu_s > 0
+        else float("nan"),
         "fft_cpu_s_per_pulse": fft_s,
         "record_raw_echoes": record,
         "presum_first": presum_first,
