@@ -85,7 +85,7 @@ def array_config_table(scn: ArrayScenario, out: Path, payload: str) -> dict[str,
             "receive": r.receive,
             "chirp_direction": r.chirp_direction,
         },
-        "geometry": {"height_m": scn.altitude_m},
+        "geometry": {"height_m": scn.altitude_m - scn.mean_ground_m},
         "ins": {
             "protocol": NAV_PROTOCOL,
             "link": str(out / INS_EMITTERS[NAV_PROTOCOL].file),

@@ -5,9 +5,11 @@ store (``compensated``: roll compensated; ``uncompensated``: imaged as if the wi
 level) with the DEM of a simulated run's ``truth.json``:
 
 - registration: the store's DEMs sit in a frame whose origin is the INS reference point at
-  the first imaged pulse (:mod:`sarmoco.daemon.array_pipeline`); the truth's reference
-  point at that pulse time moves them onto the truth's north/east (the INS gives no
-  absolute position, as for the single-channel tiles);
+  the first imaged pulse, ``geometry.height_m`` above the height datum
+  (:mod:`sarmoco.daemon.array_pipeline`); the truth's reference point at that pulse time
+  moves the truth into that frame, north, east and height (the INS gives no absolute
+  position, as for the single-channel tiles; the sim's ``geometry.height_m`` is the flight
+  above the terrain's mean, so the datum is that mean);
 - the truth is cut to the scene (its imaged strip along track, the swath
   ``|east| <= scene_half_width_m`` across) and the statistics of imaged minus true height
   are :func:`sarmoco.processing.array.dem.evaluate_dem`'s: mean, standard deviation, the
@@ -71,7 +73,8 @@ class TruthDem:
     Attributes
     ----------
     height_m : ndarray, shape (n_north, n_east)
-        True heights (up) over the scene (the truth's strip along track, the swath across), m.
+        True heights (up) over the scene (the truth's strip along track, the swath across)
+        above the product's datum, m.
     north_m, east_m : ndarray
         The samples' north and east in the product's frame (registered), m.
     """
@@ -98,8 +101,9 @@ def truth_for(dem: DemProduct, truth: dict[str, Any]) -> TruthDem:
     pulses_pos = np.asarray(truth["pulses"]["pos_ned"], dtype=np.float64)
     since = (pulses_t - pulses_t[0]).astype(np.float64)
     t0 = float(dem.track.t0_ns - pulses_t[0])
-    off = [np.interp(t0, since, pulses_pos[:, i]) - dem.track.origin_ned[i] for i in (0, 1)]
-    return TruthDem(h[np.ix_(rows, cols)], north[rows] - off[0], east[cols] - off[1])
+    off = [np.interp(t0, since, pulses_pos[:, i]) - dem.track.origin_ned[i] for i in range(3)]
+    # NED down of the DEM's frame = the truth's minus off[2]: heights (up) plus off[2]
+    return TruthDem(h[np.ix_(rows, cols)] + off[2], north[rows] - off[0], east[cols] - off[1])
 
 
 def dem_report(store: RunStore, truth_path: Path, out_dir: Path) -> dict[str, Any]:

@@ -80,6 +80,9 @@ class ArrayScenario:
         Ground speed (north) and height of the flight above the NED origin's plane, m/s, m.
     terrain : Terrain
         The DEM the echoes come from.
+    mean_ground_m : float
+        Mean height of the terrain grid, m (the flight is ``altitude_m - mean_ground_m``
+        above it: the daemon's ``geometry.height_m``).
     scene_north_m : (float, float)
         Along-track strip imaged and evaluated, north from .. to, m.
     scene_half_width_m : float
@@ -110,6 +113,7 @@ class ArrayScenario:
     speed_mps: float
     altitude_m: float
     terrain: Terrain
+    mean_ground_m: float
     scene_north_m: tuple[float, float]
     scene_half_width_m: float
     track_start_north_m: float
@@ -149,6 +153,7 @@ class ArrayScenario:
             "scale": self.scale,
             "speed_mps": self.speed_mps,
             "altitude_m": self.altitude_m,
+            "mean_ground_m": self.mean_ground_m,
             "max_look_deg": math.degrees(self.max_look_rad),
             "n_tx": self.layout.n_tx,
             "n_rx": self.layout.n_rx,
@@ -333,6 +338,7 @@ def load_array_preset(
         speed_mps=speed,
         altitude_m=altitude,
         terrain=terrain,
+        mean_ground_m=float(height.mean()),
         scene_north_m=(-0.5 * strip, 0.5 * strip),
         scene_half_width_m=half_width,
         track_start_north_m=-0.5 * flight,
