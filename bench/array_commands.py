@@ -42,7 +42,7 @@ EARTH_M_PER_DEG = 111_320.0
 
 def jacksboro_npz(path: Path) -> Path:
     """A ``--dem`` file: the Jacksboro DEM around its steepest point at 0.5 m (m, up)."""
-    dem = cbook.get_sample_data("jacksboro_fault_dem.npz")
+    dem = np.load(cbook.get_sample_data("jacksboro_fault_dem.npz", asfileobj=False))
     z = np.asarray(dem["elevation"], dtype=np.float64)
     lat = 0.5 * (float(dem["ymin"]) + float(dem["ymax"]))
     dy_m = float(dem["dy"]) * EARTH_M_PER_DEG
