@@ -9,6 +9,7 @@ neighbour tiles for tile PGA): without it the tiles lose pulses and differ.
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -16,9 +17,10 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import psutil
 import pytest
 
-from sarmoco.app.batch import LOOPBACK, Recording, run_batch
+from sarmoco.app.batch import LOOPBACK
 from sarmoco.app.cli import main
 from sarmoco.daemon.config import Config, load_config
 from sarmoco.daemon.runner import replay_files, replay_store
@@ -77,35 +79,50 @@ def assert_same_store(single: RunStore, batch: RunStore) -> None:
         assert attrs_a == attrs_b, k
     assert batch.attrs["metrics"] == single.attrs["metrics"]
     for table in ("pulses", "motion", "autofocus"):
-        a, b = single.read(table), batch.read(table)
-        assert a.keys() == b.keys()
-        for name in a:
-            np.testing.assert_array_equal(a[name], b[name], err_msg=f"{table}/{name}")
+        want, got = single.read(table), batch.read(table)
+        assert want.keys() == got.keys()
+        for name in want:
+            np.testing.assert_array_equal(want[name], got[name], err_msg=f"{table}/{name}")
 
 
 def test_blocks_on_two_workers_give_the_single_process_replay(
-    client: Any, recorded: tuple[Config, Path]
+    client: Any, recorded: tuple[Config, Path], capsys: pytest.CaptureFixture[str]
 ) -> None:
+    """``sarmoco batch --scheduler`` on the cluster, a store and a file pair at once."""
     cfg, out = recorded
     assert client.scheduler.address.startswith(f"tcp://{LOOPBACK}:")
     workers = client.scheduler_info()["workers"]
     assert len(workers) == 2 and all(a.startswith(f"tcp://{LOOPBACK}:") for a in workers)
+    pids = {os.getpid(), *client.run(os.getpid).values()}  # scheduler, nannies; workers
+    assert len(pids) == 3
+    listening = {
+        (pid, c.laddr.ip)
+        for pid in pids
+        for c in psutil.Process(pid).net_connections("inet")
+        if c.status == psutil.CONN_LISTEN
+    }
+    assert listening and {ip for _, ip in listening} == {LOOPBACK}, listening
     sim = out / "sim"
     single_files = out / "single_files.zarr"
     replay_files(cfg, sim / "radar.vrt", sim / "nav.tlog", single_files, progress=False)
     single_store = out / "single_store.zarr"
     replay_store(cfg, single_files, single_store, progress=False)
 
-    recordings = [
-        Recording(out / "batch_files.zarr", radar=sim / "radar.vrt", nav=sim / "nav.tlog"),
-        Recording(out / "batch_store.zarr", store=single_files),
-    ]
-    summaries = run_batch(client, cfg, recordings, tiles_per_block=1, progress=False)
-
-    assert [s.tiles for s in summaries] == [open_store(single_files).n_images] * 2
-    assert_same_store(open_store(single_files), open_store(recordings[0].out))
-    assert_same_store(open_store(single_store), open_store(recordings[1].out))
-    assert not any(r.scratch.exists() for r in recordings)
+    status = main(
+        ["batch", "--config", str(sim / "sarmoco.toml"), str(single_files),
+         "--radar", str(sim / "radar.vrt"), "--nav", str(sim / "nav.tlog"),
+         "--out", str(out / "batch"), "--scheduler", client.scheduler.address,
+         "--tiles-per-block", "1"]
+    )  # fmt: skip
+    printed = capsys.readouterr()
+    assert status == 0
+    n, metrics = open_store(single_files).n_images, open_store(single_files).attrs["metrics"]
+    focused = metrics["pulses_processed"]
+    assert f"single_files.zarr: {focused} pulses focused, {n} tiles" in printed.out
+    assert "dashboard:" in printed.err and f"] {2 + n * 2}/{2 + n * 2} tasks" in printed.err
+    assert_same_store(open_store(single_files), open_store(out / "batch" / "radar.zarr"))
+    assert_same_store(open_store(single_store), open_store(out / "batch" / "single_files.zarr"))
+    assert not list((out / "batch").glob("*scratch*"))
 
 
 def test_batch_command_refuses_what_it_cannot_run(
