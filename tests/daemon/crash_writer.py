@@ -107,9 +107,9 @@ def block_size(round_k: int) -> int:
     return 1 + (round_k * 37) % 53
 
 
-def main(path: str, seed: int) -> None:
-    """Write rounds until killed."""
-    rec = Recorder(
+def new_recorder(path: str, seed: int, cls: type[Recorder] = Recorder) -> Recorder:
+    """The writer's recorder (small chunks, an fsync every 50 ms) of class ``cls``."""
+    return cls(
         path,
         N_SAMPLES,
         "int16",
@@ -118,11 +118,23 @@ def main(path: str, seed: int) -> None:
         fsync_interval_s=0.05,
         chunk_rows=64,
     )
+
+
+def main(path: str, seed: int) -> None:
+    """Write rounds until killed."""
+    rec = new_recorder(path, seed)
     print("READY", flush=True)
+    write_rounds(rec, 30.0)
+    rec.close()
+
+
+def write_rounds(rec: Recorder, seconds: float, rounds: int | None = None) -> None:
+    """Write rounds of every table into ``rec`` for ``seconds`` or ``rounds`` rounds, whichever
+    ends first (``rec`` is not closed)."""
     pulses = nav = chunks = subaps = 0
-    t_end = time.monotonic() + 30.0
+    t_end = time.monotonic() + seconds
     round_k = 0
-    while time.monotonic() < t_end:
+    while time.monotonic() < t_end and (rounds is None or round_k < rounds):
         n = block_size(round_k)
         ids = np.arange(pulses, pulses + n, dtype=np.int64)
         rows = pulse_rows(ids)
@@ -142,7 +154,6 @@ def main(path: str, seed: int) -> None:
             k = round_k // IMAGE_EVERY
             rec.add_image(image_of(k), k, k + 1, {"entropy": float(k)})
         round_k += 1
-    rec.close()
 
 
 if __name__ == "__main__":
