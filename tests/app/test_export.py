@@ -48,13 +48,11 @@ class Scene:
     out: Path
 
 
-@pytest.fixture(scope="module")
-def scene(tmp_path_factory: pytest.TempPathFactory) -> Scene:
+def _replayed_scene(out: Path, look_side: str) -> Scene:
     """The ku-vehicle scene at scale 0.05 (3 point targets), replayed from its SBG log."""
-    out = tmp_path_factory.mktemp("export")
     subprocess.run(
         [sys.executable, "-m", "sarmoco", "sim", "--preset", "ku-vehicle", "--scale", "0.05",
-         "--ins-grade", "ideal", "--out", str(out / "sim")],
+         "--ins-grade", "ideal", "--look-side", look_side, "--out", str(out / "sim")],
         check=True, capture_output=True,
     )  # fmt: skip
     text = (out / "sim" / "sarmoco.toml").read_text()
@@ -65,6 +63,31 @@ def scene(tmp_path_factory: pytest.TempPathFactory) -> Scene:
     replay_files(cfg, out / "sim" / "radar.vrt", out / "sim" / "ins.sbg", store, False)
     truth = json.loads((out / "sim" / "truth.json").read_text())
     return Scene(open_store(store), truth, out)
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory: pytest.TempPathFactory) -> Scene:
+    """The scene looking right."""
+    return _replayed_scene(tmp_path_factory.mktemp("export"), "right")
+
+
+def _target_errors_m(scene: Scene) -> list[float]:
+    """Distance from each target's brightest pixel, through georeference(), to where the
+    simulator put it, m."""
+    geo = georeference(scene.store)
+    cfg = load_config(scene.out / "sbg.toml")
+    seg = segment_images(scene.store)[0]
+    pts = grid_points(seg.image, seg.track, cfg.geometry.height_m)
+    ned = geodetic_to_ned(geo.geodetic(pts), GEODETIC_ORIGIN)
+    mag = np.abs(seg.image.data)
+    errors = []
+    for target in scene.truth["targets"]:
+        t = np.asarray(target["pos_ned"])
+        near = np.linalg.norm(ned[..., :2] - t[:2], axis=-1) < 2.0
+        k = np.unravel_index(np.argmax(np.where(near, mag, 0.0)), mag.shape)
+        errors.append(float(np.linalg.norm(ned[k] - t)))
+    print(f"georeferencing errors (m): {np.round(errors, 4).tolist()}, fit rms {geo.fit_rms_m}")
+    return errors
 
 
 def test_the_store_keeps_the_sbg_position_and_the_geodetic_origin(scene: Scene) -> None:
@@ -87,19 +110,7 @@ def test_the_store_keeps_the_sbg_position_and_the_geodetic_origin(scene: Scene) 
 def test_targets_are_georeferenced_within_a_pixel(scene: Scene) -> None:
     """Each target's brightest pixel, through georeference(), lands within half a pixel
     of the simulator's position for it (ideal INS: the error is the georeferencing's)."""
-    geo = georeference(scene.store)
-    cfg = load_config(scene.out / "sbg.toml")
-    seg = segment_images(scene.store)[0]
-    pts = grid_points(seg.image, seg.track, cfg.geometry.height_m)
-    ned = geodetic_to_ned(geo.geodetic(pts), GEODETIC_ORIGIN)
-    mag = np.abs(seg.image.data)
-    errors = []
-    for target in scene.truth["targets"]:
-        t = np.asarray(target["pos_ned"])
-        near = np.linalg.norm(ned[..., :2] - t[:2], axis=-1) < 2.0
-        k = np.unravel_index(np.argmax(np.where(near, mag, 0.0)), mag.shape)
-        errors.append(np.linalg.norm(ned[k] - t))
-    print(f"georeferencing errors (m): {np.round(errors, 4).tolist()}, fit rms {geo.fit_rms_m}")
+    errors = _target_errors_m(scene)
     assert len(errors) == 3
     assert max(errors) < PIXEL_M / 2
 
@@ -208,3 +219,19 @@ def test_export_refuses_a_store_without_absolute_position(
     assert status == 2
     assert "geodetic_origin: no absolute position" in err and str(path) in err
     assert not (tmp_path / "x.nitf").exists()
+
+
+def test_a_left_looking_scene_is_georeferenced_and_its_sicd_reversed(
+    tmp_path_factory: pytest.TempPathFactory,
+) -> None:
+    """Looking left: targets within half a pixel, and the SICD (columns reversed so that
+    the grid normal points up) meets every check with side of track L."""
+    left = _replayed_scene(tmp_path_factory.mktemp("left"), "left")
+    assert max(_target_errors_m(left)) < PIXEL_M / 2
+    product = sicd_product(left.store)
+    out = left.out / "left.nitf"
+    write_sicd(product, out)
+    assert failures(skver.SicdConsistency.from_file, out, warnings=True) == []
+    seg = segment_images(left.store)[0]
+    assert np.array_equal(product.pixels, seg.image.data.T[:, ::-1])
+    assert sksicd.XmlHelper(product.xml).load("./{*}SCPCOA/{*}SideOfTrack") == "L"
