@@ -47,7 +47,7 @@ from sarmoco.app.imaging_stream import SegmentStream, StreamRecorder
 from sarmoco.daemon import schema
 from sarmoco.daemon.config import Config, load_config
 from sarmoco.daemon.focuser import radar_params, tile_imaging
-from sarmoco.daemon.pipeline import RunSummary, tile_metrics
+from sarmoco.daemon.pipeline import RunSummary, recorded_tile_metrics
 from sarmoco.daemon.recorder import create_tile, write_tile
 from sarmoco.daemon.runner import replay_files, replay_store
 from sarmoco.errors import ConfigError, ProcessingError
@@ -161,10 +161,7 @@ def image_block(cfg: Config, block: ImageBlock) -> list[tuple[int, dict[str, flo
         if not block.first_tile <= tile.index <= block.last_tile:
             continue
         index = block.store_index + tile.index - stream.tiles[0]
-        metrics = tile_metrics(tile.data) | {
-            "pulses": float(tile.n_pulses),
-            "index": float(tile.index),
-        }
+        metrics = recorded_tile_metrics(tile)
         group = images[schema.tile_name(index)]
         assert isinstance(group, zarr.Group)
         write_tile(group, tile.image(), tile.t0_ns, tile.t1_ns, metrics, track)

@@ -38,6 +38,7 @@ from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.status import Counters
 from sarmoco.drivers.radar import UDP_BATCH_PACKETS
 from sarmoco.drivers.samples import AttitudeSample, EchoPacket, Sample, VelocitySample
+from sarmoco.processing.imaging.tiles import Tile
 from sarmoco.processing.metrics import image_contrast, image_entropy
 from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, IntArray
 
@@ -437,10 +438,7 @@ class Pipeline:
         """Record the autofocus estimates made so far and the tiles of ``out``."""
         self._record_autofocus()
         for tile, track in zip(out.tiles, out.tracks, strict=True):
-            metrics = tile_metrics(tile.data) | {
-                "pulses": float(tile.n_pulses),
-                "index": float(tile.index),
-            }
+            metrics = recorded_tile_metrics(tile)
             self.recorder.add_image(
                 tile.image(), tile.t0_ns, tile.t1_ns, metrics, schema.encode_reference_track(track)
             )
@@ -505,6 +503,12 @@ def tile_metrics(data: ComplexArray) -> dict[str, float]:
     if not np.any(data):
         return {"entropy": math.nan, "contrast": math.nan}
     return {"entropy": image_entropy(data), "contrast": image_contrast(data)}
+
+
+def recorded_tile_metrics(tile: Tile) -> dict[str, float]:
+    """The ``metrics`` a tile is recorded with: :func:`tile_metrics`, the pulses
+    backprojected into it and its index in its segment's layout."""
+    return tile_metrics(tile.data) | {"pulses": float(tile.n_pulses), "index": float(tile.index)}
 
 
 def _strictly_increasing(t_ns: IntArray, after_ns: int | None) -> BoolArray:
