@@ -1,7 +1,8 @@
 """Quicklook PNGs for an operator: the image in dB, the motion solution, autofocus estimates.
 
 Drawn with matplotlib's object API (``Figure``, no pyplot state, no display); the live
-page's tile strip is encoded directly (:func:`gray_db`, :func:`png_gray`), a few ms a tile.
+page's tile strip is encoded directly (:func:`peak_blocks`, :func:`gray_of`, :func:`png_gray`),
+a few ms a tile.
 Axes are in metres and seconds.
 """
 
@@ -234,20 +235,32 @@ def plot_cuts(
     return path
 
 
-def gray_db(data: npt.NDArray[np.generic], max_px: int = 600) -> npt.NDArray[np.uint8]:
-    """An image's intensity as 8-bit gray, ``DYNAMIC_RANGE_DB`` below its peak to 255.
+def peak_blocks(data: npt.NDArray[np.generic], max_px: int = 600) -> npt.NDArray[np.float32]:
+    """An image's magnitude laid out as a picture and decimated to at most ``max_px`` a side.
 
     Axis 0 of ``data`` (along track) becomes the horizontal axis of the picture and axis 1
-    (ground range) the vertical one, far range at the top. Each axis is decimated (peak of
-    each block of pixels) to at most ``max_px`` pixels.
+    (ground range) the vertical one, far range at the top. Each axis is decimated to the
+    peak of each block of pixels.
     """
     mag = np.abs(np.asarray(data)).T[::-1]
     k0, k1 = (max(1, -(-n // max_px)) for n in mag.shape)
     n0, n1 = mag.shape[0] // k0 * k0, mag.shape[1] // k1 * k1
-    mag = mag[:n0, :n1].reshape(n0 // k0, k0, n1 // k1, k1).max(axis=(1, 3))
-    peak = float(mag.max()) if mag.size else 0.0
+    return np.asarray(
+        mag[:n0, :n1].reshape(n0 // k0, k0, n1 // k1, k1).max(axis=(1, 3)), dtype=np.float32
+    )
+
+
+def gray_of(mag: npt.NDArray[np.floating], peak: float) -> npt.NDArray[np.uint8]:
+    """Magnitudes as 8-bit gray: ``peak`` to 255, ``DYNAMIC_RANGE_DB`` below it and less to 0."""
     db = _db(mag, peak**2 if peak > 0 else 1.0)
     return np.asarray(np.round((db / DYNAMIC_RANGE_DB + 1.0) * 255.0), dtype=np.uint8)
+
+
+def gray_db(data: npt.NDArray[np.generic], max_px: int = 600) -> npt.NDArray[np.uint8]:
+    """An image's intensity as 8-bit gray, ``DYNAMIC_RANGE_DB`` below its peak to 255
+    (:func:`peak_blocks` laid out and decimated, :func:`gray_of` its own peak)."""
+    mag = peak_blocks(data, max_px)
+    return gray_of(mag, float(mag.max()) if mag.size else 0.0)
 
 
 def png_gray(pixels: npt.NDArray[np.uint8]) -> bytes:

@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from sarmoco.daemon.quicklook import gray_db, png_gray
+from sarmoco.daemon.quicklook import gray_of, peak_blocks, png_gray
 from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.errors import ConfigError, RecorderError
 
@@ -177,7 +177,8 @@ class LiveView:
     The newest finished tiles are rendered to one PNG strip in the HTTP thread that asks
     for it, at most once per ``min_interval_s`` and only when a tile was added since (the
     processing thread never renders); other requests get the last PNG. Each tile is read
-    and turned to gray once (dB re its own peak); a new strip re-encodes the PNG only.
+    and decimated once; a new strip is put on one dB scale (re the brightest of its
+    tiles, so that tiles of noise beside the scene stay dark) and re-encoded.
 
     Parameters
     ----------
@@ -192,8 +193,8 @@ class LiveView:
         self.min_interval_s = min_interval_s
         self._lock = threading.Lock()
         self._png: bytes | None = None
-        self._gray: dict[int, tuple[float, npt.NDArray[np.uint8]]] = {}
-        """Tile index to (start along track m, 8-bit picture) of the tiles on the strip."""
+        self._mag: dict[int, tuple[float, npt.NDArray[np.float32]]] = {}
+        """Tile index to (start along track m, decimated magnitude) of the tiles on the strip."""
         self._tiles_drawn = 0
         self._last_render = -math.inf
         self.renders = 0
@@ -223,16 +224,17 @@ class LiveView:
                 t0 = time.thread_time()
                 keep = range(max(0, n - LIVE_TILES), n)
                 for k in keep:
-                    if k not in self._gray:
+                    if k not in self._mag:
                         tile = store.image(k)[0]
                         width = LIVE_STRIP_PX // LIVE_TILES
-                        self._gray[k] = (float(tile.axis0_m[0]), gray_db(tile.data, width))
+                        self._mag[k] = (float(tile.axis0_m[0]), peak_blocks(tile.data, width))
             except (RecorderError, OSError, ValueError, KeyError):
                 return self._png
-            self._gray = {k: self._gray[k] for k in keep}
-            parts = sorted(self._gray.values(), key=lambda part: part[0])
-            rows = min(g.shape[0] for _, g in parts)  # far range at the top: keep the bottom
-            self._png = png_gray(np.concatenate([g[g.shape[0] - rows :] for _, g in parts], 1))
+            self._mag = {k: self._mag[k] for k in keep}
+            parts = sorted(self._mag.values(), key=lambda part: part[0])
+            rows = min(m.shape[0] for _, m in parts)  # far range at the top: keep the bottom
+            mag = np.concatenate([m[m.shape[0] - rows :] for _, m in parts], 1)
+            self._png = png_gray(gray_of(mag, float(mag.max()) if mag.size else 0.0))
             self.render_s += time.thread_time() - t0
             self.renders += 1
             self._tiles_drawn, self._last_render = n, now

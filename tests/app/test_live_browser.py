@@ -4,11 +4,12 @@ demo scene that run flies over.
 One run (module fixture): ``sarmoco sim --serve --scene extended`` into ``sarmoco run`` on
 loopback (:func:`sarmoco.app.demo.run_loopback`, the demo's own path), the status endpoint
 on a known port. While it flies, Chromium (the distribution's package; ``.ci/run``
-installs it) loads ``http://127.0.0.1:<port>/`` and is looked at every half second (the
-page reloads its strip and tables itself every 2 s); each time the strip ``<img>`` has
-loaded a new picture, its pixels' hash, the tile count the page shows and a screenshot
-are kept. Screenshots go to ``$SARMOCO_TEST_ARTEFACTS`` (default: the test's
-temporary folder); the last is the README's ``docs/img/live-page.png``.
+installs it) loads ``http://127.0.0.1:<port>/``, and every half second the test calls
+the page's own ``tick()`` (what its timer calls every 2 s: a run's tiles can all come
+within 2 s) and waits for the strip ``<img>`` to load; each time it shows a new picture,
+its pixels' hash, the tile count the page shows and a screenshot are kept. Screenshots
+go to ``$SARMOCO_TEST_ARTEFACTS`` (default: the test's temporary folder); the last is the
+README's ``docs/img/live-page.png``.
 
 The scene is then measured: the focused intensity, averaged over 1 m cells (5 x 5
 resolution cells), is correlated with the scene's reflectivity map for the three panels
@@ -58,9 +59,11 @@ UNFOCUSED_CORRELATION_MAX = 0.3
 REFLECTOR_CLEARANCE_M = 1.5
 """Cells this close to a corner reflector are left out of the correlation (its sidelobes)."""
 
-STRIP_STATE = """(() => {
+STRIP_STATE = """(async () => {
   const s = document.getElementById("strip");
-  if (!s || !s.complete || !s.naturalWidth) return null;
+  if (!s) return null;
+  await new Promise(done => { s.onload = s.onerror = done; tick(); setTimeout(done, 3000); });
+  if (!s.complete || !s.naturalWidth) return null;
   const c = document.createElement("canvas");
   c.width = s.naturalWidth; c.height = s.naturalHeight;
   const g = c.getContext("2d");
@@ -74,7 +77,8 @@ STRIP_STATE = """(() => {
           health: document.getElementById("health").innerText,
           rect: {x: r.x, y: r.y, width: r.width, height: r.height}};
 })()"""
-"""JavaScript: the strip as drawn (null while the page's timer is loading a new one)."""
+"""JavaScript: refresh the page as its timer does (its ``tick()``), wait for the strip to
+load, and describe it as drawn (null when it did not load)."""
 
 
 def artefact_dir(tmp_path: Path) -> Path:
