@@ -31,6 +31,7 @@ from importlib import resources
 from typing import Any, Literal
 
 import numpy as np
+import numpy.typing as npt
 
 from sarmoco.errors import ConfigError
 from sarmoco.processing.types import C_MPS, FloatArray, RadarParams
@@ -69,6 +70,29 @@ class Target:
 
     pos_ned: tuple[float, float, float]
     amplitude: complex = 1.0
+
+
+@dataclass(frozen=True, eq=False)
+class Clutter:
+    """Distributed scatterers of an extended scene (:mod:`sarmoco.sim.extended`).
+
+    Parameters
+    ----------
+    pos_ned : ndarray of float64, shape (K, 3)
+        Scatterer positions, NED, m.
+    amplitude : ndarray of complex128, shape (K,)
+        Complex reflectivity of each scatterer (unit: a unit point target's).
+    x_m, y_m : ndarray of float64
+        The scatterers' grid in the track frame (along track x, ground range y), m.
+    reflectivity : ndarray of float64, shape (x_m.size, y_m.size)
+        The mean power reflectivity map on that grid (amplitude² / its scale), in [0, 1].
+    """
+
+    pos_ned: FloatArray
+    amplitude: npt.NDArray[np.complex128]
+    x_m: FloatArray
+    y_m: FloatArray
+    reflectivity: FloatArray
 
 
 @dataclass(frozen=True)
@@ -114,6 +138,8 @@ class Scenario:
         Side of the track the antenna looks to.
     lever_arm_m : tuple of 3 float
         INS point to antenna phase centre, body frame (forward, right, down), m.
+    clutter : Clutter or None
+        Distributed scatterers besides ``targets`` (the extended scene), or None.
     """
 
     name: str
@@ -135,6 +161,7 @@ class Scenario:
     look_side: Literal["right", "left"] = "right"
     lever_arm_m: tuple[float, float, float] = DEFAULT_LEVER_ARM_M
     notes: dict[str, float] = field(default_factory=dict, compare=False)
+    clutter: Clutter | None = field(default=None, compare=False)
 
     @property
     def track_to_ned(self) -> FloatArray:
@@ -249,6 +276,7 @@ _SCENARIO_KEYS = {f.name for f in fields(Scenario)} - {
     "scale",
     "notes",
     "scene_center_ned",
+    "clutter",
 }
 _PRESET_KEYS = {"azimuth_resolution_m", "beamwidth_rad"}
 
