@@ -73,10 +73,13 @@ class SegmentStream:
         return range(first, math.floor((float(self.x_m[-1, 1]) + half) / length) + 1)
 
     def calls_within(self, x_lo_m: float, x_hi_m: float) -> range:
-        """The imager calls with a pulse at along-track ``x_lo_m <= x <= x_hi_m`` (m)."""
+        """The imager calls with a pulse at along-track ``x_lo_m <= x <= x_hi_m`` (m), and
+        at least the first call that reaches ``x_lo_m``: after a gap in the pulses it may
+        lie wholly beyond ``x_hi_m`` and still be the call that opens a tile of the span
+        (with no pulse in it, and its start time from that call)."""
         c0 = int(np.searchsorted(self.x_m[:, 1], x_lo_m, side="left"))
         c1 = int(np.searchsorted(self.x_m[:, 0], x_hi_m, side="right"))
-        return range(c0, max(c0, c1))
+        return range(c0, max(c1, min(c0 + 1, self.x_m.shape[0])))
 
     def read(self, call: int) -> tuple[ComplexArray, IntArray, FloatArray, FloatArray | None]:
         """Pulses, times (GPS ns), APCs (m) and ΔY (m, or None) of imager call ``call``."""

@@ -9,6 +9,7 @@ neighbour tiles for tile PGA): without it the tiles lose pulses and differ.
 
 from __future__ import annotations
 
+import math
 import os
 import subprocess
 import sys
@@ -22,9 +23,12 @@ import pytest
 
 from sarmoco.app.batch import LOOPBACK
 from sarmoco.app.cli import main
+from sarmoco.app.imaging_stream import SegmentStream
 from sarmoco.daemon.config import Config, load_config
 from sarmoco.daemon.runner import replay_files, replay_store
 from sarmoco.daemon.store import RunStore, open_store
+from sarmoco.processing.geometry import ReferenceTrack
+from sarmoco.processing.imaging.tiles import TileLayout
 
 PULSES = 700
 """Pulses simulated (ku-vehicle at scale 0.05: ten tiles)."""
@@ -140,3 +144,21 @@ def test_batch_command_refuses_what_it_cannot_run(
         status = main(["batch", "--config", str(cfg), "--out", str(tmp_path / "o.zarr"), *argv])
         err = capsys.readouterr().err
         assert status == 2 and words in err, (argv, err)
+
+
+def test_a_block_gets_the_calls_that_reach_it_and_the_one_that_opens_its_tiles() -> None:
+    """:meth:`SegmentStream.calls_within` on calls of 10 m of pulses with a gap: the calls
+    with a pulse in the span, and after the gap the first call beyond it (it opens the
+    span's tiles in the single-process replay: the tiles' start time comes from it)."""
+    layout = TileLayout(100.0, 894.0, 16.5, 10.0, 0.1, 0.05)
+    x_m = np.array([[0.0, 9.0], [10.0, 19.0], [20.0, 29.0], [200.0, 209.0]])
+    stream = SegmentStream(
+        "unused", ReferenceTrack.from_velocity(np.zeros(3), np.array([1.0, 0, 0]), 0),
+        layout, np.array([0, 10, 20, 30, 40]), x_m, False,
+    )  # fmt: skip
+    half = layout.half_footprint_m
+    assert stream.tiles == range(math.floor(-half / 10.0), math.floor((209.0 + half) / 10.0) + 1)
+    assert stream.calls_within(25.0, 40.0) == range(2, 3)
+    assert stream.calls_within(5.0, 15.0) == range(0, 2)
+    assert stream.calls_within(50.0, 60.0) == range(3, 4)
+    assert stream.calls_within(300.0, 310.0) == range(4, 4)
