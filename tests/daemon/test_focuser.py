@@ -126,12 +126,21 @@ def test_along_track_position_focuses_without_autofocus(gusty: SimRun) -> None:
     assert max(along) < max(uniform) - 2.0
 
 
-@pytest.fixture(scope="module")
-def turbulent() -> SimRun:
-    """thz-spotlight ×0.1 at the paper's 20 kHz PRF, turbulent flight, ideal INS, no noise."""
+@pytest.fixture(scope="module", params=[False, True], ids=["iq", "iq-conjugate"])
+def turbulent(request: pytest.FixtureRequest) -> SimRun:
+    """thz-spotlight ×0.1 at the paper's 20 kHz PRF, turbulent flight, ideal INS, no noise;
+    once with a receiver that delivers conjugated I/Q (the raw-echo phase then turns the
+    other way)."""
     c = load_preset("thz-spotlight", 0.1).scene_center_ned
     targets = tuple(Target((c[0], c[1] + de, 0.0)) for de in (-4.0, 0.0, 4.0))
-    scn = load_preset("thz-spotlight", 0.1, snr_db=None, targets=targets, prf_hz=20_000.0)
+    scn = load_preset(
+        "thz-spotlight",
+        0.1,
+        snr_db=None,
+        targets=targets,
+        prf_hz=20_000.0,
+        iq_conjugate=request.param,
+    )
     return simulate(scn, MotionSpec(kind="turbulence", seed=3), "ideal")
 
 
