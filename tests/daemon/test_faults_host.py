@@ -21,14 +21,22 @@ these tests are skipped, saying so):
   so systemd's ``WatchdogSec`` would restart the service; ``/status`` still answers and
   shows the backlog; after the thaw the pings resume and SIGTERM exits 0 with every
   pulse recorded.
+- **memory pressure**: the daemon in a cgroup (v1 ``memory.limit_in_bytes``, what the
+  unit's ``MemoryMax=`` sets): at 250 MB it records all 1000 pulses and exits 0 (page
+  cache reclaimed); at 190 MB the kernel OOM-kills it mid-run (exit -9:
+  ``Restart=on-failure`` restarts it) and the store opens with every committed pulse
+  intact (at 150 MB it is killed before it creates the store).
 """
 
 # ruff: noqa: F811  (the ``sim_files`` fixture is imported, and named as the tests' argument)
 from __future__ import annotations
 
 import contextlib
+import itertools
 import json
+import os
 import shutil
+import signal
 import socket
 import subprocess
 import time
@@ -50,6 +58,7 @@ from tests.daemon.test_daemon_process import (
     daemon_config,
     free_port,
     http_get,
+    wait_finished,
     wait_status,
 )
 from tests.daemon.test_daemon_process import sim as sim_files  # noqa: F401  (the fixture)
@@ -275,3 +284,56 @@ def test_a_frozen_store_stops_the_watchdog_until_it_thaws(
         print("frozen run: committed", got.committed("pulses"), "metrics", metrics)
         assert check_pulses(got, sim_files) == metrics["pulses_received"]
     print(f"pings before the freeze {before.size}, during {frozen.size}, after {after.size}")
+
+
+_CGROUPS = itertools.count()
+
+
+@contextlib.contextmanager
+def memory_cgroup(limit: str) -> Iterator[Path]:
+    """A cgroup v1 memory group under this process's own, limited to ``limit`` bytes."""
+    mine = [ln for ln in Path("/proc/self/cgroup").read_text().splitlines() if ":memory:" in ln]
+    if not mine:
+        pytest.skip("no cgroup v1 memory controller here")
+    group = Path("/sys/fs/cgroup/memory" + mine[0].split(":", 2)[2])
+    group = group / f"sarmoco-test-{os.getpid()}-{next(_CGROUPS)}"
+    try:
+        group.mkdir()
+        (group / "memory.limit_in_bytes").write_text(limit)
+    except OSError as exc:
+        pytest.skip(f"cannot create a memory cgroup at {group}: {exc.strerror}")
+    try:
+        yield group
+    finally:
+        with contextlib.suppress(OSError):
+            group.rmdir()
+
+
+def test_memory_pressure_and_the_oom_killer(sim_files: SimFiles, tmp_path: Path) -> None:
+    port = free_port(socket.SOCK_STREAM)
+    config = daemon_config(sim_files, tmp_path / "mem.toml", status={"http_port": port})
+    with memory_cgroup("250M") as group:
+        d = Daemon(config, tmp_path / "tight.zarr")
+        try:
+            (group / "cgroup.procs").write_text(str(d.proc.pid))
+            d.started()
+            wait_finished(port)
+            assert d.stop() == 0, d.log.read_text()[-2000:]
+        finally:
+            d.kill_if_running()
+        peak = int((group / "memory.max_usage_in_bytes").read_text()) >> 20
+    assert check_pulses(open_store(d.store), sim_files) == N_PULSES
+    with memory_cgroup("190M") as group:
+        d = Daemon(config, tmp_path / "oom.zarr")
+        try:
+            (group / "cgroup.procs").write_text(str(d.proc.pid))
+            assert d.proc.wait(120) == -signal.SIGKILL
+        finally:
+            d.kill_if_running()
+        assert "oom_kill 1" in (group / "memory.oom_control").read_text()
+    store = open_store(d.store)
+    assert store.attrs["complete"] is False
+    n = check_pulses(store, sim_files)
+    print(f"250 MB: all {N_PULSES} pulses, peak {peak} MiB charged; 190 MB: OOM-killed, "
+          f"{n} pulses committed")  # fmt: skip
+    assert n < N_PULSES
