@@ -27,7 +27,8 @@ Chain, on echoes [pulse, channel, fast time] with per-pulse INS position and att
    parabolic peak, 0.175 m with a 4-cell centroid); (r, θ) maps to ``y = r sin θ``,
    ``z = r cos θ`` in the imaging frame, height ``h = -(D_origin + z)``; the heights are
    interpolated per pulse onto a regular cross-track grid, NaN where the profile's peak is
-   below the echo threshold.
+   below the echo threshold, in the receive window's last pulse length (cut echoes) or more
+   than ``outlier_cells`` range cells from the median height of its 7 neighbouring beams.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.fft
+from scipy.ndimage import median_filter
 from scipy.signal import get_window
 
 from sarmoco.errors import ProcessingError
@@ -115,6 +117,9 @@ class Array3dOptions:
         Intensity below this fraction of the peak is left out of the centroid.
     threshold_db : float
         A profile whose peak is this far below the 90th percentile of all peaks is "no echo".
+    outlier_cells : float
+        A beam's height more than this many range resolution cells from the median of its 7
+        neighbouring beams is dropped as a sidelobe or noise peak.
     ground_height_m : float
         Reference ground height (up) for the near-field correction's look angle, m.
     """
@@ -129,6 +134,7 @@ class Array3dOptions:
     centroid_cells: float = 4.0
     centroid_floor: float = 0.1
     threshold_db: float = -15.0
+    outlier_cells: float = 3.0
     ground_height_m: float = 0.0
 
     def __post_init__(self) -> None:
@@ -240,7 +246,6 @@ def _surface_ranges(
     data_t: ComplexArray,
     system: ArraySystem,
     sines: FloatArray,
-    kr: FloatArray,
     opt: Array3dOptions,
     chunk: int = 32,
 ) -> tuple[FloatArray, FloatArray]:
@@ -250,8 +255,15 @@ def _surface_ranges(
     Returns the peak's range-bin position (fractional, in original bins) and power, each
     (P, n_beams).
     """
-    n_p, n_c, n_s = data_t.shape
+    n_p, n_c, n_data = data_t.shape
+    radar = system.radar
     y = system.layout.epc_body_m[:, 1]
+    # zero guard at the window's end: the steering delays (up to |y| sin θ) and the profile
+    # interpolation are circular in range, an echo at the window's end must not wrap to its start
+    bin_m = C_MPS / (2.0 * radar.sample_rate_hz)
+    n_s = scipy.fft.next_fast_len(n_data + math.ceil(float(np.max(np.abs(y))) / bin_m) + 8)
+    kr = 4.0 * math.pi * (radar.carrier_hz + scipy.fft.fftfreq(n_s, 1.0 / radar.sample_rate_hz))
+    kr /= C_MPS
     window = opt.cross_window
     w = np.ones(n_c) if window is None else get_window(window, n_c + 2, fftbins=False)[1:-1]
     order = np.argsort(y)
@@ -270,7 +282,7 @@ def _surface_ranges(
     power = np.empty((n_p, sines.size))
     for p0 in range(0, n_p, chunk):
         lo, hi = max(0, p0 - halo), min(n_p, p0 + chunk + halo)
-        blk = scipy.fft.fft(data_t[lo:hi], axis=2, workers=-1)  # (Pc, C, F)
+        blk = scipy.fft.fft(data_t[lo:hi], n_s, axis=2, workers=-1)  # (Pc, C, F)
         beams = np.matmul(np.transpose(blk, (2, 0, 1)), steer)  # (F, Pc, B)
         padded = np.zeros((n_up, *beams.shape[1:]), dtype=np.complex64)
         padded[:half] = beams[:half]
@@ -300,6 +312,19 @@ def _surface_ranges(
         pos[p0 : p0 + chunk] = (i + frac) / up
         power[p0 : p0 + chunk] = b
     return pos, power
+
+
+def _plausible(bins: FloatArray, h: FloatArray, radar: RadarParams, tol_m: float) -> np.ndarray:
+    """Beams whose surface range is usable (step 6's outlier rejection), (P, n_beams) bool.
+
+    A peak in the last pulse length of the receive window is an echo cut by the window's end
+    (or no echo), and a height farther than ``tol_m`` from the median of its 7 neighbouring
+    beams is a sidelobe or noise peak, not the surface.
+    """
+    n_pulse = radar.pulse_width_s * radar.sample_rate_hz
+    inside = (bins >= 1.0) & (bins <= radar.n_samples - n_pulse - 1.0)
+    med = median_filter(h, size=(1, 7), mode="nearest")
+    return np.asarray(inside & (np.abs(h - med) <= tol_m))
 
 
 def _grid_heights(
@@ -377,16 +402,18 @@ def form_dem(
     level = np.tile(np.array([1.0, 0.0, 0.0, 0.0]), (n_p, 1))
     att = np.asarray(quat, dtype=np.float64) if opt.compensate_attitude else level
     dev = epc_deviation(t, pos, att, system.layout, track)
-    s_roll = mean_roll_sine(dev, y_epc)
+    # a roll α (right wing down) turns the elements' boresight to sin θ = -sin α (left): the
+    # echo's k_y band and the beams are centred there
+    boresight = -mean_roll_sine(dev, y_epc)
     k_c = 4.0 * math.pi / radar.wavelength_m
     spec = scipy.fft.fft(data, axis=2, workers=-1)
-    compensate(spec, dev, y_order, kr, dx, d, opt.blocks, ky_centre=k_c * s_roll)
+    compensate(spec, dev, y_order, kr, dx, d, opt.blocks, ky_centre=k_c * boresight)
     data = scipy.fft.ifft(spec, axis=2, workers=-1)
     del spec
 
     _azimuth_compress(data, system, r, dx)
-    sines = _beam_sines(system, s_roll, opt.angle_oversample)
-    bins, power = _surface_ranges(data, system, sines, kr, opt)
+    sines = _beam_sines(system, boresight, opt.angle_oversample)
+    bins, power = _surface_ranges(data, system, sines, opt)
     r0, dr = float(r[0]), float(r[1] - r[0])
     rng_m = r0 + bins * dr
     cos_t = np.sqrt(1.0 - sines**2)
@@ -395,6 +422,7 @@ def form_dem(
     h = -(float(track.origin_ned[2]) + z_img)
     ref = np.percentile(power, 90.0)
     valid = power >= ref * 10.0 ** (opt.threshold_db / 10.0)
+    valid &= _plausible(bins, h, radar, opt.outlier_cells * radar.range_resolution_m)
     span = float(np.max(np.abs(y_img[valid]))) if np.any(valid) else 1.0
     n_half = math.ceil(span / opt.grid_spacing_m)
     y_grid = opt.grid_spacing_m * np.arange(-n_half, n_half + 1, dtype=np.float64)

@@ -145,8 +145,9 @@ def compensate(
         Sub-block counts (M along k_x, N along k_y); (1, 1) applies ΔR2 at the centre
         wavenumber only.
     ky_centre : float
-        Centre of the k_y interval the FFT bins are unwrapped to, rad/m (the mean roll moves
-        the echo's k_y band by k_r sin α; centring on it keeps the band unwrapped).
+        Centre of the k_y interval the FFT bins are unwrapped to, rad/m (a roll α turns the
+        elements' boresight to sin θ = -sin α, the echo's k_y band to -k_r sin α; centring
+        on it keeps the band unwrapped).
 
     Returns
     -------
