@@ -24,6 +24,7 @@ import dataclasses
 import io
 import os
 import pstats
+import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -45,6 +46,7 @@ def replay_cpu(cfg: Config, files: Path, profile: bool) -> tuple[int, float, str
     else:
         summary = replay_files(cfg, files / "radar.vrt", files / "nav.tlog", out, False)
     cpu = time.process_time() - c0
+    shutil.rmtree(out)
     text = ""
     if prof is not None:
         buf = io.StringIO()
