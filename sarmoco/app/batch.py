@@ -222,7 +222,7 @@ def run_batch(
     client: Any,
     cfg: Config,
     recordings: Sequence[Recording],
-    tiles_per_block: int = 4,
+    tiles_per_block: int = 16,
     progress: bool = True,
 ) -> list[RunSummary]:
     """Reprocess recordings on a dask.distributed client; their summaries, in order.
@@ -328,7 +328,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--scheduler", help="dask scheduler address (default: a local cluster)")
     parser.add_argument("--workers", type=int, default=2, help="local worker processes")
     parser.add_argument(
-        "--tiles-per-block", type=int, default=4, help="tiles per imaging task (default 4)"
+        "--tiles-per-block", type=int, default=16, help="tiles per imaging task (default 16)"
     )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
 
