@@ -283,8 +283,8 @@ class NavBuffer:
     ) -> PushResult:
         """Offer one driver sample (velocity or attitude)."""
         if isinstance(sample, VelocitySample):
-            return self.push_velocity(sample.t_gps_ns, sample.vel_ned_mps, sample.pos_ned_m, rx_ns)
-        return self.push_attitude(sample.t_gps_ns, sample.quat_wxyz, rx_ns)
+            return self.push_velocity(sample.t_gps_ns, sample.vel_ned, sample.pos_ned, rx_ns)
+        return self.push_attitude(sample.t_gps_ns, sample.quat, rx_ns)
 
     def push_nav(self, nav: NavSamples, rx_ns: IntArray | None = None) -> npt.NDArray[np.int8]:
         """Offer joint samples (simulator, recorded runs); returns one :class:`PushResult` each."""

@@ -353,14 +353,14 @@ def encode_nav(rows: Sequence[NavRow]) -> dict[str, npt.NDArray[Any]]:
     for i, (s, _, _) in enumerate(rows):
         if isinstance(s, VelocitySample):
             cols["kind"][i] = NAV_KIND_VELOCITY
-            cols["vel_ned"][i] = s.vel_ned_mps
-            if s.pos_ned_m is not None:
-                cols["pos_ned"][i] = s.pos_ned_m
+            cols["vel_ned"][i] = s.vel_ned
+            if s.pos_ned is not None:
+                cols["pos_ned"][i] = s.pos_ned
             if s.lat_lon_alt is not None and s.valid & Validity.POSITION:
                 cols["lla"][i] = s.lat_lon_alt
         else:
             cols["kind"][i] = NAV_KIND_ATTITUDE
-            cols["quat"][i] = s.quat_wxyz
+            cols["quat"][i] = s.quat
     return cols
 
 

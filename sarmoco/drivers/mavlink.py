@@ -182,7 +182,7 @@ class MavlinkDecoder:
         pos = pos if pos is not None and all(map(math.isfinite, pos)) else None
         sample = VelocitySample(
             0, vel, self.valid & ~Validity.ATTITUDE & ~Validity.HEADING, source, dev_ns,
-            pos_ned_m=pos, lat_lon_alt=lla,
+            pos_ned=pos, lat_lon_alt=lla,
         )  # fmt: skip
         self.clock.stamp(sample, out)
 

@@ -37,7 +37,7 @@ class VelocitySample:
     ----------
     t_gps_ns : int
         Sample time, GPS ns.
-    vel_ned_mps : tuple of 3 float
+    vel_ned : tuple of 3 float
         Velocity north, east, down, m/s.
     valid : Validity
         Validity flags from the source's solution status.
@@ -45,7 +45,7 @@ class VelocitySample:
         Message it came from, e.g. ``"sbg.EKF_NAV"``, ``"mavlink.LOCAL_POSITION_NED"``.
     device_time_ns : int
         The same instant on the device's own clock (boot time), ns.
-    pos_ned_m : tuple of 3 float or None
+    pos_ned : tuple of 3 float or None
         Local NED position, m, when the message carries one.
     vel_std_mps : tuple of 3 float or None
         1-sigma velocity accuracy, m/s, when the message carries one.
@@ -55,11 +55,11 @@ class VelocitySample:
     """
 
     t_gps_ns: int
-    vel_ned_mps: tuple[float, float, float]
+    vel_ned: tuple[float, float, float]
     valid: Validity
     source: str
     device_time_ns: int
-    pos_ned_m: tuple[float, float, float] | None = None
+    pos_ned: tuple[float, float, float] | None = None
     vel_std_mps: tuple[float, float, float] | None = None
     lat_lon_alt: tuple[float, float, float] | None = None
 
@@ -72,7 +72,7 @@ class AttitudeSample:
     ----------
     t_gps_ns : int
         Sample time, GPS ns.
-    quat_wxyz : tuple of 4 float
+    quat : tuple of 4 float
         Unit quaternion, scalar first, rotating body to NED (3-2-1 yaw, pitch, roll).
     valid : Validity
         Validity flags.
@@ -83,7 +83,7 @@ class AttitudeSample:
     """
 
     t_gps_ns: int
-    quat_wxyz: tuple[float, float, float, float]
+    quat: tuple[float, float, float, float]
     valid: Validity
     source: str
     device_time_ns: int

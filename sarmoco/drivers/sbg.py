@@ -78,7 +78,7 @@ class SbgDecoder:
     ----------
     geodetic_origin : tuple of 3 float or None
         Latitude, longitude (deg) and altitude (m) of the first EKF_NAV with a valid
-        position: the origin of the local NED positions (``pos_ned_m``) of the samples.
+        position: the origin of the local NED positions (``pos_ned``) of the samples.
     """
 
     def __init__(self, leap_s: int = GPS_LEAP_SECONDS_DEFAULT, link: str = "sbg") -> None:
@@ -105,7 +105,7 @@ class SbgDecoder:
         if isinstance(msg, codec.UtcTime):
             self._utc(msg, dev_ns, out)
         elif isinstance(msg, codec.EkfNav):
-            if not _finite(msg.vel_ned_mps):
+            if not _finite(msg.vel_ned):
                 self.counters.parse_errors += 1
                 return
             valid = _flags(msg.status)
@@ -113,13 +113,13 @@ class SbgDecoder:
                 msg.lat_lon_alt if valid & Validity.POSITION and _finite(msg.lat_lon_alt) else None
             )
             sample = VelocitySample(
-                0, msg.vel_ned_mps, valid, "sbg.EKF_NAV", dev_ns, pos_ned_m=self._local(lla),
+                0, msg.vel_ned, valid, "sbg.EKF_NAV", dev_ns, pos_ned=self._local(lla),
                 vel_std_mps=msg.vel_std_mps, lat_lon_alt=lla,
             )  # fmt: skip
             self.clock.stamp(sample, out)
         elif isinstance(msg, codec.EkfQuat | codec.EkfEuler):
             if isinstance(msg, codec.EkfQuat):
-                q, name = normalized(msg.quat_wxyz), "sbg.EKF_QUAT"
+                q, name = normalized(msg.quat), "sbg.EKF_QUAT"
             else:
                 q = normalized(euler_to_quat(*msg.euler_rad)) if _finite(msg.euler_rad) else None
                 name = "sbg.EKF_EULER"

@@ -98,9 +98,9 @@ def encode_ekf_euler(roll: float, pitch: float, yaw: float) -> tuple[int, bytes]
     return encode(ID_EKF_EULER, *(_i16(a, EULER_SCALE_RAD) for a in (roll, pitch, yaw)))
 
 
-def encode_ekf_vel_ned(vel_ned_mps: tuple[float, float, float]) -> tuple[int, bytes]:
+def encode_ekf_vel_ned(vel_ned: tuple[float, float, float]) -> tuple[int, bytes]:
     """EKF_VEL_NED from a velocity in m/s."""
-    return encode(ID_EKF_VEL_NED, *(_i16(v, VEL_SCALE_MPS) for v in vel_ned_mps))
+    return encode(ID_EKF_VEL_NED, *(_i16(v, VEL_SCALE_MPS) for v in vel_ned))
 
 
 def encode_utc_1(

@@ -235,7 +235,7 @@ class EkfQuat:
     """EKF_QUAT: attitude quaternion (w, x, y, z), body → NED."""
 
     time_us: int
-    quat_wxyz: tuple[float, float, float, float]
+    quat: tuple[float, float, float, float]
     std_rad: tuple[float, float, float]
     status: int
 
@@ -245,7 +245,7 @@ class EkfNav:
     """EKF_NAV: velocity NED (m/s), position (deg, deg, m above MSL), accuracies."""
 
     time_us: int
-    vel_ned_mps: tuple[float, float, float]
+    vel_ned: tuple[float, float, float]
     vel_std_mps: tuple[float, float, float]
     lat_lon_alt: tuple[float, float, float]
     undulation_m: float
@@ -304,12 +304,12 @@ def encode_message(msg: Message) -> bytes:
     if isinstance(msg, EkfNav):
         mid = MSG_EKF_NAV
         payload = _NAV.pack(
-            msg.time_us & 0xFFFFFFFF, *msg.vel_ned_mps, *msg.vel_std_mps, *msg.lat_lon_alt,
+            msg.time_us & 0xFFFFFFFF, *msg.vel_ned, *msg.vel_std_mps, *msg.lat_lon_alt,
             msg.undulation_m, *msg.pos_std_m, msg.status,
         )  # fmt: skip
     elif isinstance(msg, EkfQuat):
         mid = MSG_EKF_QUAT
-        payload = _QUAT.pack(msg.time_us & 0xFFFFFFFF, *msg.quat_wxyz, *msg.std_rad, msg.status)
+        payload = _QUAT.pack(msg.time_us & 0xFFFFFFFF, *msg.quat, *msg.std_rad, msg.status)
         payload += struct.pack("<2f", 0.0, 0.0)
     elif isinstance(msg, EkfEuler):
         mid = MSG_EKF_EULER

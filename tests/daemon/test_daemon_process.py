@@ -281,8 +281,8 @@ NavRow = tuple[int, int, tuple[float, ...]]
 def nav_row(s: VelocitySample | AttitudeSample) -> NavRow:
     """The row the daemon records for a decoded INS sample."""
     if isinstance(s, VelocitySample):
-        return s.t_gps_ns, 0, s.vel_ned_mps
-    return s.t_gps_ns, 1, s.quat_wxyz
+        return s.t_gps_ns, 0, s.vel_ned
+    return s.t_gps_ns, 1, s.quat
 
 
 def nav_rows(store: RunStore) -> list[NavRow]:

@@ -132,7 +132,7 @@ def test_sbg_positions_are_ned_about_the_first_valid_fix() -> None:
     out = dec.feed(b"".join(codec.encode_message(m) for m in frames))
     vel = [s for s in out if isinstance(s, VelocitySample)]
     assert len(vel) == 3
-    assert vel[0].pos_ned_m is None and vel[0].lat_lon_alt is None  # position not valid
-    assert vel[1].pos_ned_m == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
-    assert vel[2].pos_ned_m == pytest.approx((12.0, -3.0, -5.0), abs=1e-6)
+    assert vel[0].pos_ned is None and vel[0].lat_lon_alt is None  # position not valid
+    assert vel[1].pos_ned == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
+    assert vel[2].pos_ned == pytest.approx((12.0, -3.0, -5.0), abs=1e-6)
     assert dec.geodetic_origin == origin

@@ -84,7 +84,7 @@ def test_clock_step_is_refused_then_a_persistent_change_rebases() -> None:
 
 def test_driver_and_joint_samples() -> None:
     buf = NavBuffer(history_ns=5_000 * MS, capacity=128)
-    v = VelocitySample(1000, (30.0, 0.1, 0.0), Validity.VELOCITY, "test", 0, pos_ned_m=(1, 2, 3))
+    v = VelocitySample(1000, (30.0, 0.1, 0.0), Validity.VELOCITY, "test", 0, pos_ned=(1, 2, 3))
     a = AttitudeSample(1000, (1.0, 0.0, 0.0, 0.0), Validity.ATTITUDE, "test", 0)
     assert buf.push_sample(v) is PushResult.ACCEPTED
     assert buf.push_sample(a) is PushResult.ACCEPTED

@@ -49,9 +49,9 @@ def same_sample(got: schema.NavSample, want: schema.NavSample) -> None:
     assert type(got) is type(want) and got.t_gps_ns == want.t_gps_ns
     if isinstance(want, VelocitySample):
         assert isinstance(got, VelocitySample)
-        assert got.vel_ned_mps == want.vel_ned_mps and got.pos_ned_m == want.pos_ned_m
+        assert got.vel_ned == want.vel_ned and got.pos_ned == want.pos_ned
     else:
-        assert isinstance(got, AttitudeSample) and got.quat_wxyz == want.quat_wxyz
+        assert isinstance(got, AttitudeSample) and got.quat == want.quat
 
 
 def subaperture(j: int) -> SubapertureReport:

@@ -76,11 +76,11 @@ def check(samples: list[Any], truth: list[Any]) -> None:
     assert (len(vel), len(att), len(ev)) == (len(tv), len(ta), len(te))
     for sv, (_, t, v) in zip(vel, tv, strict=True):
         assert abs(sv.t_gps_ns - t) <= 1000
-        assert sv.vel_ned_mps == pytest.approx(v, abs=0.006)
+        assert sv.vel_ned == pytest.approx(v, abs=0.006)
         assert sv.valid & Validity.VELOCITY and sv.valid & Validity.TIME
     for s, (_, t, q) in zip(att, ta, strict=True):
         assert abs(s.t_gps_ns - t) <= 1000
-        assert s.quat_wxyz == pytest.approx(q, abs=2e-4)
+        assert s.quat == pytest.approx(q, abs=2e-4)
     for se, (_, t, _) in zip(ev, te, strict=True):
         assert abs(se.t_gps_ns - t) <= 1000
 

@@ -110,9 +110,9 @@ def test_udp_round_trip_timesync_rates() -> None:
         errors.append(abs(s.t_gps_ns - t))
         assert abs(s.t_gps_ns - t) <= bound, (s.t_gps_ns - t, bound)
         if isinstance(s, VelocitySample):
-            assert s.vel_ned_mps == pytest.approx(v, abs=1e-5)
+            assert s.vel_ned == pytest.approx(v, abs=1e-5)
         else:
-            assert s.quat_wxyz == pytest.approx(q, abs=1e-6)
+            assert s.quat == pytest.approx(q, abs=1e-6)
     assert max(errors) < 20e6 and src.time_bound_ns < 20e6  # loopback: well under 20 ms
 
 
@@ -145,7 +145,7 @@ def test_signing_rejects_unsigned_and_bad_keys() -> None:
     time.sleep(0.1)
     late = src.poll(0.2)
     src.close()
-    assert not any(isinstance(s, VelocitySample) and s.vel_ned_mps[0] == 99.0 for s in late)
+    assert not any(isinstance(s, VelocitySample) and s.vel_ned[0] == 99.0 for s in late)
     assert src.counters.rejected >= 20 and n_before > 0
 
 
@@ -172,10 +172,10 @@ def test_tlog_matches_pymavlink() -> None:
             ms = s.device_time_ns // 10**6
             m = ref[name][ms]
             if kind is VelocitySample:
-                assert s.vel_ned_mps == (m.vx, m.vy, m.vz)  # type: ignore[attr-defined]
+                assert s.vel_ned == (m.vx, m.vy, m.vz)  # type: ignore[attr-defined]
             else:
                 want = euler_to_quat(m.roll, m.pitch, m.yaw)  # type: ignore[attr-defined]
-                assert s.quat_wxyz == pytest.approx(want, abs=1e-9)
+                assert s.quat == pytest.approx(want, abs=1e-9)
             unix = ms * 10**6 + np.interp(ms, off_t, off)
             assert abs(s.t_gps_ns - unix_ns_to_gps_ns(int(unix), 18)) < 2e6
 
@@ -253,11 +253,11 @@ def test_dataflash_matches_pymavlink() -> None:
     assert len(vel) == sum(k == "NKF1" for k, _ in ref) and len(att) == len(vel)
     for s in vel:
         m = ref[("NKF1", s.device_time_ns // 1000)]
-        assert s.vel_ned_mps == (m.VN, m.VE, m.VD)  # type: ignore[attr-defined]
+        assert s.vel_ned == (m.VN, m.VE, m.VD)  # type: ignore[attr-defined]
     for s in att:
         m = ref[("NKQ1", s.device_time_ns // 1000)]
         want = np.array([m.Q1, m.Q2, m.Q3, m.Q4])  # type: ignore[attr-defined]
-        np.testing.assert_allclose(s.quat_wxyz, want / np.linalg.norm(want), atol=1e-9)
+        np.testing.assert_allclose(s.quat, want / np.linalg.norm(want), atol=1e-9)
     for kind in (vel, att):
         t = np.array([s.t_gps_ns for s in kind])
         assert np.all(np.diff(t) > 0)

@@ -88,12 +88,12 @@ def check(samples: list[Any], truth: Truth) -> None:
     assert (len(vel), len(att), len(ev)) == (len(tv), len(ta), len(te))
     for sv, (_, t, v) in zip(vel, tv, strict=True):
         assert abs(sv.t_gps_ns - t) <= 1000
-        assert sv.vel_ned_mps == pytest.approx(v, abs=1e-5)
+        assert sv.vel_ned == pytest.approx(v, abs=1e-5)
         assert sv.valid & Validity.VELOCITY and sv.valid & Validity.TIME
     for s, (_, t, q) in zip(att, ta, strict=True):
         assert abs(s.t_gps_ns - t) <= 1000
-        sign = 1 if s.quat_wxyz[0] * q[0] >= 0 else -1
-        assert [sign * c for c in s.quat_wxyz] == pytest.approx(q, abs=1e-6)
+        sign = 1 if s.quat[0] * q[0] >= 0 else -1
+        assert [sign * c for c in s.quat] == pytest.approx(q, abs=1e-6)
     for se, (_, t, _) in zip(ev, te, strict=True):
         assert abs(se.t_gps_ns - t) <= 1000 and se.channel == "A"
 

@@ -83,10 +83,10 @@ def _check_samples(samples: list[Sample]) -> None:
     for s in samples:
         assert -(2**63) <= s.t_gps_ns < 2**63, s  # fits the store's int64 columns
         if isinstance(s, VelocitySample):
-            assert all(map(math.isfinite, s.vel_ned_mps)), s
-            assert s.pos_ned_m is None or all(map(math.isfinite, s.pos_ned_m)), s
+            assert all(map(math.isfinite, s.vel_ned)), s
+            assert s.pos_ned is None or all(map(math.isfinite, s.pos_ned)), s
         elif isinstance(s, AttitudeSample):
-            assert all(map(math.isfinite, s.quat_wxyz)), s
+            assert all(map(math.isfinite, s.quat)), s
 
 
 @FUZZ

@@ -33,10 +33,8 @@ def check(em: SbgCanEmitter, samples: list[Sample]) -> None:
     ev = [s for s in samples if isinstance(s, EventSample)]
     assert len(vel) == len(att) == f.t_ns.size
     # the CAN set quantises: 0.01 m/s, 1/32767 per quaternion component
-    np.testing.assert_allclose(
-        [s.vel_ned_mps for s in vel], f.vel_ned, atol=VEL_SCALE_MPS / 2 + 1e-9
-    )
-    q = np.array([s.quat_wxyz for s in att])
+    np.testing.assert_allclose([s.vel_ned for s in vel], f.vel_ned, atol=VEL_SCALE_MPS / 2 + 1e-9)
+    q = np.array([s.quat for s in att])
     np.testing.assert_allclose(q * np.sign(q[:, :1] * f.quat[:, :1]), f.quat, atol=3 * QUAT_SCALE)
     # GPS time from the device µs clock and UTC_0 sent on whole GPS milliseconds: 1 µs
     assert np.abs(np.array([s.t_gps_ns for s in vel]) - f.t_ns).max() <= 1000

@@ -89,7 +89,7 @@ def check(
     assert len(vel) > 10
     assert np.abs(np.array([s.t_gps_ns for s in vel]) - t_true[idx]).max() <= tol_ns
     v_true = np.array(truth["ins"]["vel_ned"])[idx]
-    np.testing.assert_allclose([s.vel_ned_mps for s in vel], v_true, atol=0.005)
+    np.testing.assert_allclose([s.vel_ned for s in vel], v_true, atol=0.005)
 
 
 def test_mavlink_udp_and_radar_udp(tmp_path: Path) -> None:

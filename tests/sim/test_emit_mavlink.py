@@ -66,9 +66,9 @@ def check_values(em: MavlinkEmitter, samples: list[Sample]) -> tuple[np.ndarray,
     iv, vel = by_index(em, samples, VelocitySample)
     ia, att = by_index(em, samples, AttitudeSample)
     assert vel and att
-    np.testing.assert_allclose([s.vel_ned_mps for s in vel], f.vel_ned[iv], rtol=1e-6, atol=1e-6)
-    np.testing.assert_allclose([s.pos_ned_m for s in vel], em.pos_ned[iv], rtol=1e-6, atol=1e-5)
-    q = np.array([s.quat_wxyz for s in att])
+    np.testing.assert_allclose([s.vel_ned for s in vel], f.vel_ned[iv], rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose([s.pos_ned for s in vel], em.pos_ned[iv], rtol=1e-6, atol=1e-5)
+    q = np.array([s.quat for s in att])
     np.testing.assert_allclose(q * np.sign(q[:, :1] * f.quat[ia, :1]), f.quat[ia], atol=1e-6)
     t = np.array([s.t_gps_ns for s in vel])
     return iv, t - (f.t_ns[iv] + em.wire.shift_ns)

@@ -46,8 +46,8 @@ def check(em: SbgEmitter, samples: list[Sample], settled_after_ns: int = 0) -> N
     # GPS time recovered from the device clock and UTC_TIME, to 1 µs
     settled = feed.t_ns >= settled_after_ns
     assert np.abs(t_vel - feed.t_ns)[settled].max() <= 1000
-    np.testing.assert_allclose([s.vel_ned_mps for s in vel], feed.vel_ned, rtol=1e-6, atol=1e-6)
-    q = np.array([s.quat_wxyz for s in att])
+    np.testing.assert_allclose([s.vel_ned for s in vel], feed.vel_ned, rtol=1e-6, atol=1e-6)
+    q = np.array([s.quat for s in att])
     q *= np.sign(q[:, :1]) * np.sign(feed.quat[:, :1])
     np.testing.assert_allclose(q, feed.quat, atol=1e-6)
     lla = np.array([s.lat_lon_alt for s in vel], dtype=np.float64)

@@ -84,7 +84,7 @@ def test_nav_files_match_truth(written: tuple[Path, dict], proto: str) -> None:
     assert len(vel) == t_true.size  # every INS sample in every recording
     assert np.abs(np.array([s.t_gps_ns for s in vel]) - t_true).max() <= 2_000  # ns
     atol = 0.005 if proto == "sbg-can" else 1e-5  # CAN carries 0.01 m/s steps
-    np.testing.assert_allclose([s.vel_ned_mps for s in vel], v_true, atol=atol)
+    np.testing.assert_allclose([s.vel_ned for s in vel], v_true, atol=atol)
 
 
 def test_fast_and_realtime_write_the_same_bytes(tmp_path: Path) -> None:
