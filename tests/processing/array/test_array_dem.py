@@ -86,3 +86,17 @@ def test_roll_from_a_noisy_ins_series() -> None:
     assert abs(left) < 0.1 and abs(right) < 0.1
     # a constant roll known to the processor is not enough when the roll moves by 0.5°
     assert nominal.within_half_cell < series.within_half_cell - 0.1
+
+
+def test_the_rolled_swath_is_imaged_where_the_antenna_looks() -> None:
+    # flat ground wider than the swath: a roll of +3° (right wing down) turns the 20° fan
+    # to -23°..+17°; the DEM must reach the left edge and hold no grating-lobe band
+    flat = simulate(n_rx=20, width_m=190.0, strip_m=3.0, roll_rad=ROLL, height_scale=0.0)
+    product = flat.image()
+    err, _ = flat.errors(product)
+    covered = product.y_m[np.any(np.isfinite(product.height_m), axis=0)]
+    print(f"\nrolled swath: y {covered.min():.1f}..{covered.max():.1f} m, max |error| "
+          f"{np.nanmax(np.abs(err)):.2f} m")  # fmt: skip
+    assert covered.min() < -200.0 * math.tan(math.radians(21.0))
+    assert covered.max() < 200.0 * math.tan(math.radians(19.0))
+    assert np.nanmax(np.abs(err)) < 1.0
