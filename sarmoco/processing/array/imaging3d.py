@@ -23,7 +23,7 @@ Chain, on echoes [pulse, channel, fast time] with per-pulse INS position and att
    profile over ``centroid_cells`` resolution cells about its peak (intensity above
    ``centroid_floor`` of the peak): on a slope the beam's footprint spreads over several
    range cells and speckle moves the peak within it, while the centroid stays near the
-   footprint's centre (on the paper's terrain, full array, steepest strip: std 0.25 m with the
+   footprint's centre (paper's terrain, full array, steepest strip, at b3182a8: std 0.25 m with the
    parabolic peak, 0.175 m with a 4-cell centroid); (r, θ) maps to ``y = r sin θ``,
    ``z = r cos θ`` in the imaging frame, height ``h = -(D_origin + z)``; the heights are
    interpolated per pulse onto a regular cross-track grid, NaN where the profile's peak is
