@@ -45,13 +45,15 @@ from typing import Any
 import numpy as np
 import zarr
 
-from bench.bench_daemon import PY, SIM_ARGS, load_average, rss_summary, vm_rss_kb
+from bench.bench_daemon import load_average
+from sarmoco.app.benchcmd import PY, SIM_ARGS, proc_status_kb, rss_trend_mb_per_min
 from sarmoco.app.demo import free_udp_port, read_json_line
 from sarmoco.app.simconfig import config_table, write_config
 from sarmoco.daemon import schema
 from sarmoco.daemon.config import load_config
 from sarmoco.daemon.flags import NAV_UNUSABLE
 from sarmoco.daemon.store import RunStore, open_store
+from sarmoco.errors import SarmocoError
 from sarmoco.sim.scenario import load_preset
 from tests.daemon.test_daemon_process import NotifyListener, http_get
 from tests.daemon.test_faults_wire import wait_idle
@@ -88,11 +90,29 @@ class Sampler(threading.Thread):
         while not self.stop.wait(1.0):
             t = time.monotonic() - t0
             try:
-                self.rss.append((t, vm_rss_kb(self.pid)))
-            except (FileNotFoundError, RuntimeError):
+                self.rss.append((t, proc_status_kb(self.pid, "VmRSS")))
+            except (FileNotFoundError, SarmocoError):
                 return
             if not self.load or t - self.load[-1][0] >= 60.0:
                 self.load.append((t, os.getloadavg()[0]))
+
+
+def rss_summary(rss: list[tuple[float, int]]) -> dict[str, float]:
+    """Medians of the first and last minute after :data:`RSS_WARMUP_S`, the maximum and the
+    trend (least squares), MB."""
+    t = np.array([r[0] for r in rss], dtype=np.float64)
+    mb = np.array([r[1] for r in rss], dtype=np.float64) / 1024.0
+    keep = t >= RSS_WARMUP_S
+    if np.count_nonzero(keep) < 10:
+        return {}
+    t, mb = t[keep], mb[keep]
+    return {
+        "span_min": float((t[-1] - t[0]) / 60.0),
+        "first_min_median_mb": float(np.median(mb[t < t[0] + 60.0])),
+        "last_min_median_mb": float(np.median(mb[t > t[-1] - 60.0])),
+        "max_mb": float(mb.max()),
+        "slope_mb_per_min": rss_trend_mb_per_min(rss, RSS_WARMUP_S),
+    }
 
 
 def check_tiles(store: RunStore, tile_length_m: float) -> dict[str, Any]:
@@ -212,7 +232,7 @@ def soak(work: Path, minutes: float, scale: float, loss: float, dropout_s: float
         "t_term_s": round(t_term, 2),
     }
     assert sampler is not None
-    record["rss"] = rss_summary([r for r in sampler.rss if r[0] >= RSS_WARMUP_S - 30.0])
+    record["rss"] = rss_summary(sampler.rss)
     record["load_per_minute"] = [round(v, 2) for _, v in sampler.load]
     record["load_at_end"] = load_average()
     run = open_store(store)
