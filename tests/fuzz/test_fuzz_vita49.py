@@ -196,14 +196,18 @@ def test_batch_decode_equals_packet_by_packet(case: tuple[int, str, list[bytes]]
 def test_stream_framer_resynchronises_with_a_bounded_buffer(
     case: tuple[int, str, list[bytes]], chunks: list[int]
 ) -> None:
-    """Damage and garbage followed by three clean packets: the framer never raises, its
-    buffer never exceeds one maximal packet plus one read, and at least two of the three
-    clean packets come out (one may be swallowed by a candidate that starts in the damage)."""
+    """Damage and garbage followed by three clean packets and the stream going on: the
+    framer never raises, its buffer never exceeds one maximal packet plus one read, and at
+    least two of the three clean packets come out (one may be swallowed by a candidate that
+    starts in the damage). The stream goes on for a maximal packet of zero bytes after them:
+    a candidate header in the damage may announce more bytes than the clean packets hold
+    (``40 00 00`` + the first clean byte is a 28-word context header), and only the bytes
+    after it complete that candidate, so that it is refused and the framer resynchronises."""
     n_samples, payload, packets = case
     dec = VitaDecoder(n_samples, payload)  # type: ignore[arg-type]
     iq = np.arange(2 * n_samples, dtype=np.int16)  # small positive words: no fake headers
     clean = [encode_signal_packet(0, 10**18 + k, k, iq, payload) for k in range(3)]  # type: ignore[arg-type]
-    stream = b"".join(packets) + b"".join(clean)
+    stream = b"".join(packets) + b"".join(clean) + bytes(dec.max_packet_bytes)
     row = np.empty(n_samples, np.complex64)
     framer = VitaStreamFramer(dec)
     times = []
