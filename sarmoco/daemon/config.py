@@ -289,9 +289,9 @@ class ArrayConfig:
         gt=0,
     )
     antenna_length_m: float = _key(
-        2.0,
-        "Along-track length D of the elements: Doppler band |k_x| <= 4 pi / D, along-track "
-        "resolution D / 2; the pulse spacing v / PRF must be <= D / 4",
+        1.0,
+        "Along-track length D of the elements: the imager keeps the Doppler band "
+        "|k_x| <= 4 pi / D (2 v / D in Hz, at most the PRF); along-track resolution D / 2",
         unit="m",
         gt=0,
     )
