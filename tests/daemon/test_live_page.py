@@ -21,7 +21,6 @@ import urllib.request
 from pathlib import Path
 
 import numpy as np
-import pytest
 from PIL import Image as PilImage
 
 from sarmoco.app.simconfig import write_config
