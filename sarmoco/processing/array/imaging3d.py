@@ -23,8 +23,11 @@ Chain, on echoes [pulse, channel, fast time] with per-pulse INS position and att
    profile over ``centroid_cells`` resolution cells about its peak (intensity above
    ``centroid_floor`` of the peak): on a slope the beam's footprint spreads over several
    range cells and speckle moves the peak within it, while the centroid stays near the
-   footprint's centre (paper's terrain, full array, steepest strip, at b3182a8: std 0.25 m with the
-   parabolic peak, 0.175 m with a 4-cell centroid); (r, θ) maps to ``y = r sin θ``,
+   footprint's centre (paper's terrain, full array, steepest strip, at b3182a8: std 0.25 m
+   with the parabolic peak, 0.175 m with a 4-cell centroid). Where the surface climbs along
+   track faster than ``slope_switch`` the single-look centroid is taken (a strip across
+   along-track slopes: 0.402 m with 3 looks everywhere, 0.261 m with the switch and a 6-cell
+   centroid); (r, θ) maps to ``y = r sin θ``,
    ``z = r cos θ`` in the imaging frame, height ``h = -(D_origin + z)``; the heights are
    interpolated per pulse onto a regular cross-track grid, NaN where the profile's peak is
    below the echo threshold, in the receive window's last pulse length (cut echoes) or more
@@ -117,6 +120,10 @@ class Array3dOptions:
         Intensity below this fraction of the peak is left out of the centroid.
     threshold_db : float
         A profile whose peak is this far below the 90th percentile of all peaks is "no echo".
+    slope_switch : float
+        Where the looked surface climbs along track faster than this (m per m), the single
+        look's range is used instead: averaging neighbouring pulses mixes their heights.
+        0: always the looked range.
     outlier_cells : float
         A beam's height more than this many range resolution cells from the median of its 7
         neighbouring beams is dropped as a sidelobe or noise peak.
@@ -131,10 +138,11 @@ class Array3dOptions:
     angle_oversample: float = 2.0
     cross_window: str | None = None
     looks: int = 3
-    centroid_cells: float = 4.0
+    centroid_cells: float = 6.0
     centroid_floor: float = 0.1
     threshold_db: float = -15.0
     outlier_cells: float = 3.0
+    slope_switch: float = 1.0
     ground_height_m: float = 0.0
 
     def __post_init__(self) -> None:
@@ -254,12 +262,12 @@ def _surface_ranges(
     sines: FloatArray,
     opt: Array3dOptions,
     chunk: int = 32,
-) -> tuple[FloatArray, FloatArray]:
+) -> tuple[FloatArray, FloatArray, FloatArray]:
     """Beamform (step 5), average ``opt.looks`` neighbouring pulses' intensity profiles and
     find each profile's peak (step 6).
 
-    Returns the peak's range-bin position (fractional, in original bins) and power, each
-    (P, n_beams).
+    Returns the surface position (fractional range bins of the window) with the looks, the
+    same from single pulses, and the looked peak power, each (P, n_beams).
     """
     n_p, n_c, n_data = data_t.shape
     radar = system.radar
@@ -286,6 +294,7 @@ def _surface_ranges(
     res_bins = system.radar.range_resolution_m / (C_MPS / (2.0 * system.radar.sample_rate_hz))
     pos = np.empty((n_p, sines.size))
     power = np.empty((n_p, sines.size))
+    single = pos if halo == 0 else np.empty((n_p, sines.size))
     for p0 in range(0, n_p, chunk):
         lo, hi = max(0, p0 - halo), min(n_p, p0 + chunk + halo)
         blk = scipy.fft.fft(data_t[lo:hi], n_s, axis=2, workers=-1)  # (Pc, C, F)
@@ -294,30 +303,43 @@ def _surface_ranges(
         padded[:half] = beams[:half]
         padded[n_up - (n_s - half) :] = beams[half:]
         prof = np.abs(scipy.fft.ifft(padded, axis=0, workers=-1)) ** 2  # (S U, Pc, B)
+        keep = slice(p0 - lo, p0 - lo + min(chunk, n_p - p0))
         if halo:
             csum = np.concatenate([np.zeros_like(prof[:, :1]), np.cumsum(prof, axis=1)], axis=1)
             idx = np.arange(prof.shape[1])
             a_i = np.clip(idx - halo, 0, prof.shape[1])
             b_i = np.clip(idx + halo + 1, 0, prof.shape[1])
-            prof = (csum[:, b_i] - csum[:, a_i]) / (b_i - a_i)[None, :, None]
-        prof = prof[:, p0 - lo : p0 - lo + min(chunk, n_p - p0)]
-        i = np.argmax(prof, axis=0)
-        b = np.take_along_axis(prof, i[None], 0)[0]
-        if opt.centroid_cells > 0.0:
-            half_w = round(opt.centroid_cells * up * res_bins / 2.0)
-            offs = np.arange(-half_w, half_w + 1)
-            idx = np.clip(i[None] + offs[:, None, None], 0, n_up - 1)
-            vals = np.take_along_axis(prof, idx, 0)
-            vals = np.maximum(vals - opt.centroid_floor * b[None], 0.0)
-            frac = np.sum(vals * offs[:, None, None], axis=0) / np.sum(vals, axis=0)
+            looked = (csum[:, b_i] - csum[:, a_i]) / (b_i - a_i)[None, :, None]
+            single[p0 : p0 + chunk] = _peak_bins(prof[:, keep], opt, up, res_bins)[0]
         else:
-            a = np.take_along_axis(prof, np.clip(i - 1, 0, n_up - 1)[None], 0)[0]
-            c = np.take_along_axis(prof, np.clip(i + 1, 0, n_up - 1)[None], 0)[0]
-            den = a - 2.0 * b + c
-            frac = np.where(den < 0.0, 0.5 * (a - c) / np.where(den < 0.0, den, -1.0), 0.0)
-        pos[p0 : p0 + chunk] = (i + frac) / up
-        power[p0 : p0 + chunk] = b
-    return pos, power
+            looked = prof
+        pos[p0 : p0 + chunk], power[p0 : p0 + chunk] = _peak_bins(
+            looked[:, keep], opt, up, res_bins
+        )
+    return pos, single, power
+
+
+def _peak_bins(
+    prof: FloatArray, opt: Array3dOptions, up: int, res_bins: float
+) -> tuple[FloatArray, FloatArray]:
+    """Surface position (original range bins, fractional) and peak power of profiles
+    (S U, P, B): the centroid of step 6, or the parabolic peak."""
+    n_up = prof.shape[0]
+    i = np.argmax(prof, axis=0)
+    b = np.take_along_axis(prof, i[None], 0)[0]
+    if opt.centroid_cells > 0.0:
+        half_w = round(opt.centroid_cells * up * res_bins / 2.0)
+        offs = np.arange(-half_w, half_w + 1)
+        idx = np.clip(i[None] + offs[:, None, None], 0, n_up - 1)
+        vals = np.take_along_axis(prof, idx, 0)
+        vals = np.maximum(vals - opt.centroid_floor * b[None], 0.0)
+        frac = np.sum(vals * offs[:, None, None], axis=0) / np.sum(vals, axis=0)
+    else:
+        a = np.take_along_axis(prof, np.clip(i - 1, 0, n_up - 1)[None], 0)[0]
+        c = np.take_along_axis(prof, np.clip(i + 1, 0, n_up - 1)[None], 0)[0]
+        den = a - 2.0 * b + c
+        frac = np.where(den < 0.0, 0.5 * (a - c) / np.where(den < 0.0, den, -1.0), 0.0)
+    return (i + frac) / up, b
 
 
 def _plausible(bins: FloatArray, h: FloatArray, radar: RadarParams, tol_m: float) -> np.ndarray:
@@ -419,10 +441,15 @@ def form_dem(
 
     _azimuth_compress(data, system, r, dx)
     sines = _beam_sines(system, boresight, opt.angle_oversample)
-    bins, power = _surface_ranges(data, system, sines, opt)
+    bins, bins_single, power = _surface_ranges(data, system, sines, opt)
     r0, dr = float(r[0]), float(r[1] - r[0])
-    rng_m = r0 + bins * dr
     cos_t = np.sqrt(1.0 - sines**2)
+    if opt.looks > 1 and opt.slope_switch > 0.0:
+        # the looks average along track: where the surface climbs along track faster than
+        # slope_switch (height over along-track distance, from the looked heights), one look
+        slope = np.abs(np.gradient((r0 + bins * dr) * cos_t[None, :], dx, axis=0))
+        bins = np.where(slope > opt.slope_switch, bins_single, bins)
+    rng_m = r0 + bins * dr
     y_img = rng_m * sines[None, :]
     z_img = rng_m * cos_t[None, :]
     h = -(float(track.origin_ned[2]) + z_img)
