@@ -281,7 +281,8 @@ class _LiveRun:
         Offered at once, they would push the samples the waiting pulses need out of the
         nav buffer's history, so they wait here until the radar comes within half the
         history (:meth:`_ins_horizon_ns`). The read time of a file says nothing of when
-        the INS sent a sample: no receive time goes with them (no latency check).
+        the INS sent a sample: no receive time goes with them (no latency check); the
+        bytes are recorded with the time they were read.
 
         Returns
         -------
@@ -292,7 +293,7 @@ class _LiveRun:
         backlog = self._ins_backlog
         if not backlog:
             backlog.extend(link.poll(POLL_S))
-            self.pipe.add_ins_raw(link.take_raw(), None)
+            self.pipe.add_ins_raw(link.take_raw(), time.monotonic_ns())  # when it was read
         horizon = self._ins_horizon_ns()
         offer = []
         while backlog and (horizon is None or backlog[0].t_gps_ns <= horizon):
