@@ -658,5 +658,15 @@ def _toml_value(v: Any) -> str:
 
 
 def config_to_dict(cfg: Config) -> dict[str, Any]:
-    """Return the configuration as plain dicts (JSON-able; for recorder attributes)."""
-    return dataclasses.asdict(cfg)
+    """Return the configuration as plain dicts and lists (JSON-able, for recorder attributes;
+    :func:`parse_config` takes it back: a tuple key is a TOML array, a list)."""
+    return typing.cast(dict[str, Any], _plain(dataclasses.asdict(cfg)))
+
+
+def _plain(value: Any) -> Any:
+    """``value`` with every tuple made a list, in dicts and lists at any depth."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    return value
