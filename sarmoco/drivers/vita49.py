@@ -55,6 +55,10 @@ _CIF0_SAMPLE_RATE = 21
 # Words of each CIF0 field from bit 30 down to bit 21 (the profile reads no further).
 _CIF0_FIELD_WORDS = {30: 1, 29: 2, 28: 2, 27: 2, 26: 2, 25: 2, 24: 1, 23: 1, 22: 1, 21: 2}
 _CIF_EXTRA_WORD_BITS = (1, 2, 3, 7)
+_CIF0_UNREAD = (1 << 21) - 1
+"""CIF0 bits of fields (and further CIF words) whose contents the profile does not read: when
+none is set, a context packet's size is known to the word (a longer one is damage, e.g. a
+header in garbage whose size field swallows the packets after it)."""
 _RADIX = float(1 << 20)
 
 _TR_CAL_TIME = (31, 19)
@@ -580,6 +584,9 @@ class VitaDecoder:
             if words == 2:
                 values[bit] = _Q64S.unpack_from(packet, pos)[0] / _RADIX
             pos += 4 * words
+        if not cif0 & _CIF0_UNREAD and pos != n:  # every field read: the packet ends here
+            self._bad("context", f"{n - pos} bytes after the last field its CIF0 announces")
+            return False
         ctx = ContextValues(
             sid,
             t,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import socket
+import struct
 import threading
 from pathlib import Path
 
@@ -110,6 +111,24 @@ def test_context_mismatch_names_the_field() -> None:
     )
     with pytest.raises(ConfigError, match="sample_rate_hz"):
         dec.decode_into(bad, row)
+
+
+def test_context_longer_than_its_fields_is_damage() -> None:
+    """A context packet whose CIF0 announces only fields the profile reads is exactly that
+    long: one word more (a header in garbage whose size field would swallow the packets
+    after it, as hypothesis found) is refused and counted, the exact one accepted."""
+    dec = VitaDecoder(N)
+    row = np.zeros(N, np.complex64)
+    good = encode_context_packet(
+        1, T0, 0, bandwidth_hz=1.5e8, rf_reference_hz=9.6e9, sample_rate_hz=1.8e8
+    )
+    assert dec.decode_into(good, row) is None and dec.last_ok
+    words = struct.unpack_from(">I", good)[0] & 0xFFFF
+    longer = struct.pack(">I", (struct.unpack_from(">I", good)[0] & ~0xFFFF) | (words + 1))
+    longer += good[4:] + bytes(4)
+    before = dec.counters.parse_errors
+    assert dec.decode_into(longer, row) is None and not dec.last_ok
+    assert dec.counters.parse_errors == before + 1
 
 
 def test_tcp_stream_with_garbage_resyncs() -> None:
