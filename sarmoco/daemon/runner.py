@@ -35,6 +35,9 @@ _Link = RadarSource | Source
 POLL_S = 0.05
 """Reader poll timeout and idle sleep of the processing loop, s."""
 
+INS_ENDED_NOW_NS = 2**62
+"""The aligner's "now" once an INS log file has ended, GPS ns (year 2116: after every pulse)."""
+
 INS_STALE_S = 2.0
 """The INS counts as unhealthy when its newest sample is older than this (host clock), s."""
 
@@ -339,11 +342,15 @@ class _LiveRun:
         "now" for links that deliver data as it happens. An INS log file is read at its
         own pace: until it ends, a pulse beyond what it has delivered is waiting for the
         read, not for an INS that is late, so "now" goes no further than the newest
-        sample both INS streams hold (None: wait for the first).
+        sample both INS streams hold (None: wait for the first). Once the log has ended no
+        pulse can gain navigation by waiting: "now" is then :data:`INS_ENDED_NOW_NS` (a pulse
+        time-stamped an hour ahead by a hostile sender would otherwise wait for ever).
         """
         now = self.pipe.now_ns(live=True)
-        if now is None or not self._ins_file or "ins" in self.st.finished:
+        if now is None or not self._ins_file:
             return now
+        if "ins" in self.st.finished:
+            return INS_ENDED_NOW_NS  # no sample will come: every waiting pulse is decided now
         span = self.pipe.nav.span_ns()
         return None if span is None else min(now, span[1])
 
