@@ -96,7 +96,6 @@ def test_sigkill_at_random_moments_leaves_committed_rows_intact(tmp_path: Path) 
     print(f"{trials} kills in {elapsed:.1f} s; committed pulses per run: {pulses}")
     distinct = {(n_img, *sorted(counts.items())) for n_img, counts in outcomes}
     assert len(distinct) >= 3  # the kills landed at different points
-    assert elapsed < 40.0
 
 
 def test_clean_close_trims_and_xarray_reads_it_directly(tmp_path: Path) -> None:

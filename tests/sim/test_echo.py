@@ -108,7 +108,10 @@ def test_shapes_checked(n_times: int, n_targets: int) -> None:
         )
 
 
-def test_scene_of_300_scatterers_is_fast() -> None:
+def test_scene_of_300_scatterers() -> None:
+    """300 illuminated scatterers synthesise to one complex64 row per pulse (the time it
+    takes is printed here and measured by ``python -m bench.bench_sim``, not asserted: a
+    wall-clock bound in a unit test fails on a loaded machine)."""
     scn = load_preset("ku-vehicle", scale=0.1)
     rng = np.random.default_rng(5)
     targets = scene_targets(scn, 300, rng)
@@ -122,5 +125,6 @@ def test_scene_of_300_scatterers_is_fast() -> None:
         scn.radar, np.arange(t.size, dtype=np.int64), apc, tgt, amp, 0.0, rng, illumination=lit
     )
     elapsed = time.perf_counter() - t0
+    print(f"300 scatterers x {scn.n_pulses} pulses synthesised in {elapsed:.2f} s")
     assert echo.shape == (scn.n_pulses, scn.radar.n_samples) and echo.dtype == np.complex64
-    assert elapsed < 15.0, elapsed
+    assert np.count_nonzero(np.abs(echo).max(axis=1) > 0) == int(lit.any(axis=1).sum())
