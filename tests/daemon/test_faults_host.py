@@ -183,7 +183,11 @@ def _says_why(run: UdpRun, store: Path, reason: str, metrics: str, exit_status: 
     assert exit_status == 2, log[-3:]
     assert "sarmoco_processing_errors_total" in metrics
     assert 'sarmoco_component_up{component="processing"} 0' in metrics, metrics
-    errors = [r for r in log if r.get("level") == "error"]
+    # the daemon's own error records (a library's, e.g. asyncio's about a write zarr's event
+    # loop saw fail, may come too on a loaded machine, worded its own way)
+    errors = [
+        r for r in log if r.get("level") == "error" and r.get("logger", "").startswith("sarmoco")
+    ]
     assert errors and all(str(store) in r["error"] and reason in r["error"] for r in errors)
     assert log[-1]["msg"].startswith("sarmoco: error: recorder: ") and reason in log[-1]["msg"]
 
