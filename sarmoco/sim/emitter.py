@@ -80,7 +80,7 @@ class Emitter(ABC):
     def send(self, packet: bytes, t_ns: int) -> None:
         """Offer one packet, sent at scenario time ``t_ns``, to the fault injector and the link."""
         self.now_ns = t_ns
-        self.injector.send(packet, self.write)
+        self.injector.send(packet, self.write, t_ns)
 
     def write(self, packet: bytes) -> None:
         """Put one packet on the link (formats with per-packet framing override this)."""

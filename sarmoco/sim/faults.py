@@ -7,6 +7,8 @@ Switches (``sarmoco sim --fault SPEC``, repeatable):
 ``corrupt=P[@LINK]``              flip one random bit of each packet with probability P
 ``dup=P[@LINK]``                  send each packet twice with probability P
 ``reorder=P[@LINK]``              hold a packet back and send it after the next one, probability P
+``burst=EVERY:LENGTH[@LINK]``     lose every packet sent during LENGTH s at the end of each EVERY s
+                                  (from the link's first packet): bursts of loss
 ``ins-dropout=START:DURATION``    the INS sends nothing for DURATION s from START s after the
                                   first pulse (repeatable)
 ``clock-offset=S``                INS device clock offset against GPS, s (its time messages
@@ -45,6 +47,18 @@ class PacketFaults:
     corrupt: float = 0.0
     dup: float = 0.0
     reorder: float = 0.0
+    burst_every_s: float = 0.0
+    """Period of the loss bursts, s (0: none)."""
+    burst_s: float = 0.0
+    """Length of each loss burst, s."""
+
+    def in_burst(self, since_first_ns: int) -> bool:
+        """Whether a packet sent ``since_first_ns`` after the link's first one falls in a
+        loss burst (the last ``burst_s`` of each ``burst_every_s``)."""
+        if not self.burst_every_s > 0:
+            return False
+        every_ns = round(self.burst_every_s * 1e9)
+        return since_first_ns % every_ns >= every_ns - round(self.burst_s * 1e9)
 
     @property
     def any(self) -> bool:
@@ -120,6 +134,18 @@ def parse_faults(specs: list[str] | None) -> Faults:
                 faults = replace(faults, radar=replace(faults.radar, **{_PACKET_KEYS[key]: p}))
             if link in ("", "ins"):
                 faults = replace(faults, ins=replace(faults.ins, **{_PACKET_KEYS[key]: p}))
+        elif key == "burst":
+            text, _, link = value.partition("@")
+            every, length = _pair(spec, text)
+            if not 0 < length < every:
+                raise ConfigError(f"--fault {spec!r}: want 0 < LENGTH < EVERY, got {text!r}")
+            if link and link not in LINKS:
+                raise ConfigError(f"--fault {spec!r}: link {link!r} is not one of {LINKS}")
+            burst = {"burst_every_s": every, "burst_s": length}
+            if link in ("", "radar"):
+                faults = replace(faults, radar=replace(faults.radar, **burst))
+            if link in ("", "ins"):
+                faults = replace(faults, ins=replace(faults.ins, **burst))
         elif key == "ins-dropout":
             start, duration = _pair(spec, value)
             if not duration > 0:
@@ -132,7 +158,8 @@ def parse_faults(specs: list[str] | None) -> Faults:
         elif key == "clock-step":
             faults = replace(faults, clock_steps_s=(*faults.clock_steps_s, _pair(spec, value)))
         else:
-            known = ", ".join([*_PACKET_KEYS, "ins-dropout", "clock-offset", "clock-drift"])
+            known = ", ".join([*_PACKET_KEYS, "burst", "ins-dropout", "clock-offset",
+                               "clock-drift"])  # fmt: skip
             raise ConfigError(
                 f"--fault {spec!r}: unknown fault {key!r} (known: {known}, clock-step)"
             )
@@ -168,6 +195,9 @@ class FaultCounts:
     packets: int = 0
     """Packets offered to the link."""
     lost: int = 0
+    """Packets lost, at random or in bursts."""
+    burst_lost: int = 0
+    """Of those, the packets lost in bursts."""
     corrupted: int = 0
     duplicated: int = 0
     reordered: int = 0
@@ -189,6 +219,7 @@ class PacketFaultInjector:
     -----
     Each offered packet draws the same four uniforms whatever the outcome, so
     which packets are hit does not depend on the outcome of earlier draws.
+    A packet in a loss burst (by its send time) is lost whatever it drew.
     A lost packet is neither corrupted, duplicated nor reordered; a reordered
     packet is held and sent right after the next packet that is sent (or at
     :meth:`flush`).
@@ -201,9 +232,14 @@ class PacketFaultInjector:
     def __post_init__(self) -> None:
         self._rng = np.random.default_rng(self.seed)
         self._held: bytes | None = None
+        self._first_ns: int | None = None
 
-    def send(self, data: bytes, write: Callable[[bytes], None]) -> None:
-        """Offer one packet; ``write`` is called for each copy that goes on the wire."""
+    def send(self, data: bytes, write: Callable[[bytes], None], t_ns: int | None = None) -> None:
+        """Offer one packet; ``write`` is called for each copy that goes on the wire.
+
+        ``t_ns``: its send time (scenario ns), which places it in or out of a loss burst
+        (None: never in one).
+        """
         f = self.faults
         self.counts.packets += 1
         if not f.any:
@@ -211,6 +247,12 @@ class PacketFaultInjector:
             return
         u_loss, u_corrupt, u_dup, u_reorder = self._rng.random(4)
         where = int(self._rng.integers(0, 8 * len(data))) if data else 0
+        if t_ns is not None:
+            self._first_ns = t_ns if self._first_ns is None else self._first_ns
+            if f.in_burst(t_ns - self._first_ns):
+                self.counts.lost += 1
+                self.counts.burst_lost += 1
+                return
         if u_loss < f.loss:
             self.counts.lost += 1
             return

@@ -44,7 +44,8 @@ def test_parse_every_switch() -> None:
     ("spec", "match"),
     [("loss", "KEY=VALUE"), ("loss=2", r"\[0, 1\]"), ("loss=0.1@gps", "link"),
      ("jitter=1", "unknown"), ("ins-dropout=1", "A:B"), ("ins-dropout=1:0", "duration"),
-     ("clock-drift=fast", "number")],
+     ("clock-drift=fast", "number"), ("burst=0.1:1", "LENGTH < EVERY"),
+     ("burst=1:0.1@gps", "link")],
 )  # fmt: skip
 def test_parse_errors_name_the_switch(spec: str, match: str) -> None:
     with pytest.raises(ConfigError, match=match):
@@ -93,6 +94,23 @@ def test_each_fault_does_what_it_says() -> None:
     assert len(damaged) <= counts.corrupted * 2  # (a corrupted packet may be duplicated)
     keys = [int.from_bytes(p[8:12], "big") for p in intact]
     assert sum(1 for a, b in itertools.pairwise(keys) if b < a) <= counts.reordered
+
+
+def test_loss_bursts_drop_every_packet_in_their_window() -> None:
+    """``burst=1:0.1@radar``: packets every 5 ms for 3.5 s lose exactly those in the last
+    100 ms of each second from the first packet (3 bursts of 20), and nothing else; the
+    other links are untouched."""
+    f = parse_faults(["burst=1:0.1@radar"])
+    assert f.radar == PacketFaults(burst_every_s=1.0, burst_s=0.1) and not f.ins.any
+    inj = PacketFaultInjector(f.radar, seed=0)
+    out: list[bytes] = []
+    t0 = 10**18
+    for k in range(700):
+        inj.send(k.to_bytes(4, "big"), out.append, t0 + k * 5_000_000)
+    got = {int.from_bytes(p, "big") for p in out}
+    lost = sorted(set(range(700)) - got)
+    assert lost == [k for s in (1, 2, 3) for k in range(200 * s - 20, 200 * s)]
+    assert inj.counts.lost == inj.counts.burst_lost == 60
 
 
 def test_same_seed_same_faults() -> None:
