@@ -28,6 +28,7 @@ from sarmoco.sim.array_run import NAV_PROTOCOL, simulate_array, write_array_run
 from sarmoco.sim.array_scenario import ARRAY_PRESET, ArrayScenario, load_array_preset
 from sarmoco.sim.insemitters import INS_EMITTERS
 from sarmoco.sim.outfiles import RADAR_FILE, TRUTH_FILE
+from sarmoco.sim.scenario import radar_table
 
 CONFIG_FILE = "sarmoco.toml"
 """The daemon configuration written beside the files."""
@@ -68,22 +69,13 @@ def check_array_arguments(args: argparse.Namespace) -> None:
 
 def array_config_table(scn: ArrayScenario, out: Path, payload: str) -> dict[str, Any]:
     """The daemon configuration (a TOML table) for the files of ``scn`` written in ``out``."""
-    r = scn.radar
     return {
-        "radar": {
+        "radar": radar_table(scn.radar)
+        | {
             "mode": "array",
             "channels": scn.layout.n_channels,
             "link": str(out / RADAR_FILE),
             "sample_format": payload,
-            "carrier_hz": r.carrier_hz,
-            "bandwidth_hz": r.bandwidth_hz,
-            "pulse_width_s": r.pulse_width_s,
-            "sample_rate_hz": r.sample_rate_hz,
-            "prf_hz": r.prf_hz,
-            "n_samples": r.n_samples,
-            "range_gate_delay_s": r.range_gate_delay_s,
-            "receive": r.receive,
-            "chirp_direction": r.chirp_direction,
         },
         "geometry": {"height_m": scn.altitude_m - scn.mean_ground_m},
         "ins": {

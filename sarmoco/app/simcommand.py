@@ -42,7 +42,6 @@ Faults (``--fault``, repeatable): ``loss=P``, ``corrupt=P``, ``dup=P``, ``reorde
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import math
 import os
@@ -68,7 +67,7 @@ from sarmoco.sim.links import Link, TcpServerLink, UdpOutLink
 from sarmoco.sim.outfiles import NAV_FILES, TRUTH_FILE, truth_record, write_run, write_truth
 from sarmoco.sim.player import Pacing, play_emitters
 from sarmoco.sim.run import SimRun, simulate
-from sarmoco.sim.scenario import DEFAULT_LEVER_ARM_M, PRESETS
+from sarmoco.sim.scenario import DEFAULT_LEVER_ARM_M, PRESETS, radar_table
 from sarmoco.sim.trajectory import MotionSpec
 
 
@@ -253,7 +252,7 @@ def _serve(args: argparse.Namespace, run: SimRun, faults: Faults) -> int:
                 "n_pulses": int(run.t_ns.size),
                 "radar": emitters["radar"].describe() if "radar" in emitters else None,
                 "ins": [e.describe() for name, e in emitters.items() if name != "radar"],
-                "radar_params": radar_params(run),
+                "radar_params": radar_table(run.scenario.radar),
                 "truth": None if args.truth is None else str(args.truth),
             }
         )
@@ -282,11 +281,6 @@ def _serve(args: argparse.Namespace, run: SimRun, faults: Faults) -> int:
         for e in emitters.values():
             e.close()
     return 0
-
-
-def radar_params(run: SimRun) -> dict[str, Any]:
-    """The radar parameters a daemon configuration needs (from the run's scenario)."""
-    return dataclasses.asdict(run.scenario.radar)
 
 
 def _stop(signum: int, frame: FrameType | None) -> None:

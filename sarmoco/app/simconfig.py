@@ -9,7 +9,7 @@ from typing import Any
 import tomli_w
 
 from sarmoco.daemon.config import AutofocusSection, Config, parse_config
-from sarmoco.sim.scenario import Scenario
+from sarmoco.sim.scenario import Scenario, radar_table
 
 TILE_LENGTH_M = 10.0
 """Along-track tile length used for simulated scenes, m."""
@@ -68,20 +68,8 @@ def config_table(scn: Scenario, **sections: dict[str, Any]) -> dict[str, Any]:
     -----
     A scene with distributed clutter (``scn.clutter``) gets ``mocomp.along_track = true``.
     """
-    r = scn.radar
     table: dict[str, dict[str, Any]] = {
-        "radar": {
-            "carrier_hz": r.carrier_hz,
-            "bandwidth_hz": r.bandwidth_hz,
-            "pulse_width_s": r.pulse_width_s,
-            "sample_rate_hz": r.sample_rate_hz,
-            "prf_hz": r.prf_hz,
-            "n_samples": r.n_samples,
-            "range_gate_delay_s": r.range_gate_delay_s,
-            "receive": r.receive,
-            "chirp_direction": r.chirp_direction,
-            "iq_conjugate": r.iq_conjugate,
-        },
+        "radar": radar_table(scn.radar),
         "geometry": {
             "height_m": scn.altitude_m,
             "center_slant_range_m": scn.center_slant_range_m,

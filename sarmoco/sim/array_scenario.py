@@ -31,7 +31,7 @@ from sarmoco.errors import ConfigError, DataFileError
 from sarmoco.processing.array.geometry import ArrayLayout, mimo_layout
 from sarmoco.processing.types import C_MPS, FloatArray, RadarParams
 from sarmoco.sim.array_echo import peaks_dem
-from sarmoco.sim.scenario import DEFAULT_T0_NS
+from sarmoco.sim.scenario import DEFAULT_T0_NS, radar_table
 from sarmoco.sim.trajectory import SinusoidSum, Trajectory, euler_to_quat
 
 ARRAY_PRESET = "mimo-array"
@@ -147,7 +147,6 @@ class ArrayScenario:
 
     def truth_dict(self) -> dict[str, Any]:
         """JSON-able description (no arrays but the DEM's axes; the DEM goes in the truth)."""
-        r = self.radar
         return {
             "name": ARRAY_PRESET,
             "scale": self.scale,
@@ -166,15 +165,7 @@ class ArrayScenario:
             "roll_series": self.roll_series is not None,
             "snr_db": self.snr_db,
             "scatterers_per_cell": self.scatterers_per_cell,
-            "radar": {
-                "carrier_hz": r.carrier_hz,
-                "bandwidth_hz": r.bandwidth_hz,
-                "pulse_width_s": r.pulse_width_s,
-                "sample_rate_hz": r.sample_rate_hz,
-                "prf_hz": r.prf_hz,
-                "n_samples": r.n_samples,
-                "range_gate_delay_s": r.range_gate_delay_s,
-            },
+            "radar": radar_table(self.radar),
         }
 
 

@@ -12,7 +12,7 @@ from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 from sarmoco.sim.echo import synthesize
 from sarmoco.sim.extended import clutter_echo
 from sarmoco.sim.ins import InsMeasurement, measure_ins
-from sarmoco.sim.scenario import Scenario
+from sarmoco.sim.scenario import Scenario, radar_table
 from sarmoco.sim.trajectory import MotionSpec, Trajectory, apc_trajectory, true_trajectory
 
 INS_MARGIN_S = 0.5
@@ -58,7 +58,7 @@ class SimRun:
     def truth_dict(self) -> dict[str, Any]:
         """JSON-able truth record (scenario, motion, targets, true APC per pulse, INS samples)."""
         scn = self.scenario
-        radar = dataclasses.asdict(scn.radar)
+        radar = radar_table(scn.radar)
         motion = dataclasses.asdict(self.motion)
         motion["log_path"] = None if self.motion.log_path is None else str(self.motion.log_path)
         nav = self.ins.nav

@@ -24,6 +24,7 @@ the part a stripmap aperture spends on the (scaled) along-track extent of the sc
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import tomllib
 from dataclasses import dataclass, field, fields
@@ -257,6 +258,17 @@ def scene_targets(scn: Scenario, n: int, rng: np.random.Generator) -> tuple[Targ
     pos = np.asarray(scn.scene_center_ned) + offset @ scn.track_to_ned.T
     amp = (rng.standard_normal(n) + 1j * rng.standard_normal(n)) / math.sqrt(2.0)
     return tuple(Target(_point(x), complex(a)) for x, a in zip(pos, amp, strict=True))
+
+
+def radar_table(radar: RadarParams) -> dict[str, Any]:
+    """The waveform and receiver keys of a configuration's ``radar`` table for ``radar``.
+
+    Every :class:`RadarParams` field under its own name, in its own unit (Hz, s, samples):
+    the keys of the daemon's ``[radar]`` section that describe the waveform, and the
+    ``radar`` record of a run's truth. The link, sample format, channels and mode are
+    the caller's.
+    """
+    return dataclasses.asdict(radar)
 
 
 def _point(xyz: FloatArray) -> tuple[float, float, float]:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from sarmoco.app.simarray import array_config_table
 from sarmoco.app.simconfig import (
     MIN_SUBAPERTURE_PULSES,
     autofocus_table,
@@ -15,8 +16,10 @@ from sarmoco.app.simconfig import (
     synthetic_aperture_s,
     write_config,
 )
-from sarmoco.daemon.config import load_config
+from sarmoco.daemon.config import load_config, parse_config
+from sarmoco.daemon.focuser import radar_params
 from sarmoco.errors import ConfigError
+from sarmoco.sim.array_scenario import load_array_preset
 from sarmoco.sim.scenario import load_preset
 
 
@@ -56,3 +59,19 @@ def test_an_invalid_table_is_not_written(tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"^ins\.protocol: 'nmea' is not one of"):
         write_config(tmp_path / "bad.toml", table)
     assert not (tmp_path / "bad.toml").exists()
+
+
+def test_both_scenario_kinds_configure_the_scenarios_radar(tmp_path: Path) -> None:
+    """The one radar table (``sim.scenario.radar_table``) carries every waveform key."""
+    scn = load_preset("ku-vehicle", 0.1)
+    odd = dataclasses.replace(
+        scn.radar, receive="dechirp", chirp_direction="down", iq_conjugate=True
+    )
+    scn = dataclasses.replace(scn, radar=odd)
+    assert radar_params(scenario_config(scn)) == odd
+    array = load_array_preset(0.1)
+    cfg = parse_config(array_config_table(array, tmp_path, "float32"))
+    assert radar_params(cfg) == array.radar
+    assert (cfg.radar.mode, cfg.radar.channels) == ("array", array.layout.n_channels)
+    assert cfg.radar.link == str(tmp_path / "radar.vrt")
+    assert array.truth_dict()["radar"] == dataclasses.asdict(array.radar)
