@@ -21,6 +21,7 @@ from sarmoco.drivers.dataflash import DataflashSource
 from sarmoco.drivers.mavlink import MavlinkSource, mavlink2, mavutil
 from sarmoco.drivers.samples import AttitudeSample, VelocitySample
 from tests.conftest import SHARED_DATA
+from tests.drivers.mapbounds import observe_map_bounds
 
 DATA = SHARED_DATA / "mavlink"
 TLOG = DATA / "arduplane_quadplane_sitl.tlog"
@@ -98,15 +99,7 @@ def test_udp_round_trip_timesync_rates() -> None:
     that sample. (Judged against the bound read after a whole poll, one sample failed in
     1 of 7 CI runs: a TIMESYNC reply later in the same poll had narrowed the bound.)"""
     src = MavlinkSource("udpin:127.0.0.1:0", timesync_period_s=0.1)
-    model = src.decoder.model
-    map_boot = model.map
-    bound_at_map: dict[int, int] = {}  # device time -> widest bound stated when mapping it
-
-    def observed_map(device_ns: int) -> int:
-        bound_at_map[device_ns] = max(bound_at_map.get(device_ns, 0), model.bound_ns)
-        return map_boot(device_ns)
-
-    model.map = observed_map  # type: ignore[method-assign]
+    bound_at_map = observe_map_bounds(src)
     src, ap, got = run_link(None, None, source=src)
     src.close()
     assert (mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 32.0) in ap.commands  # LOCAL_POSITION_NED
