@@ -266,6 +266,20 @@ class ImagingConfig:
         "and before range compression: range compression, envelope shift, per-bin D_los, "
         "autofocus and imaging then run at the decimated pulse rate (with prefilter on)",
     )
+    method: Literal["direct", "ffbp"] = _key(
+        "direct",
+        "Tile image formation: direct backprojection, or fast factorised backprojection "
+        "(polar subimages merged in stages, factorisation set by ffbp_max_phase_error_rad)",
+    )
+    ffbp_max_phase_error_rad: float = _key(
+        0.3,
+        "With method ffbp: bound on the two-way phase error of the factorisation summed over "
+        "its stages (angle sampling pi L dalpha / lambda per stage); a larger budget means "
+        "fewer angle samples and higher sidelobes",
+        unit="rad",
+        gt=0,
+        lt=math.pi,
+    )
 
 
 @dataclass(frozen=True)

@@ -133,6 +133,7 @@ def tile_imaging(cfg: Config, radar: RadarParams) -> tuple[TileImager, TilePga |
         ),
         rangecomp.range_axis_m(radar),
         radar.wavelength_m,
+        ffbp_budget_rad=im.ffbp_max_phase_error_rad if im.method == "ffbp" else None,
     )
     tile_pga = (
         TilePga(

@@ -48,7 +48,7 @@ import numba
 import numpy as np
 
 from sarmoco.errors import ProcessingError
-from sarmoco.processing.imaging.backprojection import RangeLines, backproject_into
+from sarmoco.processing.imaging.backprojection import RangeLines, _sincos, backproject_into
 from sarmoco.processing.imaging.grid import PlaneGrid
 from sarmoco.processing.imaging.interp import fft_upsample
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
@@ -158,7 +158,7 @@ def _read(
     return re0 + g * (re1 - re0), im0 + g * (im1 - im0), True
 
 
-@numba.njit(parallel=True, nogil=True, cache=True)
+@numba.njit(parallel=True, nogil=True, cache=True, fastmath=True)
 def _pulses_to_polar(
     line: ComplexArray,
     r_first: float,
@@ -213,13 +213,13 @@ def _pulses_to_polar(
                 ph = k * (d_rel - r)
                 if squint:
                     ph += geo[s, 4] * (np.sqrt(dx * dx + dy * dy) - dy) / rs
-                c, sn = np.cos(ph), np.sin(ph)
+                c, sn = _sincos(ph)
                 acc_re += v_re * c - v_im * sn
                 acc_im += v_re * sn + v_im * c
             out[b, a, i] = complex(acc_re, acc_im)
 
 
-@numba.njit(parallel=True, nogil=True, cache=True)
+@numba.njit(parallel=True, nogil=True, cache=True, fastmath=True)
 def _merge(
     child: ComplexArray,
     c_geo: FloatArray,
@@ -263,13 +263,13 @@ def _merge(
                 if not hit:
                     continue
                 ph = k * (rc - r)
-                cs, sn = np.cos(ph), np.sin(ph)
-                acc_re += v_re * cs - v_im * sn
-                acc_im += v_re * sn + v_im * cs
+                cs, sn = _sincos(ph)
+                acc_re += float(v_re * cs - v_im * sn)
+                acc_im += float(v_re * sn + v_im * cs)
             out[b, a, i] = complex(acc_re, acc_im)
 
 
-@numba.njit(parallel=True, nogil=True, cache=True)
+@numba.njit(parallel=True, nogil=True, cache=True, fastmath=True)
 def _polar_to_grid(
     child: ComplexArray,
     c_geo: FloatArray,
@@ -281,26 +281,36 @@ def _polar_to_grid(
     ax1: FloatArray,
     k: float,
     order: int,
-    out: ComplexArray,
+    out: FloatArray,
 ) -> None:  # pragma: no cover - compiled
-    """Last stage: add every polar subimage, read at each pixel, into ``out`` (in place)."""
+    """Last stage: add every polar subimage, read at each pixel, into ``out`` (in place).
+
+    ``out`` is the float32 view (re/im interleaved) of the complex64 pixels. Per row and
+    subimage a first loop computes the polar position and phase of every column
+    (vectorised), a second one reads and accumulates.
+    """
+    n1 = ax1.shape[0]
     for i in numba.prange(ax0.shape[0]):
-        for j in range(ax1.shape[0]):
-            acc_re = 0.0
-            acc_im = 0.0
-            for c in range(child.shape[0]):
-                du = ax0[i] - c_geo[c, 0]
+        r_pos = np.empty(n1, np.float64)
+        a_pos = np.empty(n1, np.float64)
+        cos_ph = np.empty(n1, np.float32)
+        sin_ph = np.empty(n1, np.float32)
+        for c in range(child.shape[0]):
+            du = ax0[i] - c_geo[c, 0]
+            base = du * du + c_geo[c, 2]
+            for j in range(n1):
                 dw = ax1[j] - c_geo[c, 1]
-                rc = np.sqrt(du * du + dw * dw + c_geo[c, 2])
-                a_pos = (du / rc - c_alpha0[c]) / c_d_alpha
-                v_re, v_im, hit = _read(child[c], a_pos, (rc - c_r0[c]) / c_dr, order)
-                if not hit:
-                    continue
-                ph = k * rc
-                cs, sn = np.cos(ph), np.sin(ph)
-                acc_re += v_re * cs - v_im * sn
-                acc_im += v_re * sn + v_im * cs
-            out[i, j] += complex(acc_re, acc_im)
+                rc = np.sqrt(base + dw * dw)
+                a_pos[j] = (du / rc - c_alpha0[c]) / c_d_alpha
+                r_pos[j] = (rc - c_r0[c]) / c_dr
+                cs, sn = _sincos(k * rc)
+                cos_ph[j] = cs
+                sin_ph[j] = sn
+            for j in range(n1):
+                v_re, v_im, hit = _read(child[c], a_pos[j], r_pos[j], order)
+                if hit:
+                    out[i, 2 * j] += v_re * cos_ph[j] - v_im * sin_ph[j]
+                    out[i, 2 * j + 1] += v_re * sin_ph[j] + v_im * cos_ph[j]
 
 
 def _groups(n: int, merge: int) -> IntArray:
@@ -583,6 +593,6 @@ def ffbp_into(
     _polar_to_grid(
         level.data, level.geo, level.alpha0, level.d_alpha, level.r0, level.dr,
         np.asarray(grid.axis0_m, dtype=np.float64), np.asarray(grid.axis1_m, dtype=np.float64),
-        k, plan.angle_order, out,
+        k, plan.angle_order, out.view(np.float32),
     )  # fmt: skip
     return plan

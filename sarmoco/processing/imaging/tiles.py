@@ -23,6 +23,7 @@ import numpy as np
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.imaging.backprojection import RangeLines, backproject_into
+from sarmoco.processing.imaging.ffbp import ffbp_into
 from sarmoco.processing.imaging.grid import PlaneGrid
 from sarmoco.processing.types import ComplexArray, FloatArray, Image, IntArray
 
@@ -113,6 +114,10 @@ class TileImager:
     only : range, optional
         Form only these tiles (a block of a batch; the others the pulses reach are
         skipped). Default every tile.
+    ffbp_budget_rad : float, optional
+        Form the tiles by fast factorised backprojection
+        (:func:`~sarmoco.processing.imaging.ffbp.ffbp_into`) with this phase-error budget,
+        rad; None: direct backprojection.
     """
 
     def __init__(
@@ -121,9 +126,11 @@ class TileImager:
         range_axis_m: FloatArray,
         wavelength_m: float,
         only: range | None = None,
+        ffbp_budget_rad: float | None = None,
     ) -> None:
         self.layout = layout
         self.only = only
+        self.ffbp_budget_rad = ffbp_budget_rad
         self.range_axis_m = np.asarray(range_axis_m, dtype=np.float64)
         self.wavelength_m = float(wavelength_m)
         self._open: dict[int, Tile] = {}
@@ -187,16 +194,31 @@ class TileImager:
                 continue
             if lines is None:
                 lines = RangeLines.upsample(rc, self.range_axis_m)
-            backproject_into(
-                tile.data,
-                lines,
-                apc_m,
-                self.wavelength_m,
-                tile.grid,
-                pulses=sel,
-                beam_half_angle_rad=self.layout.beamwidth_rad / 2.0,
-                compensated_dy_m=compensated_dy_m,
-            )
+            half = self.layout.beamwidth_rad / 2.0
+            if self.ffbp_budget_rad is None:
+                backproject_into(
+                    tile.data,
+                    lines,
+                    apc_m,
+                    self.wavelength_m,
+                    tile.grid,
+                    pulses=sel,
+                    beam_half_angle_rad=half,
+                    compensated_dy_m=compensated_dy_m,
+                )
+            else:
+                ffbp_into(
+                    tile.data,
+                    lines,
+                    float(self.range_axis_m[1] - self.range_axis_m[0]),
+                    apc_m,
+                    self.wavelength_m,
+                    tile.grid,
+                    self.ffbp_budget_rad,
+                    pulses=sel,
+                    beam_half_angle_rad=half,
+                    compensated_dy_m=compensated_dy_m,
+                )
             tile.n_pulses += sel.size
             tile.t1_ns = int(t_ns[sel[-1]])
 
