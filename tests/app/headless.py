@@ -17,10 +17,11 @@ import subprocess
 import tempfile
 import time
 from pathlib import Path
-from types import TracebackType
 from typing import Any
 
 import pytest
+
+from sarmoco.closing import Closing
 
 CHROMIUM_FLAGS = (
     "--headless",
@@ -51,7 +52,7 @@ def chromium_or_skip() -> str:
     return path
 
 
-class HeadlessChromium:
+class HeadlessChromium(Closing):
     """One headless Chromium with one page of ``width`` x ``height`` CSS pixels.
 
     Parameters
@@ -64,6 +65,7 @@ class HeadlessChromium:
 
     def __init__(self, executable: str, width: int = 1200, height: int = 900) -> None:
         self._profile = tempfile.TemporaryDirectory(prefix="sarmoco-chromium-")
+        self._closed = False
         to_browser_r, self._to_browser = os.pipe()
         self._from_browser, from_browser_w = os.pipe()
 
@@ -153,7 +155,10 @@ class HeadlessChromium:
         return path
 
     def close(self) -> None:
-        """Close the browser (politely, then by force) and remove its profile."""
+        """Close the browser (politely, then by force) and remove its profile; idempotent."""
+        if self._closed:
+            return
+        self._closed = True
         try:
             if self.proc.poll() is None:
                 os.write(self._to_browser, json.dumps({"id": 0, "method": "Browser.close"}).encode()
@@ -166,14 +171,3 @@ class HeadlessChromium:
             os.close(self._to_browser)
             os.close(self._from_browser)
             self._profile.cleanup()
-
-    def __enter__(self) -> HeadlessChromium:
-        return self
-
-    def __exit__(
-        self,
-        exc_type: type[BaseException] | None,
-        exc: BaseException | None,
-        tb: TracebackType | None,
-    ) -> None:
-        self.close()
