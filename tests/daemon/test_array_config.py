@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from sarmoco.daemon.config import parse_config
-from sarmoco.errors import ConfigError
+from tests.daemon.refusals import assert_refused
 
 ARRAY_RADAR = {"mode": "array", "channels": 160, "range_gate_delay_s": 1.0e-6}
 """An array-mode radar whose range window (149.9 .. 763.7 m: 4096 samples at 1 GHz after a
@@ -73,6 +73,4 @@ def test_array_mode_takes_one_channel_per_pair() -> None:
     ],
 )
 def test_bad_array_settings_name_the_key(table: dict[str, object], message: str) -> None:
-    with pytest.raises(ConfigError) as info:
-        parse_config(table)
-    assert str(info.value).startswith(message), str(info.value)
+    assert_refused(table, message)
