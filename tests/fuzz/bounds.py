@@ -1,9 +1,10 @@
-"""What every fuzz test asserts: bounded allocation, and errors of the project's tree only."""
+"""What every fuzz test asserts: bounded allocation, and errors of the project's tree only;
+and the reads a stream harness feeds (a bounded buffer is checked after each)."""
 
 from __future__ import annotations
 
 import tracemalloc
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 
 from sarmoco.errors import SarmocoError
@@ -33,3 +34,14 @@ def assert_named_error(exc: BaseException, *names: str) -> None:
     assert isinstance(exc, SarmocoError), f"{type(exc).__name__}: {exc}"
     text = str(exc)
     assert any(n in text for n in names), f"{text!r} names none of {names}"
+
+
+def stream_reads(stream: bytes, sizes: Sequence[int]) -> Iterator[tuple[bytes, bool]]:
+    """``stream`` cut into reads of ``sizes`` bytes (cycled, each >= 1), in order: each
+    read and whether it is the last (a file's end). A decoder's buffer may hold one
+    maximal frame plus the read just fed, never more."""
+    pos, k = 0, 0
+    while pos < len(stream):
+        end = pos + sizes[k % len(sizes)]
+        yield stream[pos:end], end >= len(stream)
+        pos, k = end, k + 1

@@ -24,7 +24,7 @@ from sarmoco.drivers import sbg_codec as codec
 from sarmoco.drivers.sbg import SbgDecoder
 from sarmoco.errors import ProtocolError
 from tests.conftest import SHARED_DATA
-from tests.fuzz.bounds import assert_named_error, bounded_allocation
+from tests.fuzz.bounds import assert_named_error, bounded_allocation, stream_reads
 from tests.fuzz.edits import edited
 
 DBC = SHARED_DATA / "can" / "sbgCan.dbc"
@@ -98,13 +98,10 @@ def test_sbgecom_stream_never_raises(chunks_in: list[bytes], reads: list[int]) -
             for k in range(1, 4)]  # fmt: skip
     stream = b"".join(chunks_in) + b"".join(good)
     dec = SbgDecoder()
-    pos, k = 0, 0
     with bounded_allocation():
-        while pos < len(stream):
-            step = reads[k % len(reads)]
-            dec.feed(stream[pos : pos + step], final=pos + step >= len(stream))
-            pos, k = pos + step, k + 1
-            assert len(dec.sniffer._buf) <= codec.MAX_FRAME + step
+        for read, last in stream_reads(stream, reads):
+            dec.feed(read, final=last)
+            assert len(dec.sniffer._buf) <= codec.MAX_FRAME + len(read)
     assert dec.counters.frames >= 2
 
 
