@@ -43,6 +43,9 @@ class PulseFlag(enum.IntFlag):
     """The platform was turning (the heading averaged over a synthetic aperture changed by
     more than half the azimuth beam within one, :mod:`sarmoco.processing.segments`): the
     pulse was not imaged. Set by the focuser, after the pulse was first recorded."""
+    CONTEXT_MISMATCH = 1 << 9
+    """The radar's last context packet on this stream disagreed with the configured sample
+    rate, bandwidth or RF frequency (VITA 49 context): the pulse was recorded, not focused."""
 
     @classmethod
     def from_packet(cls, packet: EchoPacket) -> PulseFlag:
@@ -56,7 +59,8 @@ class PulseFlag(enum.IntFlag):
         Returns
         -------
         PulseFlag
-            ``INVALID_DATA``, ``SAMPLE_LOSS``, ``OVER_RANGE`` and ``LOST_BEFORE`` as they apply.
+            ``INVALID_DATA``, ``SAMPLE_LOSS``, ``OVER_RANGE``, ``LOST_BEFORE`` and
+            ``CONTEXT_MISMATCH`` as they apply.
         """
         flags = cls.NONE
         if not packet.valid_data:
@@ -67,8 +71,12 @@ class PulseFlag(enum.IntFlag):
             flags |= cls.OVER_RANGE
         if packet.lost_before:
             flags |= cls.LOST_BEFORE
+        if packet.context_mismatch:
+            flags |= cls.CONTEXT_MISMATCH
         return flags
 
 
 NAV_UNUSABLE = PulseFlag.NAV_GAP | PulseFlag.NAV_TIMEOUT
 """Flags under which a pulse has no navigation solution (NaN motion)."""
+UNFOCUSABLE = NAV_UNUSABLE | PulseFlag.CONTEXT_MISMATCH
+"""Flags under which a pulse is recorded but not focused (its echo blanked)."""

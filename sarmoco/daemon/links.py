@@ -42,8 +42,13 @@ def vita_decoder(cfg: Config) -> VitaDecoder:
     )
 
 
-def open_radar(cfg: Config, link: str | None = None) -> RadarSource:
+def open_radar(
+    cfg: Config, link: str | None = None, decoder: VitaDecoder | None = None
+) -> RadarSource:
     """Open ``radar.link`` (or ``link``): ``udp://HOST:PORT``, ``tcp://HOST:PORT`` or a file.
+
+    ``decoder``: the decoder of the link reopened (its counters, packet counts and context
+    state go on across the reconnection); None: a new one (:func:`vita_decoder`).
 
     Raises
     ------
@@ -53,7 +58,7 @@ def open_radar(cfg: Config, link: str | None = None) -> RadarSource:
         If the socket or file cannot be opened.
     """
     text = cfg.radar.link if link is None else link
-    decoder = vita_decoder(cfg)
+    decoder = vita_decoder(cfg) if decoder is None else decoder
     url = urlsplit(text)
     if url.scheme in ("udp", "tcp"):
         if url.hostname is None or url.port is None:

@@ -31,7 +31,7 @@ from sarmoco.daemon import schema
 from sarmoco.daemon.aligner import AlignedBlock, Aligner
 from sarmoco.daemon.config import Config
 from sarmoco.daemon.echoring import Block, EchoRing, SampleFormat, sample_dtype, sample_shape
-from sarmoco.daemon.flags import FLAG_DTYPE, NAV_UNUSABLE, PulseFlag
+from sarmoco.daemon.flags import FLAG_DTYPE, NAV_UNUSABLE, UNFOCUSABLE, PulseFlag
 from sarmoco.daemon.focuser import Focuser, FocusOutput, SinkFactory
 from sarmoco.daemon.navbuffer import NavBuffer
 from sarmoco.daemon.recorder import Recorder
@@ -53,6 +53,10 @@ READ_BLOCK_PULSES = UDP_BATCH_PACKETS
 """Ring slots reserved per radar read: room for one batch of the UDP driver (batched
 receive and decode, and its short gathering pause, need at least
 :data:`~sarmoco.drivers.vita49.BATCH_MIN_PACKETS` rows)."""
+TIME_JUMP_S = 10.0
+"""A pulse stamped further ahead than this of both the INS (its newest sample) and the
+radar's own clock (the newest pulse taken plus the host time since it came) is refused as
+a time jump, when :class:`Pipeline` refuses jumps (a live run's network radar link), s."""
 
 
 class PulseSource(Protocol):
@@ -109,7 +113,10 @@ class _Pulses:
     t_ns, pulse_id : ndarray of int64, shape (P,)
         Transmit time (GPS ns) and running number.
     usable : ndarray of bool, shape (P,)
-        The pulse has navigation (no :data:`~sarmoco.daemon.flags.NAV_UNUSABLE` flag).
+        The pulse is focused (no :data:`~sarmoco.daemon.flags.UNFOCUSABLE` flag: it has
+        navigation and was taken under the configured radar parameters).
+    flags : ndarray of uint32, shape (P,)
+        :class:`~sarmoco.daemon.flags.PulseFlag` bits.
     raw : ndarray of complex64, shape (P, S)
         Raw echoes.
     pos_ned, vel_ned : ndarray, shape (P, 3)
@@ -123,6 +130,7 @@ class _Pulses:
     t_ns: IntArray
     pulse_id: IntArray
     usable: BoolArray
+    flags: npt.NDArray[np.uint32]
     raw: ComplexArray
     pos_ned: FloatArray
     vel_ned: FloatArray
@@ -137,7 +145,8 @@ class _Pulses:
         return cls(
             t_ns=t_ns,
             pulse_id=np.concatenate([b.echoes.pulse_id for b in blocks]),
-            usable=(flags & NAV_UNUSABLE) == 0,
+            usable=(flags & UNFOCUSABLE) == 0,
+            flags=flags,
             raw=np.concatenate([b.echoes.complex_samples() for b in blocks]),
             pos_ned=np.concatenate([b.nav.pos_ned for b in blocks]),
             vel_ned=np.concatenate([b.nav.vel_ned for b in blocks]),
@@ -168,6 +177,11 @@ class Pipeline:
     sink : SinkFactory, optional
         Imaging deferred: the focuser's segments hand their pulses to sinks made by this
         and record no tiles (:class:`~sarmoco.daemon.focuser.Focuser`).
+    refuse_jumps : bool
+        Refuse pulses stamped more than :data:`TIME_JUMP_S` ahead of the INS and of the
+        radar clock (:meth:`read_radar`): a live network link, where the host clock runs
+        with the radar's. Not for files and replays, read faster than real time (a pause
+        of the radar would look like a jump).
     """
 
     def __init__(
@@ -176,6 +190,7 @@ class Pipeline:
         recorder: Recorder,
         counters: Counters,
         sink: SinkFactory | None = None,
+        refuse_jumps: bool = False,
     ) -> None:
         self.cfg = cfg
         self.sink = sink
@@ -212,6 +227,10 @@ class Pipeline:
         self.out_of_order = 0
         """Pulses not newer than one before them, kept from the focuser (the ring sorts
         pulses out already, so this stays 0 unless something upstream breaks)."""
+        self._refuse_jumps = refuse_jumps
+        self.time_jumps = 0
+        """Pulses refused as stamped too far ahead (:data:`TIME_JUMP_S`)."""
+        self._jump_logged_mono = -math.inf
         self._last_nav: tuple[int, FloatArray, FloatArray] = (0, np.zeros(3), np.eye(4)[0])
         """Time (GPS ns), velocity and attitude of the last pulse with navigation."""
         fmt = ring_format(cfg)
@@ -234,7 +253,11 @@ class Pipeline:
         ring is full the pulses are read into scratch space and dropped (counted by
         the ring, and the next stored pulse flagged), so the socket is always drained.
         ``max_pulses`` stops after that many (a file read at its own pace: a replay, a
-        file link of ``run``).
+        file link of ``run``). With ``refuse_jumps`` a pulse stamped more than
+        :data:`TIME_JUMP_S` ahead of the INS and of the radar clock is not taken
+        (counted in ``pulses_time_jump``, logged at most once a second): a forged or
+        corrupted timestamp must not become the ring's newest time, which would make
+        every real pulse after it look late.
         """
         n, limit = 0, math.inf if max_pulses is None else max_pulses
         while n < limit:
@@ -257,6 +280,12 @@ class Pipeline:
         t_ns = np.fromiter((p.t_gps_ns for p in packets), np.int64, k)
         channel = np.fromiter((p.stream_id for p in packets), np.int32, k)
         flags = np.fromiter((PulseFlag.from_packet(p) for p in packets), FLAG_DTYPE, k)
+        if self._refuse_jumps and k:
+            keep = self._not_jumped(t_ns)
+            if not keep.all():
+                k = int(np.count_nonzero(keep))
+                block.samples[:k] = block.samples[: len(packets)][keep]
+                t_ns, channel, flags = t_ns[keep], channel[keep], flags[keep]
         with self._id_lock:
             first = self._next_pulse_id
             self._next_pulse_id += k
@@ -264,6 +293,40 @@ class Pipeline:
                 self._latest_pulse_ns = int(t_ns[-1])
                 self._latest_pulse_mono_ns = time.monotonic_ns()
         self.ring.commit_block(block, t_ns, np.arange(first, first + k), channel, flags)
+
+    def _not_jumped(self, t_ns: IntArray) -> BoolArray:
+        """Mask of the pulses not stamped more than :data:`TIME_JUMP_S` ahead of the newest
+        INS sample and of the radar clock (each pulse taken moves the clock on); counts
+        and logs the others."""
+        refs = []
+        with self._id_lock:
+            if self._latest_pulse_ns is not None:
+                elapsed = time.monotonic_ns() - self._latest_pulse_mono_ns
+                refs.append(self._latest_pulse_ns + elapsed)
+        span = self.nav.span_ns()
+        if span is not None:
+            refs.append(span[1])
+        keep = np.ones(t_ns.shape, dtype=bool)
+        if not refs:
+            return keep  # nothing to compare with: the first pulse, no INS yet
+        jump_ns, ref = round(TIME_JUMP_S * 1e9), max(refs)
+        if (t_ns <= ref + jump_ns).all():
+            return keep
+        ahead_ns = 0
+        for i, t in enumerate(t_ns.tolist()):
+            keep[i] = t <= ref + jump_ns
+            ahead_ns = ahead_ns or (0 if keep[i] else t - ref)
+            ref = max(ref, t) if keep[i] else ref
+        refused = int(np.count_nonzero(~keep))
+        self.time_jumps += refused
+        now = time.monotonic()
+        if now - self._jump_logged_mono >= 1.0:
+            self._jump_logged_mono = now
+            log.warning(
+                "radar pulse times jumped ahead of the INS and the radar clock: refused",
+                extra={"pulses": refused, "ahead_s": ahead_ns * 1e-9, "total": self.time_jumps},
+            )
+        return keep
 
     def add_nav(self, samples: list[Sample], rx_ns: int | None) -> None:
         """Offer INS samples to the nav buffer and queue them for the recorder."""
@@ -348,7 +411,7 @@ class Pipeline:
         in_order = self._in_time_order(_Pulses.join(blocks, self._pending_row))
         if in_order is None:
             return
-        self.summary.pulses_nav_flagged += int(np.count_nonzero(~in_order.usable))
+        self.summary.pulses_nav_flagged += int(np.count_nonzero(in_order.flags & NAV_UNUSABLE))
         p = in_order if self.focuser is not None else self._start_focusing(in_order)
         if p is None:
             return  # no navigation yet: the aperture has not begun
@@ -486,6 +549,7 @@ class Pipeline:
             "pulses_reordered": self.ring.reordered,
             "pulses_late_dropped": self.ring.late_dropped,
             "pulses_out_of_order": self.out_of_order,
+            "pulses_time_jump": self.time_jumps,
             "nav_samples": self.summary.nav_samples,
             "tiles": self.summary.tiles,
         }

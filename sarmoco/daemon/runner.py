@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime
 import logging
+import math
 import signal
 import sys
 import threading
@@ -213,7 +214,9 @@ class _LiveRun:
         self.recorder = open_recorder(cfg, path)
         radar = open_radar(cfg)
         ins = open_ins(cfg, keep_raw=cfg.recorder.raw_ins)
-        self.pipe = Pipeline(cfg, self.recorder, self.counters)
+        self.pipe = Pipeline(
+            cfg, self.recorder, self.counters, refuse_jumps=not isinstance(radar, RadarFileSource)
+        )
         self._ins_file = Path(cfg.ins.link).is_file()
         """The INS link is a log file, read at its own pace (see :meth:`_now_ns`)."""
         self._ins_backlog: deque[Sample] = deque()
@@ -222,7 +225,9 @@ class _LiveRun:
         self.counters.add_source("radar", radar.decoder.counters.snapshot)
         self.counters.add_source("ins", ins.counters.snapshot)
         self.threads = [
-            self._reader("radar", lambda: open_radar(cfg), radar, self._read_radar),
+            self._reader(
+                "radar", lambda: open_radar(cfg, decoder=radar.decoder), radar, self._read_radar
+            ),
             self._reader(
                 "ins", lambda: open_ins(cfg, keep_raw=cfg.recorder.raw_ins), ins, self._read_ins
             ),
@@ -414,10 +419,16 @@ class _LiveRun:
         return ok
 
     def _publish_status(self, now: float) -> None:
-        """The INS age counter and the systemd ``STATUS=`` line."""
+        """The INS and radar age gauges and the systemd ``STATUS=`` line.
+
+        ``radar_age_seconds``: host time since the radar link last gave a pulse (infinite
+        before the first): a stalled peer shows here while the link stays up.
+        """
         nav_age = self._nav_age(now)
         ended = sorted(self.st.finished)
         self.counters.set("ins_age_seconds", nav_age)
+        last_pulse = self.st.last_pulse_mono
+        self.counters.set("radar_age_seconds", now - last_pulse if last_pulse else math.inf)
         self.notifier.status(
             f"{self.pipe.summary.pulses_received} pulses, INS age {nav_age:.2f} s, "
             f"backlog {len(self.pipe.ring)}{'; ' if ended else ''}{_finished_text(ended)}"

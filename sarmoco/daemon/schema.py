@@ -434,6 +434,7 @@ def decode_pulses(cols: Mapping[str, npt.NDArray[Any]], n_samples: int) -> list[
             bool(flags & PulseFlag.SAMPLE_LOSS),
             bool(flags & PulseFlag.OVER_RANGE),
             int(bool(flags & PulseFlag.LOST_BEFORE)),
+            bool(flags & PulseFlag.CONTEXT_MISMATCH),
         )
         for t, channel, flags in zip(
             cols["t_ns"].tolist(), cols["channel"].tolist(), cols["flags"].tolist(), strict=True

@@ -32,8 +32,8 @@ class DriverCounters:
         Frames known to be lost (the sum of gap sizes where the size is known),
         or frames received but discarded (buffer full, unknown stream).
     rejected : int
-        Frames rejected by policy (MAVLink signing, context mismatch, a VITA stream
-        other than the configured channel's).
+        Frames rejected by policy (MAVLink signing, a VITA stream other than the
+        configured channel's).
     skipped_bytes : int
         Bytes skipped while resynchronising a byte stream.
     """

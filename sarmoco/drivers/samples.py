@@ -163,6 +163,10 @@ class EchoPacket:
     lost_before : int
         Packets missing between the previous packet of this stream and this one
         (from the 4-bit count, so modulo 16).
+    context_mismatch : bool
+        The stream's last context packet disagrees with the configured radar parameters
+        (sample rate, bandwidth, RF frequency): the samples were taken under parameters
+        the processing does not assume.
     """
 
     stream_id: int
@@ -173,3 +177,4 @@ class EchoPacket:
     sample_loss: bool
     over_range: bool
     lost_before: int
+    context_mismatch: bool = False

@@ -14,6 +14,8 @@ Profile (what sarmoco reads and what its simulator writes; README "Radar wire fo
 * Context packets (type 4) with CIF0 bandwidth (bit 29), RF reference frequency
   (bit 27) and sample rate (bit 21), each 64-bit two's complement with 20
   fractional bits, Hz; checked against configuration when expectations are given.
+  A context packet that disagrees marks its stream: the signal packets after it carry
+  ``context_mismatch`` until a context packet agrees again (counted, logged).
 
 Every length in a header is checked against the packet before anything is sliced;
 the payload is converted by numpy straight into the caller's preallocated row.
@@ -257,6 +259,24 @@ class ContextExpectation:
     rel_tol: float = 1e-6
 
 
+@dataclass
+class VitaCounters(DriverCounters):
+    """:class:`~sarmoco.drivers.counters.DriverCounters` and what only a radar stream counts.
+
+    Attributes
+    ----------
+    context_changes : int
+        Context packets that changed a stream from agreeing with the configured radar
+        parameters to disagreeing (or from one disagreeing value to another).
+    context_mismatch : int
+        Signal packets decoded while their stream's last context disagreed with the
+        configuration (returned with ``context_mismatch``: recorded, never focused).
+    """
+
+    context_changes: int = 0
+    context_mismatch: int = 0
+
+
 @dataclass(frozen=True)
 class ContextValues:
     """Values read from the last context packet of a stream (None when absent)."""
@@ -292,9 +312,14 @@ class VitaDecoder:
     Notes
     -----
     Bad packets are counted in :attr:`counters` and logged once per burst; they
-    never raise. A context packet that disagrees with ``expect`` raises
-    :class:`~sarmoco.errors.ConfigError` naming the field: the radar is not
-    configured as sarmoco believes, and focusing would be wrong.
+    never raise. A context packet that disagrees with ``expect`` (the radar changed its
+    sample rate, bandwidth or RF frequency mid-stream, or was never set up as
+    configured) is logged as an error naming the field, counted
+    (``context_changes``), and marks its stream: every signal packet of that stream
+    after it is returned with ``context_mismatch`` (counted in ``context_mismatch``),
+    because range compression and focusing with the configured parameters would be
+    wrong for it, until a context packet agrees with the configuration again (logged).
+    The samples are still decoded: the pulses are recorded for the ground, flagged.
     """
 
     def __init__(
@@ -318,8 +343,10 @@ class VitaDecoder:
         self.stream_id = stream_id
         self.skipped_streams: set[int] = set()
         """Stream IDs whose signal packets were skipped (each logged once)."""
-        self.counters = DriverCounters()
+        self.counters = VitaCounters()
         self.context: dict[int, ContextValues] = {}
+        self.mismatch: dict[int, str] = {}
+        """Streams whose last context packet disagrees with ``expect``: what it said."""
         self._src_dtype = _SRC_DTYPES[payload]
         self._payload_bytes = 2 * n_samples * self._src_dtype.itemsize
         self._last_count: dict[tuple[int, int], int] = {}
@@ -464,7 +491,18 @@ class VitaDecoder:
         self.counters.frames += 1
         self._burst.ok()
         self.last_ok = True
-        return EchoPacket(stream_id, t_ns, count, self.n_samples, valid, loss, over, lost)
+        return EchoPacket(
+            stream_id, t_ns, count, self.n_samples, valid, loss, over, lost,
+            self._mismatched(stream_id),
+        )  # fmt: skip
+
+    def _mismatched(self, stream_id: int) -> bool:
+        """Whether a signal packet of ``stream_id`` comes under a disagreeing context
+        (counted in ``context_mismatch``)."""
+        if stream_id not in self.mismatch:
+            return False
+        self.counters.context_mismatch += 1
+        return True
 
     def _accepts(self, stream_id: Any) -> Any:
         """Whether signal packets of ``stream_id`` are decoded (int, or elementwise array)."""
@@ -559,7 +597,7 @@ class VitaDecoder:
             got.append(EchoPacket(
                 sid, self._time((w0 >> 22) & 3, sec, ps), count, n, _indicator(tr, _TR_VALID, True),
                 _indicator(tr, _TR_SAMPLE_LOSS, False), _indicator(tr, _TR_OVER_RANGE, False),
-                self._count(TYPE_SIGNAL_SID, sid, count),
+                self._count(TYPE_SIGNAL_SID, sid, count), self._mismatched(sid),
             ))  # fmt: skip
         self.counters.bytes += len(got) * (_FULL_HEADER.itemsize + self._payload_bytes + 4)
         self.counters.frames += len(got)
@@ -602,16 +640,32 @@ class VitaDecoder:
         return True
 
     def _check_context(self, ctx: ContextValues) -> None:
+        """Mark or clear the stream's mismatch (class notes); log each change once."""
         assert self.expect is not None
+        wrong = []
         for name in ("bandwidth_hz", "rf_reference_hz", "sample_rate_hz"):
             got = getattr(ctx, name)
             want = getattr(self.expect, name)
             if got is not None and abs(got - want) > self.expect.rel_tol * abs(want):
-                self.counters.rejected += 1
-                raise ConfigError(
-                    f"radar.{name}: configured {want!r} Hz but the radar's context packet "
-                    f"(stream 0x{ctx.stream_id:08x}) says {got!r} Hz"
-                )
+                wrong.append(f"radar.{name}: configured {want!r} Hz, the radar says {got!r} Hz")
+        sid, before = ctx.stream_id, self.mismatch.get(ctx.stream_id)
+        if not wrong:
+            if before is not None:
+                del self.mismatch[sid]
+                log.warning(
+                    "radar context of stream 0x%08x agrees with the configuration again: "
+                    "its pulses are focused again", sid,
+                )  # fmt: skip
+            return
+        reason = "; ".join(wrong)
+        if reason != before:
+            self.mismatch[sid] = reason
+            self.counters.context_changes += 1
+            log.error(
+                "radar context of stream 0x%08x disagrees with the configuration (%s): its "
+                "pulses are recorded flagged CONTEXT_MISMATCH and not focused until a "
+                "context packet agrees again", sid, reason,
+            )  # fmt: skip
 
 
 def _indicator(trailer: int, bits: tuple[int, int], default: bool) -> bool:

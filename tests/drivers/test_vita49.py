@@ -15,15 +15,17 @@ from hypothesis import strategies as st
 from sarmoco.drivers.radar import RadarFileSource, RadarTcpSource, RadarUdpSource
 from sarmoco.drivers.samples import EchoPacket
 from sarmoco.drivers.vita49 import (
+    BATCH_MIN_PACKETS,
     ContextExpectation,
     VitaDecoder,
     encode_context_packet,
     encode_signal_packet,
 )
-from sarmoco.errors import ConfigError
 
 N = 64
 T0 = 1_400_000_000_000_000_000  # GPS ns, 2024
+BATCH = BATCH_MIN_PACKETS
+"""Pulses between context packets: batched decoding takes its fast path through them."""
 
 
 def pulses(n_pulses: int, seed: int = 0) -> np.ndarray:
@@ -98,19 +100,40 @@ def test_packet_count_loss_and_trailer_flags() -> None:
     assert e is not None and not e.valid_data and e.sample_loss and e.over_range
 
 
-def test_context_mismatch_names_the_field() -> None:
+def test_context_change_flags_the_pulses_after_it_until_it_agrees_again(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A context packet that changes the sample rate mid-stream marks the stream: the pulses
+    after it come back ``context_mismatch`` (counted, the change logged naming the key), in
+    packet-by-packet and batched decoding alike, until a context packet agrees again."""
     want = ContextExpectation(bandwidth_hz=1.5e8, rf_reference_hz=9.6e9, sample_rate_hz=1.8e8)
-    dec = VitaDecoder(N, expect=want)
-    row = np.zeros(N, np.complex64)
-    good = encode_context_packet(
-        1, T0, 0, bandwidth_hz=1.5e8, rf_reference_hz=9.6e9, sample_rate_hz=1.8e8
+    iq = pulses(3 * BATCH)
+
+    def context(rate_hz: float, count: int) -> bytes:
+        return encode_context_packet(
+            0, T0, count, bandwidth_hz=1.5e8, rf_reference_hz=9.6e9, sample_rate_hz=rate_hz
+        )
+
+    signal = packets(iq, sid=0)
+    stream = [context(1.8e8, 0), *signal[:BATCH], context(2.0e8, 1), *signal[BATCH : 2 * BATCH]]
+    stream += [context(1.8e8, 2), *signal[2 * BATCH :]]
+    for batched in (False, True):
+        dec = VitaDecoder(N, expect=want)
+        rows = np.zeros((len(stream), N), np.complex64)
+        if batched:
+            stage = np.zeros((len(stream), dec.max_packet_bytes), np.uint8)
+            for i, p in enumerate(stream):
+                stage[i, : len(p)] = np.frombuffer(p, np.uint8)
+            got = dec.decode_batch(stage, [len(p) for p in stream], rows)
+        else:
+            got = [e for p in stream if (e := dec.decode_into(p, rows[0])) is not None]
+        mismatch = [e.context_mismatch for e in got]
+        assert mismatch == [False] * BATCH + [True] * BATCH + [False] * BATCH
+        assert dec.counters.context_changes == 1 and dec.counters.context_mismatch == BATCH
+        assert dec.counters.frames == 3 * BATCH + 3 and dec.counters.parse_errors == 0
+    assert "radar.sample_rate_hz: configured 180000000.0 Hz, the radar says 200000000.0 Hz" in (
+        caplog.text
     )
-    assert dec.decode_into(good, row) is None and dec.last_ok
-    bad = encode_context_packet(
-        1, T0, 1, bandwidth_hz=1.5e8, rf_reference_hz=9.6e9, sample_rate_hz=2.0e8
-    )
-    with pytest.raises(ConfigError, match="sample_rate_hz"):
-        dec.decode_into(bad, row)
 
 
 def test_context_longer_than_its_fields_is_damage() -> None:
