@@ -116,8 +116,13 @@ def test_udp_live_timesync_and_rates() -> None:
     # every GPS time is within the bound the driver stated when it mapped it, and once
     # TIMESYNC has settled that bound is well under the 20 ms a loopback allows
     stated = np.array([bounds[s.device_time_ns] for s in vel])
+    late, late_bound = np.abs(err[iv.size // 2 :]), stated[iv.size // 2 :]
+    print(  # the README's figures (pytest -s)
+        f"\nlive MAVLink/UDP, second half: GPS time error median {np.median(late) / 1e3:.0f} µs, "
+        f"max {late.max() / 1e3:.0f} µs; stated bound median {np.median(late_bound) / 1e3:.0f} µs"
+    )
     assert np.all(np.abs(err) <= stated), (np.abs(err) - stated).max()
-    assert stated[iv.size // 2 :].max() < 20_000_000
+    assert late_bound.max() < 20_000_000
 
 
 @pytest.mark.parametrize("kind", ["tcp", "pty"])
