@@ -120,7 +120,7 @@ def test_sarmoco_verbs_and_options_exist(readme: str) -> None:
 
 def test_pytest_selections_match_tests(readme: str, repo_root: Path) -> None:
     """``pytest ... FILE -k WORD`` selects at least one test of FILE."""
-    pattern = r"pytest [^`]*?(tests/[\w/]+\.py) -k ([\w]+(?: or [\w]+)*)"
+    pattern = r"pytest [^`]*?(tests/[\w/]+\.py) -k \"?(\w+(?: or \w+)*)"
     seen = 0
     for line in commands(readme):
         for m in re.finditer(pattern, line):
