@@ -39,6 +39,7 @@ from zarr.storage import LocalStore
 from sarmoco.closing import Closing
 from sarmoco.daemon import schema
 from sarmoco.daemon.echoring import SampleFormat
+from sarmoco.daemon.livefeed import LiveFeed
 from sarmoco.daemon.schema import COMMITTED_ATTR, TableSpec
 from sarmoco.errors import RecorderError
 from sarmoco.processing.types import Image
@@ -286,6 +287,9 @@ class Recorder(Closing):
         Interval between fsyncs of the files written, s (0: after every append).
     chunk_rows : int
         Rows per chunk of the other tables.
+    live : LiveFeed, optional
+        The live page's feed: each tile and autofocus row recorded is handed to it in
+        memory, so that the page never opens the store.
     """
 
     def __init__(
@@ -298,8 +302,10 @@ class Recorder(Closing):
         chunk_pulses: int = 256,
         fsync_interval_s: float = 1.0,
         chunk_rows: int = 1024,
+        live: LiveFeed | None = None,
     ) -> None:
         self.path = Path(path)
+        self.live = live
         if self.path.exists():
             raise RecorderError(f"recorder: {self.path} exists; a run never overwrites a store")
         try:
@@ -449,6 +455,8 @@ class Recorder(Closing):
                 raise RecorderError(f"append_rows: {spec.name!r} is a fixed part of the store")
             table = self._create(spec)
         table.append(**columns)
+        if self.live is not None and spec.name == schema.AUTOFOCUS.name:
+            self.live.add_autofocus(columns)
         self._maybe_sync()
 
     def add_image(
@@ -478,6 +486,8 @@ class Recorder(Closing):
         write_tile(group, image, t0_ns, t1_ns, metrics, reference_track)
         self.n_images = index + 1
         self._images.update_attributes({COMMITTED_ATTR: self.n_images})
+        if self.live is not None:
+            self.live.add_tile(index, image)
         self._maybe_sync()
         return index
 

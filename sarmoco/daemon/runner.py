@@ -18,6 +18,7 @@ from types import FrameType
 from sarmoco.daemon.config import Config, config_to_dict
 from sarmoco.daemon.focuser import SinkFactory
 from sarmoco.daemon.links import open_ins, open_radar
+from sarmoco.daemon.livefeed import LiveFeed
 from sarmoco.daemon.pipeline import Pipeline, RunSummary, ring_format
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.sdnotify import Notifier
@@ -49,8 +50,9 @@ def new_store_path(directory: str | Path, kind: str) -> Path:
     return Path(directory) / f"{kind}-{stamp}.zarr"
 
 
-def open_recorder(cfg: Config, path: Path) -> Recorder:
-    """The run's recorder, configured from ``recorder.*``."""
+def open_recorder(cfg: Config, path: Path, live: LiveFeed | None = None) -> Recorder:
+    """The run's recorder, configured from ``recorder.*`` (handing tiles and autofocus
+    estimates to ``live``, the live page's feed, if given)."""
     return Recorder(
         path,
         cfg.radar.n_samples,
@@ -59,6 +61,7 @@ def open_recorder(cfg: Config, path: Path) -> Recorder:
         raw_echoes=cfg.recorder.raw_echoes,
         chunk_pulses=cfg.recorder.chunk_pulses,
         fsync_interval_s=cfg.recorder.fsync_interval_s,
+        live=live,
     )
 
 
@@ -133,9 +136,10 @@ def _finished_text(names: list[str]) -> str:
 
 
 def _start_status(
-    counters: Counters, health: Health, port: int, store: Path
+    counters: Counters, health: Health, port: int, store: Path, live: LiveFeed
 ) -> StatusServer | None:
-    """The status endpoint on 127.0.0.1:``port`` with the live page of ``store`` (None: port 0).
+    """The status endpoint on 127.0.0.1:``port`` with the live page of ``live``, the feed
+    of the recorder of ``store`` (None: port 0).
 
     Raises
     ------
@@ -145,7 +149,7 @@ def _start_status(
     if not port:
         return None
     try:
-        return StatusServer(counters, health, port=port, live=LiveView(store)).start()
+        return StatusServer(counters, health, port=port, live=LiveView(store, live)).start()
     except OSError as exc:
         raise ConfigError(f"status.http_port: {port} cannot be bound: {exc.strerror}") from exc
 
@@ -210,8 +214,9 @@ class _LiveRun:
         self.notifier = Notifier()
         self.counters, self.health = Counters(), Health()
         self.st = _LiveState(stop)
-        self.status = _start_status(self.counters, self.health, cfg.status.http_port, path)
-        self.recorder = open_recorder(cfg, path)
+        live = LiveFeed()
+        self.status = _start_status(self.counters, self.health, cfg.status.http_port, path, live)
+        self.recorder = open_recorder(cfg, path, live)
         radar = open_radar(cfg)
         ins = open_ins(cfg, keep_raw=cfg.recorder.raw_ins)
         self.pipe = Pipeline(

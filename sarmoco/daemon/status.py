@@ -37,9 +37,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from sarmoco.daemon.livefeed import LIVE_TILES, LiveFeed
 from sarmoco.daemon.quicklook import gray_of, peak_blocks, png_gray
-from sarmoco.daemon.store import RunStore, open_store
-from sarmoco.errors import ConfigError, RecorderError
+from sarmoco.errors import ConfigError
 
 LOOPBACK_HOSTS = ("127.0.0.1", "::1", "localhost")
 """The only addresses the status server binds to."""
@@ -161,35 +161,34 @@ def _number(value: float) -> str:
     return repr(int(value)) if float(value).is_integer() else repr(float(value))
 
 
-LIVE_TILES = 4
-"""Newest tiles the live page's strip shows."""
-
 LIVE_STRIP_PX = 1200
 """Width of the live strip, pixels (each tile is decimated to its share once)."""
 
-LIVE_AUTOFOCUS_ROWS = 300
-"""Newest autofocus estimates the live page plots."""
-
 
 class LiveView:
-    """The live page's data, read from the store the run writes (never from the pipeline).
+    """The live page's data, from the run's :class:`~sarmoco.daemon.livefeed.LiveFeed`
+    (handed over in memory by the recorder; the store is never opened).
 
     The newest finished tiles are rendered to one PNG strip in the HTTP thread that asks
     for it, at most once per ``min_interval_s`` and only when a tile was added since (the
-    processing thread never renders); other requests get the last PNG. Each tile is read
-    and decimated once; a new strip is put on one dB scale (re the brightest of its
-    tiles, so that tiles of noise beside the scene stay dark) and re-encoded.
+    processing thread never renders); other requests get the last PNG. Each tile is
+    decimated once; a new strip is put on one dB scale (re the brightest of its tiles, so
+    that tiles of noise beside the scene stay dark) and re-encoded.
 
     Parameters
     ----------
     store_path : Path
-        The run's store (it may not exist yet).
+        The run's store (it may not exist yet): only the free space of its file system
+        is read.
+    feed : LiveFeed
+        What the run's recorder hands over: tile count, newest tiles, autofocus estimates.
     min_interval_s : float
         Shortest time between two renderings, s.
     """
 
-    def __init__(self, store_path: Path, min_interval_s: float = 1.0) -> None:
+    def __init__(self, store_path: Path, feed: LiveFeed, min_interval_s: float = 1.0) -> None:
         self.store_path = store_path
+        self.feed = feed
         self.min_interval_s = min_interval_s
         self._lock = threading.Lock()
         self._png: bytes | None = None
@@ -202,49 +201,36 @@ class LiveView:
         self.render_s = 0.0
         """Thread CPU time spent rendering them, s."""
 
-    def _store(self) -> RunStore | None:
-        try:
-            return open_store(self.store_path)
-        except (RecorderError, OSError, ValueError, KeyError):
-            return None  # not created yet, or its metadata is being written
-
     def png(self) -> bytes | None:
         """The newest tiles as one PNG strip (along track left to right); None before any."""
         with self._lock:
             now = time.monotonic()
             if now - self._last_render < self.min_interval_s:
                 return self._png
-            store = self._store()
-            if store is None:
+            snap = self.feed.snapshot()
+            if snap.n_tiles == self._tiles_drawn:
                 return self._png
-            try:
-                n = store.n_images
-                if n == self._tiles_drawn:
-                    return self._png
-                t0 = time.thread_time()
-                keep = range(max(0, n - LIVE_TILES), n)
-                for k in keep:
-                    if k not in self._mag:
-                        tile = store.image(k)[0]
-                        width = LIVE_STRIP_PX // LIVE_TILES
-                        self._mag[k] = (float(tile.axis0_m[0]), peak_blocks(tile.data, width))
-            except (RecorderError, OSError, ValueError, KeyError):
-                return self._png
-            self._mag = {k: self._mag[k] for k in keep}
+            t0 = time.thread_time()
+            width = LIVE_STRIP_PX // LIVE_TILES
+            self._mag = {
+                t.index: self._mag.get(t.index) or (t.x0_m, peak_blocks(t.data, width))
+                for t in snap.tiles
+            }
             parts = sorted(self._mag.values(), key=lambda part: part[0])
             rows = min(m.shape[0] for _, m in parts)  # far range at the top: keep the bottom
             mag = np.concatenate([m[m.shape[0] - rows :] for _, m in parts], 1)
             self._png = png_gray(gray_of(mag, float(mag.max()) if mag.size else 0.0))
             self.render_s += time.thread_time() - t0
             self.renders += 1
-            self._tiles_drawn, self._last_render = n, now
+            self._tiles_drawn, self._last_render = snap.n_tiles, now
             return self._png
 
     def summary(self) -> dict[str, Any]:
         """``/live.json``: tiles recorded, autofocus estimates, disk, rendering cost."""
+        snap = self.feed.snapshot()
         out: dict[str, Any] = {
-            "tiles": 0,
-            "autofocus": {"t_s": [], "a_y_mps2": [], "a_z_mps2": []},
+            "tiles": snap.n_tiles,
+            "autofocus": snap.autofocus,
             "disk_free_bytes": None,
             "disk_total_bytes": None,
             "png_renders": self.renders,
@@ -255,22 +241,6 @@ class LiveView:
             usage = shutil.disk_usage(folder)
             out["disk_free_bytes"], out["disk_total_bytes"] = usage.free, usage.total
         except OSError:
-            pass
-        store = self._store()
-        if store is None:
-            return out
-        try:
-            out["tiles"] = store.n_images
-            if "autofocus" in store.tables():
-                n = store.committed("autofocus")
-                cols = ["t_center_s", "a_y_mps2", "a_z_mps2"]
-                a = store.read("autofocus", cols, max(0, n - LIVE_AUTOFOCUS_ROWS), n)
-                out["autofocus"] = {
-                    "t_s": a["t_center_s"].tolist(),
-                    "a_y_mps2": a["a_y_mps2"].tolist(),
-                    "a_z_mps2": a["a_z_mps2"].tolist(),
-                }
-        except (RecorderError, OSError, ValueError, KeyError):
             pass
         return out
 

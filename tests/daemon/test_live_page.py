@@ -24,6 +24,7 @@ import numpy as np
 from PIL import Image as PilImage
 
 from sarmoco.app.simconfig import write_config
+from sarmoco.daemon.livefeed import LiveFeed
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.status import LiveView
 from sarmoco.processing.types import Image
@@ -119,13 +120,14 @@ def test_live_page_during_a_run(tmp_path: Path) -> None:
 
 
 def test_the_strip_follows_the_tiles_as_they_are_recorded(tmp_path: Path) -> None:
-    """A real store written tile by tile: 404-free PNG once a tile exists, the same PNG
+    """A real recorder writing tile by tile: 404-free PNG once a tile exists, the same PNG
     while no tile is added, a new one when a tile is, each decodable."""
     path = tmp_path / "run.zarr"
-    view = LiveView(path, min_interval_s=0.0)
-    assert view.png() is None  # no store yet
+    feed = LiveFeed()
+    view = LiveView(path, feed, min_interval_s=0.0)
+    assert view.png() is None  # no tile yet
     rng = np.random.default_rng(1)
-    with Recorder(path, 8, "int16", config={}, fsync_interval_s=0.0) as rec:
+    with Recorder(path, 8, "int16", config={}, fsync_interval_s=0.0, live=feed) as rec:
         seen = []
         for k in range(3):
             data = (rng.normal(size=(40, 30)) + 1j * rng.normal(size=(40, 30))).astype(np.complex64)

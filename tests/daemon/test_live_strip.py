@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 from PIL import Image as PilImage
 
+from sarmoco.daemon.livefeed import LiveFeed
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.status import LiveView
 from sarmoco.processing.types import Image
@@ -20,9 +21,10 @@ NOISE_BELOW_SCENE_DB = 30.0
 def test_noise_tile_stays_dark_beside_the_scene(tmp_path: Path) -> None:
     rng = np.random.default_rng(7)
     path = tmp_path / "run.zarr"
-    view = LiveView(path, min_interval_s=0.0)
+    feed = LiveFeed()
+    view = LiveView(path, feed, min_interval_s=0.0)
     shape = (60, 40)
-    with Recorder(path, 8, "int16", config={}, fsync_interval_s=0.0) as rec:
+    with Recorder(path, 8, "int16", config={}, fsync_interval_s=0.0, live=feed) as rec:
         for k, level in enumerate((1.0, 10 ** (-NOISE_BELOW_SCENE_DB / 20))):
             data = level * (rng.normal(size=shape) + 1j * rng.normal(size=shape))
             if k == 0:
