@@ -51,13 +51,17 @@ def targets_in_image(out: Path) -> list[tuple[float, float, float]]:
     return out_list
 
 
-def assert_focused(out: Path, summary: dict[str, Any]) -> None:
-    """Every truth target is found focused at its place in the report's bright points."""
+def assert_focused(out: Path, summary: dict[str, Any]) -> list[dict[str, float]]:
+    """Every truth target is found focused at its place in the report's bright points.
+
+    Returns the report's point of each target (in the truth's order).
+    """
     scn = json.loads((out / "truth.json").read_text())["scenario"]
     cell = 299_792_458.0 / (2 * scn["radar"]["bandwidth_hz"])
     lam = 299_792_458.0 / scn["radar"]["carrier_hz"]
     irw_az = 0.886 * lam / (4 * math.sin(scn["integration_angle_rad"] / 2))
     points = summary["image"]["points"]
+    found = []
     for x, y, r in targets_in_image(out):
         near = [p for p in points if math.hypot(p["x_m"] - x, p["y_m"] - y) < 0.5]
         assert near, f"target ({x:.2f}, {y:.2f}) not found among {points}"
@@ -65,6 +69,8 @@ def assert_focused(out: Path, summary: dict[str, Any]) -> None:
         assert p["pslr_az_db"] <= -12.5 and p["pslr_rg_db"] <= -12.5, p
         assert p["irw_az_m"] <= 1.1 * irw_az, p
         assert p["irw_rg_m"] <= 1.1 * 0.886 * cell * r / y, p
+        found.append(p)
+    return found
 
 
 @pytest.fixture(scope="module")
@@ -89,7 +95,16 @@ def test_live_run_focuses_and_records(live_runs: dict[str, Path], ins: str, rada
     assert run["pulses_nav_flagged"] <= 0.05 * n_sent
     assert store.committed("nav") > 0 and store.n_images > 0
     summary = json.loads((out / "report" / "report.json").read_text())
-    assert_focused(out, summary)
+    found = assert_focused(out, summary)
+    print(  # the README's figures (pytest -s)
+        f"\n{ins}+vita-{radar}: azimuth PSLR "
+        + " / ".join(f"{p['pslr_az_db']:.2f}" for p in found)
+        + " dB, range PSLR "
+        + " / ".join(f"{p['pslr_rg_db']:.2f}" for p in found)
+        + " dB, azimuth IRW "
+        + " / ".join(f"{p['irw_az_m']:.3f}" for p in found)
+        + " m"
+    )
 
 
 def test_replay_of_store_reproduces_live_image(live_runs: dict[str, Path], tmp_path: Path) -> None:
