@@ -31,7 +31,7 @@ from sarmoco.errors import ConfigError, DataFileError
 from sarmoco.processing.array.geometry import ArrayLayout, mimo_layout
 from sarmoco.processing.types import C_MPS, FloatArray, RadarParams
 from sarmoco.sim.array_echo import peaks_dem
-from sarmoco.sim.scenario import DEFAULT_T0_NS, radar_table
+from sarmoco.sim.scenario import DEFAULT_T0_NS, level_track, radar_table
 from sarmoco.sim.trajectory import SinusoidSum, Trajectory, euler_to_quat
 
 ARRAY_PRESET = "mimo-array"
@@ -136,11 +136,7 @@ class ArrayScenario:
     def trajectory(self, t_s: FloatArray) -> Trajectory:
         """True kinematics of the array's reference point (= the INS) at ``t_s`` s after t0."""
         t = np.asarray(t_s, dtype=np.float64)
-        pos = np.zeros((t.size, 3))
-        pos[:, 0] = self.track_start_north_m + self.speed_mps * t
-        pos[:, 2] = -self.altitude_m
-        vel = np.zeros((t.size, 3))
-        vel[:, 0] = self.speed_mps
+        pos, vel = level_track(t, self.track_start_north_m, self.speed_mps, self.altitude_m)
         euler = np.zeros((t.size, 3))
         euler[:, 0] = self.roll_rad_at(t)
         return Trajectory(t, pos, vel, np.zeros((t.size, 3)), euler_to_quat(euler))

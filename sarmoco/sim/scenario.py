@@ -202,12 +202,7 @@ class Scenario:
         pos_ned, vel_ned : ndarray of float64, shape (P, 3)
             Position (m) and velocity (m/s) in NED.
         """
-        t = np.asarray(t_s, dtype=np.float64)
-        pos = np.zeros((t.size, 3))
-        pos[:, 0] = self.track_start_north_m + self.speed_mps * t
-        pos[:, 2] = -self.altitude_m
-        vel = np.zeros((t.size, 3))
-        vel[:, 0] = self.speed_mps
+        pos, vel = level_track(t_s, self.track_start_north_m, self.speed_mps, self.altitude_m)
         rot = self.track_to_ned
         return pos @ rot.T, vel @ rot.T
 
@@ -258,6 +253,36 @@ def scene_targets(scn: Scenario, n: int, rng: np.random.Generator) -> tuple[Targ
     pos = np.asarray(scn.scene_center_ned) + offset @ scn.track_to_ned.T
     amp = (rng.standard_normal(n) + 1j * rng.standard_normal(n)) / math.sqrt(2.0)
     return tuple(Target(_point(x), complex(a)) for x, a in zip(pos, amp, strict=True))
+
+
+def level_track(
+    t_s: FloatArray, start_m: float, speed_mps: float, altitude_m: float
+) -> tuple[FloatArray, FloatArray]:
+    """A straight, level, constant-speed track along x of a frame whose z points down.
+
+    Parameters
+    ----------
+    t_s : ndarray of float64, shape (P,)
+        Time since the first pulse, s.
+    start_m : float
+        x at ``t_s = 0``, m.
+    speed_mps : float
+        Speed along +x, m/s.
+    altitude_m : float
+        Height above z = 0 (the track lies at z = -altitude_m), m.
+
+    Returns
+    -------
+    pos_m, vel_mps : ndarray of float64, shape (P, 3)
+        Position (m) and velocity (m/s) in that frame.
+    """
+    t = np.asarray(t_s, dtype=np.float64)
+    pos = np.zeros((t.size, 3))
+    pos[:, 0] = start_m + speed_mps * t
+    pos[:, 2] = -altitude_m
+    vel = np.zeros((t.size, 3))
+    vel[:, 0] = speed_mps
+    return pos, vel
 
 
 def radar_table(radar: RadarParams) -> dict[str, Any]:

@@ -10,6 +10,7 @@ import pytest
 
 from sarmoco.errors import ConfigError
 from sarmoco.processing.types import C_MPS
+from sarmoco.sim.array_scenario import load_array_preset
 from sarmoco.sim.scenario import PRESETS, Target, load_preset, scene_targets
 
 
@@ -74,6 +75,21 @@ def test_default_targets_near_centre_far_at_broadside(name: str) -> None:
     assert np.linalg.norm(np.array(scn.scene_center_ned) - mid[0]) == pytest.approx(
         scn.center_slant_range_m
     )
+
+
+def test_nominal_tracks_fly_level_above_the_ground() -> None:
+    """Both scenario kinds' nominal tracks (one ``level_track``): at -altitude in NED
+    (z down, the ground at 0), at the scenario's speed along the track."""
+    t = np.linspace(0.0, 2.0, 5)
+    scn = load_preset("ku-vehicle", scale=0.1, heading_rad=0.5)
+    pos, vel = scn.ideal_track(t)
+    np.testing.assert_allclose(pos[:, 2], -scn.altitude_m)
+    np.testing.assert_allclose(vel, np.tile(scn.speed_mps * scn.track_to_ned[:, 0], (5, 1)))
+    np.testing.assert_allclose(np.diff(pos, axis=0), vel[1:] * np.diff(t)[:, None])
+    mimo = load_array_preset(0.1)
+    array = mimo.trajectory(t)
+    np.testing.assert_allclose(array.pos_ned[:, 2], -mimo.altitude_m)
+    np.testing.assert_allclose(array.vel_ned, np.tile([mimo.speed_mps, 0.0, 0.0], (5, 1)))
 
 
 def test_stripmap_illumination_spans_the_integration_angle() -> None:
