@@ -26,7 +26,7 @@ from sarmoco.drivers.vita49 import (
     encode_context_packet,
     encode_signal_packet,
 )
-from tests.fuzz.bounds import bounded_allocation
+from tests.fuzz.bounds import bounded_allocation, stream_reads
 from tests.fuzz.edits import edited
 
 FUZZ = settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -211,18 +211,15 @@ def test_stream_framer_resynchronises_with_a_bounded_buffer(
     row = np.empty(n_samples, np.complex64)
     framer = VitaStreamFramer(dec)
     times = []
-    pos, k = 0, 0
     with bounded_allocation():
-        while pos < len(stream):
-            step = chunks[k % len(chunks)]
-            framer.feed(stream[pos : pos + step])
-            pos, k = pos + step, k + 1
+        for read, _ in stream_reads(stream, chunks):
+            framer.feed(read)
             while (pkt := framer.next_packet()) is not None:
                 got = dec.decode_into(pkt, row)
                 if got is not None:
                     times.append(got.t_gps_ns)
                 framer.consume(pkt, dec.last_ok)
-            assert framer.pending_bytes <= dec.max_packet_bytes + step
+            assert framer.pending_bytes <= dec.max_packet_bytes + len(read)
     assert sum(t in times for t in (10**18, 10**18 + 1, 10**18 + 2)) >= 2
 
 
