@@ -194,7 +194,7 @@ class TileImager:
                 continue
             if lines is None:
                 lines = RangeLines.upsample(rc, self.range_axis_m)
-            half = self.layout.beamwidth_rad / 2.0
+            beam_half = self.layout.beamwidth_rad / 2.0
             if self.ffbp_budget_rad is None:
                 backproject_into(
                     tile.data,
@@ -203,7 +203,7 @@ class TileImager:
                     self.wavelength_m,
                     tile.grid,
                     pulses=sel,
-                    beam_half_angle_rad=half,
+                    beam_half_angle_rad=beam_half,
                     compensated_dy_m=compensated_dy_m,
                 )
             else:
@@ -216,7 +216,7 @@ class TileImager:
                     tile.grid,
                     self.ffbp_budget_rad,
                     pulses=sel,
-                    beam_half_angle_rad=half,
+                    beam_half_angle_rad=beam_half,
                     compensated_dy_m=compensated_dy_m,
                 )
             tile.n_pulses += sel.size
