@@ -319,17 +319,19 @@ def _groups(n: int, merge: int) -> IntArray:
 
 
 def _centres(geo: FloatArray, first: IntArray) -> tuple[FloatArray, float]:
-    """Centres ``(u, w, h^2)`` of groups of points ``geo[:, :3]`` and the largest extent in u.
+    """Centres ``(u, w, h^2)`` of groups of points ``geo[:, :3]`` and their largest length in u.
 
-    The centre's u is the middle of the group's u span (so that no member is more than half
-    the extent from it), w and height are the group means.
+    The centre's u is the middle of the group's u span, w and height are the group means.
+    A group of ``n`` members spanning ``D`` stands for an aperture of length ``D n / (n - 1)``
+    (each member covers one spacing: a pulse its pulse interval, a subaperture its length).
     """
     start, count = first[:-1], np.diff(first)
     lo = np.minimum.reduceat(geo[:, 0], start)
     hi = np.maximum.reduceat(geo[:, 0], start)
     w = np.add.reduceat(geo[:, 1], start) / count
     h = np.add.reduceat(np.sqrt(geo[:, 2]), start) / count
-    return np.column_stack([(lo + hi) / 2.0, w, h**2]), float(np.max(hi - lo))
+    length = (hi - lo) * count / np.maximum(count - 1, 1)
+    return np.column_stack([(lo + hi) / 2.0, w, h**2]), float(np.max(length))
 
 
 def _polar_extent(

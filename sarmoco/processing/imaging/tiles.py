@@ -117,7 +117,9 @@ class TileImager:
     ffbp_budget_rad : float, optional
         Form the tiles by fast factorised backprojection
         (:func:`~sarmoco.processing.imaging.ffbp.ffbp_into`) with this phase-error budget,
-        rad; None: direct backprojection.
+        rad; None: direct backprojection. The pulses are then held until ``CHUNK_PULSES``
+        are there (one factorisation over each chunk), so tiles finish up to that many
+        pulses later.
     """
 
     def __init__(
@@ -136,6 +138,8 @@ class TileImager:
         self._open: dict[int, Tile] = {}
         self._first_open = -(2**62)
         """Tiles below this index were handed out and are never reopened."""
+        self._held: list[tuple[ComplexArray, IntArray, FloatArray, FloatArray | None]] = []
+        """With FFBP: pulses not yet imaged (fewer than ``CHUNK_PULSES``)."""
 
     def add(
         self,
@@ -162,6 +166,32 @@ class TileImager:
         """
         if rc.shape[0] == 0:
             return []
+        if self.ffbp_budget_rad is None:
+            return self._add(rc, t_ns, apc_m, compensated_dy_m)
+        dy = None if compensated_dy_m is None else np.array(compensated_dy_m)
+        self._held.append((np.array(rc), np.array(t_ns), np.array(apc_m), dy))
+        n = sum(h[0].shape[0] for h in self._held)
+        if n < CHUNK_PULSES:
+            return []
+        return self._add(*self._release(n - n % CHUNK_PULSES))
+
+    def _release(self, n: int) -> tuple[ComplexArray, IntArray, FloatArray, FloatArray | None]:
+        """The first ``n`` held pulses (FFBP), the rest kept."""
+        held, self._held = self._held, []
+        rc, t_ns, apc_m = (np.concatenate([h[k] for h in held]) for k in range(3))
+        dy = None if any(h[3] is None for h in held) else np.concatenate([h[3] for h in held])
+        if n < rc.shape[0]:
+            self._held = [(rc[n:], t_ns[n:], apc_m[n:], None if dy is None else dy[n:])]
+        return rc[:n], t_ns[:n], apc_m[:n], None if dy is None else dy[:n]
+
+    def _add(
+        self,
+        rc: ComplexArray,
+        t_ns: IntArray,
+        apc_m: FloatArray,
+        compensated_dy_m: FloatArray | None,
+    ) -> list[Tile]:
+        """Backproject a block now; the tiles it finished."""
         x = apc_m[:, 0]
         half = self.layout.half_footprint_m
         length = self.layout.tile_length_m
@@ -223,8 +253,10 @@ class TileImager:
             tile.t1_ns = int(t_ns[sel[-1]])
 
     def close(self) -> list[Tile]:
-        """Hand out every tile still open (end of the run)."""
-        return self._pop_below(2**62)
+        """Hand out every tile still open (end of the run), after the pulses held for FFBP."""
+        n = sum(h[0].shape[0] for h in self._held)
+        tiles = self._add(*self._release(n)) if n else []
+        return tiles + self._pop_below(2**62)
 
     def _pop_below(self, index: int) -> list[Tile]:
         keys = sorted(k for k in self._open if k < index)
