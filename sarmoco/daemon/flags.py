@@ -23,9 +23,10 @@ class PulseFlag(enum.IntFlag):
 
     NONE = 0
     NAV_GAP = 1 << 0
-    """The INS samples around the pulse are further apart than the allowed gap
-    (dropout, samples rejected for a clock inconsistency, before the first or after
-    a break): the navigation is not interpolated (NaN), never bridged."""
+    """The INS samples around the pulse are further apart than the longest silence
+    bridged (``ins.bridge_gap_s``: a long dropout, samples rejected for a clock
+    inconsistency, before the first or after a break): the navigation is not
+    interpolated (NaN), the pulse is not focused."""
     NAV_TIMEOUT = 1 << 1
     """No INS sample at or after the pulse arrived within the latency budget:
     the navigation is not interpolated (NaN)."""
@@ -43,6 +44,10 @@ class PulseFlag(enum.IntFlag):
     """The platform was turning (the heading averaged over a synthetic aperture changed by
     more than half the azimuth beam within one, :mod:`sarmoco.processing.segments`): the
     pulse was not imaged. Set by the focuser, after the pulse was first recorded."""
+    NAV_BRIDGED = 1 << 8
+    """The INS samples around the pulse are further apart than ``ins.max_gap_s`` but not
+    than ``ins.bridge_gap_s`` (a short INS silence): the navigation was interpolated
+    across the silence from the samples on both sides and the pulse was focused."""
     CONTEXT_MISMATCH = 1 << 9
     """The radar's last context packet on this stream disagreed with the configured sample
     rate, bandwidth or RF frequency (VITA 49 context): the pulse was recorded, not focused."""

@@ -80,6 +80,8 @@ class RunSummary:
     pulses_received: int = 0
     pulses_processed: int = 0
     pulses_nav_flagged: int = 0
+    pulses_nav_bridged: int = 0
+    """Pulses focused with navigation bridged across an INS silence (``NAV_BRIDGED``)."""
     nav_samples: int = 0
     tiles: int = 0
     tile_metrics: list[dict[str, float]] = field(default_factory=list)
@@ -94,6 +96,7 @@ class RunSummary:
             "pulses_received": self.pulses_received,
             "pulses_processed": self.pulses_processed,
             "pulses_nav_flagged": self.pulses_nav_flagged,
+            "pulses_nav_bridged": self.pulses_nav_bridged,
             "nav_samples": self.nav_samples,
             "tiles": self.tiles,
             "tile_metrics": self.tile_metrics,
@@ -206,6 +209,7 @@ class Pipeline:
             latency_budget_ns=round(cfg.ins.latency_budget_s * 1e9),
             lever_arm_body_m=cfg.ins.lever_arm_m,
             max_block=cfg.imaging.block_pulses,
+            bridge_gap_ns=round(cfg.ins.bridge_gap_s * 1e9),
         )
         self.focuser: Focuser | None = None
         self.summary = RunSummary()
@@ -387,6 +391,7 @@ class Pipeline:
             self._record(self.focuser.finish())
         r, summary = self.ring, self.summary
         summary.pulses_dropped_ring, summary.pulses_duplicate = r.dropped, r.duplicates
+        summary.pulses_nav_bridged = self.aligner.nav_bridged
         summary.pulses_reordered, summary.pulses_late_dropped = r.reordered, r.late_dropped
         self.recorder.set_metrics(self.summary.as_dict())
         self._update_counters()
@@ -544,6 +549,9 @@ class Pipeline:
             "pulses_received": self.summary.pulses_received,
             "pulses_processed": self.summary.pulses_processed,
             "pulses_nav_flagged": self.summary.pulses_nav_flagged,
+            "pulses_nav_gap": self.aligner.nav_gap,
+            "pulses_nav_timeout": self.aligner.nav_timeout,
+            "pulses_nav_bridged": self.aligner.nav_bridged,
             "pulses_dropped_ring": self.ring.dropped,
             "pulses_duplicate": self.ring.duplicates,
             "pulses_reordered": self.ring.reordered,

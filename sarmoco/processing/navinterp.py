@@ -199,3 +199,98 @@ def interpolate_nav(
     vel[~valid] = np.nan
     quat[~valid] = np.nan
     return PulseNav(t_ns=t, pos_ned=pos, vel_ned=vel, quat=quat, valid=valid)
+
+
+def end_acceleration(t_ns: IntArray, vel: FloatArray, k: int, side: int, fit_ns: int) -> FloatArray:
+    """Acceleration at sample ``k`` from a least-squares quadratic through the velocities
+    within ``fit_ns`` on one side of it (the edge of a gap: the samples beyond are missing).
+
+    Parameters
+    ----------
+    t_ns : ndarray of int64, shape (N,)
+        Sample times, GPS ns, increasing.
+    vel : ndarray, shape (N, 3)
+        Velocities, NED, m/s.
+    k : int
+        The sample at the gap's edge.
+    side : int
+        -1: fit the samples at and before ``k`` (the gap follows); +1: at and after it.
+    fit_ns : int
+        Span of the fit, ns.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        d vel / dt at ``t_ns[k]``, NED, m/s²; NaN with fewer than three samples in the span.
+    """
+    t0 = int(t_ns[k])
+    if side < 0:
+        lo, hi = int(np.searchsorted(t_ns, t0 - fit_ns, side="left")), k + 1
+    else:
+        lo, hi = k, int(np.searchsorted(t_ns, t0 + fit_ns, side="right"))
+    if hi - lo < 3:
+        return np.full(3, np.nan)
+    x = (t_ns[lo:hi].astype(np.int64) - t0) * 1e-9
+    design = np.stack([np.ones_like(x), x, x * x], axis=1)
+    coef = np.linalg.lstsq(design, vel[lo:hi], rcond=None)[0]
+    return np.asarray(coef[1], dtype=np.float64)
+
+
+def bridge_gap(
+    nav: NavSamples, i: int, t_ns: IntArray, fit_ns: int
+) -> tuple[FloatArray, FloatArray | None]:
+    """Velocity (and position) across the gap between samples ``i`` and ``i + 1``.
+
+    Over a gap of many sample periods the linear velocity of :func:`interpolate_nav`
+    misses the motion's curvature (its error is ``v'' T² / 8``). Here the velocity is
+    the cubic Hermite through both ends' velocities and accelerations
+    (:func:`end_acceleration` over ``fit_ns`` of samples beyond each end): error of
+    order ``v'''' T⁴ / 384``. Where an end has fewer than three samples to fit, its
+    acceleration is the chord ``(v1 - v0) / T``.
+
+    Parameters
+    ----------
+    nav : NavSamples
+        Samples, GPS ns, NED.
+    i : int
+        Index of the sample before the gap.
+    t_ns : ndarray of int64, shape (P,)
+        Query times inside the gap, GPS ns.
+    fit_ns : int
+        Span of the acceleration fits, ns.
+
+    Returns
+    -------
+    vel : ndarray, shape (P, 3)
+        Velocity, NED, m/s.
+    pos : ndarray, shape (P, 3), or None
+        Without ``nav.pos_ned`` None. Else ``p0`` plus the integral of ``vel``, plus the
+        share ``s = (t - t0) / T`` of what that integral misses of ``p1 - p0`` (so both
+        ends' positions are met), NED, m.
+    """
+    t0, t1 = int(nav.t_ns[i]), int(nav.t_ns[i + 1])
+    h = (t1 - t0) * 1e-9
+    v0, v1 = nav.vel_ned[i], nav.vel_ned[i + 1]
+    chord = (v1 - v0) / h
+    a0 = end_acceleration(nav.t_ns, nav.vel_ned, i, -1, fit_ns)
+    a1 = end_acceleration(nav.t_ns, nav.vel_ned, i + 1, +1, fit_ns)
+    a0 = np.where(np.isnan(a0), chord, a0)
+    a1 = np.where(np.isnan(a1), chord, a1)
+    s = ((np.asarray(t_ns, dtype=np.int64) - t0) / (t1 - t0))[:, None]
+    s2, s3 = s * s, s**3
+    vel = (2 * s3 - 3 * s2 + 1) * v0 + (s3 - 2 * s2 + s) * h * a0
+    vel += (-2 * s3 + 3 * s2) * v1 + (s3 - s2) * h * a1
+    if nav.pos_ned is None:
+        return vel, None
+
+    def displacement(s: FloatArray) -> FloatArray:
+        return h * (
+            (s**4 / 2 - s**3 + s) * v0
+            + (s**4 / 4 - 2 * s**3 / 3 + s**2 / 2) * h * a0
+            + (-(s**4) / 2 + s**3) * v1
+            + (s**4 / 4 - s**3 / 3) * h * a1
+        )
+
+    p0, p1 = nav.pos_ned[i], nav.pos_ned[i + 1]
+    pos = p0 + displacement(s) + (p1 - p0 - displacement(np.ones((1, 1)))) * s
+    return vel, pos

@@ -216,3 +216,51 @@ def test_timeout_flag_velocity_only_source_and_flush() -> None:
     assert late is not None and late.echoes.flags[0] == PulseFlag.NAV_TIMEOUT
     assert not late.nav.valid[0] and aligner.nav_timeout == 1
     assert aligner.flush() is None
+
+
+def test_short_silence_bridged_long_ones_flagged() -> None:
+    """A 200 Hz INS silent for 0.3 s, 1 s and 10 s; pulses at 100 Hz, events fed in time
+    order with 5 ms INS latency. The 0.3 s silence (<= bridge_gap 0.4 s) is bridged: its
+    pulses wait for the samples after it, leave flagged NAV_BRIDGED only, with navigation;
+    every pulse of the 1 s and 10 s silences is flagged NAV_UNUSABLE with NaN navigation."""
+    silences = ((1000, 1300), (3000, 4000), (5000, 15000))
+    t_ins = np.arange(0, 17000, 5) * MS
+    t_ins = t_ins[~np.any([(t_ins >= a * MS) & (t_ins < b * MS) for a, b in silences], axis=0)]
+    t_pulse = np.arange(5, 16500, 10) * MS
+    pos, vel = _imu(t_ins * 1e-9)
+    quat = _euler_quat(t_ins * 1e-9)
+    ring = EchoRing(4096, 4)
+    aligner = Aligner(ring, NavBuffer(), 50 * MS, 500 * MS, bridge_gap_ns=400 * MS)
+    events = sorted([(int(t), 0, k) for k, t in enumerate(t_pulse)]
+                    + [(int(t) + 5 * MS, 1, k) for k, t in enumerate(t_ins)])  # fmt: skip
+    blocks: list[AlignedBlock] = []
+    for now, kind, k in events:
+        if kind == 0:
+            slot = ring.reserve()
+            assert slot is not None
+            ring.commit(slot, t_ns=int(t_pulse[k]), pulse_id=k)
+        else:
+            aligner.nav.push_velocity(int(t_ins[k]), vel[k], pos[k])
+            aligner.nav.push_attitude(int(t_ins[k]), quat[k])
+        while (block := aligner.poll(now)) is not None:
+            blocks.append(block)
+    if (block := aligner.flush()) is not None:
+        blocks.append(block)
+    t = np.concatenate([b.echoes.t_ns for b in blocks])
+    flags = np.concatenate([b.echoes.flags for b in blocks])
+    got_pos = np.concatenate([b.nav.pos_ned for b in blocks])
+    np.testing.assert_array_equal(t, t_pulse)
+    in_s = [(t >= a * MS) & (t < b * MS) for a, b in silences]
+    bridged = (flags & PulseFlag.NAV_BRIDGED) != 0
+    unusable = (flags & NAV_UNUSABLE) != 0
+    print(f"0.3 s silence: {bridged[in_s[0]].sum()} of {in_s[0].sum()} bridged; 1 s: "
+          f"{unusable[in_s[1]].sum()} of {in_s[1].sum()} flagged; 10 s: "
+          f"{unusable[in_s[2]].sum()} of {in_s[2].sum()} flagged")  # fmt: skip
+    assert (flags[in_s[0]] == PulseFlag.NAV_BRIDGED).all()
+    los_err = np.abs((got_pos[in_s[0]] - _imu(t[in_s[0]] * 1e-9)[0]) @ LOS_NED).max()
+    print(f"bridged |LOS error| {los_err * 1e3:.2f} mm")
+    assert los_err < LAMBDA_KU / 4
+    assert unusable[in_s[1] | in_s[2]].all() and not bridged[in_s[1] | in_s[2]].any()
+    assert np.isnan(got_pos[in_s[1] | in_s[2]]).all()
+    assert not (bridged | unusable)[~np.any(in_s, axis=0)].any()
+    assert aligner.nav_bridged == in_s[0].sum()
