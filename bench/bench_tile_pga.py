@@ -37,8 +37,8 @@ ALONG_TOLERANCE_M = 3.0
 def _at(points: list[dict[str, Any]], targets: list[tuple[float, float]]) -> list[dict[str, Any]]:
     """The report's point nearest each target, in the targets' order, with its offset ``dx_m``.
 
-    Within 0.5 m in ground range and :data:`ALONG_TOLERANCE_M` along track: the sliding
-    autofocus may move a whole image along track (the LOS trend it cannot observe).
+    Within 0.5 m in ground range and :data:`ALONG_TOLERANCE_M` along track: the INS's
+    velocity error moves a whole image along track (1.2-1.3 m on seeds 1 and 2).
     """
     found = []
     for x, y in targets:
