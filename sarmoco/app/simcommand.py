@@ -56,6 +56,7 @@ from sarmoco.app.simarray import add_array_arguments, check_array_arguments, run
 from sarmoco.drivers.clock import GPS_LEAP_SECONDS_DEFAULT
 from sarmoco.errors import ConfigError
 from sarmoco.sim.array_scenario import ARRAY_PRESET
+from sarmoco.sim.echostream import streams
 from sarmoco.sim.emit_radar import RadarEmitter
 from sarmoco.sim.emitter import Emitter, WireTime
 from sarmoco.sim.extended import SCENES, load_scene
@@ -64,7 +65,7 @@ from sarmoco.sim.ins import GRADES
 from sarmoco.sim.insemitters import host_port, live_ins_emitter
 from sarmoco.sim.insfeed import InsFeed
 from sarmoco.sim.links import Link, TcpServerLink, UdpOutLink
-from sarmoco.sim.outfiles import NAV_FILES, TRUTH_FILE, truth_record, write_run, write_truth
+from sarmoco.sim.outfiles import NAV_FILES, TRUTH_FILE, TruthWriter, write_run
 from sarmoco.sim.player import Pacing, play_emitters
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import DEFAULT_LEVER_ARM_M, PRESETS, radar_table
@@ -184,7 +185,8 @@ def radar_link(url: str) -> Link:
 
 
 def build_run(args: argparse.Namespace, faults: Faults) -> SimRun:
-    """Simulate the scenario the arguments describe."""
+    """Simulate the scenario the arguments describe (a long run's echo is streamed:
+    :mod:`sarmoco.sim.echostream`)."""
     scn = load_scene(args.scene, args.preset, scale=args.scale, **scenario_overrides(args))
     return simulate(
         scn,
@@ -195,6 +197,7 @@ def build_run(args: argparse.Namespace, faults: Faults) -> SimRun:
         n_pulses=args.pulses,
         ins_clock_offset_s=faults.clock_offset_s,
         ins_clock_drift_ppm=faults.clock_drift_ppm,
+        stream_echo=streams(scn, scn.n_pulses if args.pulses is None else args.pulses),
     )
 
 
@@ -232,6 +235,7 @@ def _serve(args: argparse.Namespace, run: SimRun, faults: Faults) -> int:
     if not args.radar and not args.ins:
         raise ConfigError("sim --serve: give --radar and/or --ins")
     feed = InsFeed.from_run(run, faults)
+    truth = None if args.truth is None else TruthWriter(args.truth, run)
     emitters: dict[str, Emitter] = {}
     try:
         if args.radar:
@@ -242,6 +246,8 @@ def _serve(args: argparse.Namespace, run: SimRun, faults: Faults) -> int:
             )  # fmt: skip
         for k, spec in enumerate(args.ins or [], start=1):
             options: dict[str, Any] = {"faults": faults.ins, "seed": args.seed * 16 + k, "rank": k}
+            if faults.mavlink_rogue_system:
+                options["rogue_system"] = faults.mavlink_rogue_system
             emitters[f"ins{k}"] = live_ins_emitter(spec, feed, options)
         _print_line(
             {
@@ -258,15 +264,15 @@ def _serve(args: argparse.Namespace, run: SimRun, faults: Faults) -> int:
         )
 
         def on_start(wire: WireTime) -> None:
-            if args.truth is not None:
-                write_truth(args.truth, truth_record(run, feed, faults, emitters, wire))
+            if truth is not None:
+                truth.write(feed, faults, emitters, wire)
 
         result = play_emitters(
             list(emitters.values()), _pacing(args, live=True), wait_s=args.wait,
             linger_s=args.linger, on_start=on_start,
         )  # fmt: skip
-        if args.truth is not None:
-            write_truth(args.truth, truth_record(run, feed, faults, emitters, result.wire))
+        if truth is not None:
+            truth.write(feed, faults, emitters, result.wire)
         _print_line(
             {
                 "event": "done",

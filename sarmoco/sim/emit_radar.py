@@ -8,7 +8,9 @@ reference frequency, sample rate) before the first pulse and then every
 (:mod:`sarmoco.drivers.vita49`): the profile has one definition.
 
 int16 payloads need a scale: the raw echo is multiplied by :attr:`RadarEmitter.iq_scale`
-(peak magnitude of I or Q at :data:`INT16_PEAK`) and rounded.
+(peak magnitude of I or Q at :data:`INT16_PEAK`; for an
+:class:`~sarmoco.sim.echostream.EchoStream` its peak's upper bound) and rounded,
+saturating at the int16 limits as an ADC would.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import numpy as np
 from sarmoco.drivers.vita49 import PayloadFormat, encode_context_packet, encode_signal_packet
 from sarmoco.errors import ConfigError
 from sarmoco.processing.types import ComplexArray, IntArray, RadarParams
+from sarmoco.sim.echostream import EchoStream
 from sarmoco.sim.emitter import Emitter
 from sarmoco.sim.faults import PacketFaults
 from sarmoco.sim.links import Link, UdpOutLink
@@ -35,9 +38,12 @@ OUI_SIM = 0xFFFFFE
 """OUI written in the class ID of simulated packets (any OUI is accepted)."""
 
 
-def int16_scale(echo: ComplexArray) -> float:
-    """Scale that puts the run's largest |I| or |Q| at :data:`INT16_PEAK`."""
-    peak = float(np.max(np.abs(echo.view(echo.real.dtype)))) if echo.size else 0.0
+def int16_scale(echo: ComplexArray | EchoStream) -> float:
+    """Scale that puts the run's largest |I| or |Q| (a stream: its bound) at :data:`INT16_PEAK`."""
+    if isinstance(echo, EchoStream):
+        peak = echo.peak_iq_bound()
+    else:
+        peak = float(np.max(np.abs(echo.view(echo.real.dtype)))) if echo.size else 0.0
     return INT16_PEAK / peak if peak > 0 else 1.0
 
 
@@ -52,8 +58,8 @@ class RadarEmitter(Emitter):
         Waveform and receiver (context packet values, receive window).
     t_ns : ndarray of int64, shape (P,)
         Pulse transmit times, scenario GPS ns.
-    echo : ndarray of complex64, shape (P, S)
-        Raw samples.
+    echo : ndarray of complex64, shape (P, S), or EchoStream
+        Raw samples (a stream is read in pulse order).
     payload : {"int16", "float32"}
         Wire format of I and Q.
     stream_id : int
@@ -71,7 +77,7 @@ class RadarEmitter(Emitter):
         link: Link,
         radar: RadarParams,
         t_ns: IntArray,
-        echo: ComplexArray,
+        echo: ComplexArray | EchoStream,
         *,
         payload: PayloadFormat = "int16",
         stream_id: int = 0,
@@ -129,7 +135,8 @@ class RadarEmitter(Emitter):
         """Pulse ``k`` as it goes on the wire (int16-scaled and rounded, or float32)."""
         row = self.echo[k]
         if self.payload == "int16":
-            return np.rint(row.view(row.real.dtype) * self.iq_scale).astype(np.int16)
+            scaled = np.rint(row.view(row.real.dtype) * self.iq_scale)
+            return np.clip(scaled, -32768, 32767).astype(np.int16)
         return row.astype(np.complex64)
 
     def _pulse(self, k: int) -> None:

@@ -52,7 +52,15 @@ def truth_record(
     ``wire.shift_ns`` is added to every scenario GPS time on the wire (0 for files).
     """
     truth = run.truth_dict()
-    truth["wire"] = {
+    truth["wire"] = wire_record(feed, faults, emitters, wire)
+    return truth
+
+
+def wire_record(
+    feed: InsFeed, faults: Faults, emitters: dict[str, Emitter], wire: WireTime
+) -> dict[str, Any]:
+    """The ``wire`` section of the truth record: time base, INS clock, faults, links."""
+    return {
         "shift_ns": wire.shift_ns,
         "leap_s": wire.leap_s,
         "ins_clock": feed.clock.to_dict(),
@@ -61,14 +69,44 @@ def truth_record(
         "faults": faults.to_dict(),
         "links": {name: {**e.describe(), "stats": e.stats()} for name, e in emitters.items()},
     }
-    return truth
+
+
+class TruthWriter:
+    """Writes one live run's truth record whenever asked, its run part serialized once.
+
+    A 30-minute run's truth (every pulse's APC, every INS sample) is over 100 MB of JSON,
+    tens of seconds to make: made before real-time playback, not between its start and
+    its first event (which would then all be due at once). The file is what
+    :func:`write_truth` writes of :func:`truth_record`.
+
+    Parameters
+    ----------
+    path : Path
+        The truth file.
+    run : SimRun
+    """
+
+    def __init__(self, path: Path, run: SimRun) -> None:
+        self.path = path
+        self._run_json = json.dumps(run.truth_dict())
+
+    def write(
+        self, feed: InsFeed, faults: Faults, emitters: dict[str, Emitter], wire: WireTime
+    ) -> None:
+        """Write the record with the ``wire`` section as it stands now."""
+        wire_json = json.dumps(wire_record(feed, faults, emitters, wire))
+        _write_atomic(self.path, f'{self._run_json[:-1]}, "wire": {wire_json}}}')
 
 
 def write_truth(path: Path, truth: dict[str, Any]) -> None:
     """Write ``truth`` as JSON (atomically: a reader never sees half a file)."""
+    _write_atomic(path, json.dumps(truth))
+
+
+def _write_atomic(path: Path, text: str) -> None:
     tmp = path.with_suffix(".json.tmp")
     try:
-        tmp.write_text(json.dumps(truth))
+        tmp.write_text(text)
         tmp.replace(path)
     except OSError as exc:
         raise DataFileError(f"{path}: cannot write the truth record: {exc}") from exc

@@ -9,8 +9,7 @@ from typing import Any
 import numpy as np
 
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
-from sarmoco.sim.echo import synthesize
-from sarmoco.sim.extended import clutter_echo
+from sarmoco.sim.echostream import EchoStream, scene_echo
 from sarmoco.sim.ins import InsMeasurement, measure_ins
 from sarmoco.sim.scenario import Scenario, radar_table
 from sarmoco.sim.trajectory import MotionSpec, Trajectory, apc_trajectory, true_trajectory
@@ -29,8 +28,8 @@ class SimRun:
     motion : MotionSpec
     t_ns : ndarray of int64, shape (P,)
         Pulse transmit times, GPS ns.
-    echo : ndarray of complex64, shape (P, S)
-        Raw samples.
+    echo : ndarray of complex64, shape (P, S), or EchoStream
+        Raw samples (a stream makes them by blocks when read: long runs).
     apc_ned, vel_ned : ndarray, shape (P, 3)
         True APC position (m) and velocity (m/s) per pulse, NED.
     traj : Trajectory
@@ -46,7 +45,7 @@ class SimRun:
     scenario: Scenario
     motion: MotionSpec
     t_ns: IntArray
-    echo: ComplexArray
+    echo: ComplexArray | EchoStream
     apc_ned: FloatArray
     vel_ned: FloatArray
     traj: Trajectory
@@ -118,6 +117,7 @@ def simulate(
     n_pulses: int | None = None,
     ins_clock_offset_s: float = 0.0,
     ins_clock_drift_ppm: float = 0.0,
+    stream_echo: bool = False,
 ) -> SimRun:
     """Simulate one acquisition of ``scn`` along the trajectory ``motion``.
 
@@ -135,6 +135,9 @@ def simulate(
         Pulses to simulate; default the whole aperture ``scn.n_pulses``.
     ins_clock_offset_s, ins_clock_drift_ppm : float
         INS clock offset (s) and rate error (ppm) against GPS.
+    stream_echo : bool
+        Make the echo an :class:`~sarmoco.sim.echostream.EchoStream` (synthesized by
+        blocks as it is read; other noise draws) instead of an array.
 
     Returns
     -------
@@ -146,21 +149,11 @@ def simulate(
     traj = apc_trajectory(scn, t_s, motion)
     targets, amps = scn.targets_array()
     noise_seed, ins_seed = np.random.SeedSequence(seed).spawn(2)
-    echo = synthesize(
-        scn.radar,
-        t_ns,
-        traj.pos_ned,
-        targets,
-        amps,
-        scn.snr_db,
-        np.random.default_rng(noise_seed),
-        illumination=scn.illumination(traj.pos_ned, targets),
-    )
-    if scn.clutter is not None:
-        half_beam = scn.integration_angle_rad / 2.0 if scn.mode == "stripmap" else None
-        echo += clutter_echo(
-            scn.radar, traj.pos_ned, scn.clutter, scn.track_to_ned[:, 0], half_beam
-        )
+    echo: ComplexArray | EchoStream
+    if stream_echo:
+        echo = EchoStream(scn, t_ns, traj.pos_ned, noise_seed)
+    else:
+        echo = scene_echo(scn, t_ns, traj.pos_ned, np.random.default_rng(noise_seed))
     ins = measure_ins(
         lambda t: true_trajectory(scn, t, motion),
         float(t_s[0]) - INS_MARGIN_S,
