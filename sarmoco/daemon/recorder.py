@@ -12,7 +12,9 @@ fsynced (with their directories) every ``fsync_interval_s``, and at close.
 :meth:`Recorder.close` trims every array to its committed length and marks the
 store ``complete``.
 
-One thread writes to a recorder; it is not safe for concurrent use.
+One thread calls a recorder; it is not safe for concurrent use. With a
+``writer_queue`` the writes themselves run, in call order, on the recorder's writer
+thread (:mod:`sarmoco.daemon.writer`), off the caller's.
 """
 
 from __future__ import annotations
@@ -41,6 +43,7 @@ from sarmoco.daemon import schema
 from sarmoco.daemon.echoring import SampleFormat
 from sarmoco.daemon.livefeed import LiveFeed
 from sarmoco.daemon.schema import COMMITTED_ATTR, TableSpec
+from sarmoco.daemon.writer import OrderedWriter
 from sarmoco.errors import RecorderError
 from sarmoco.processing.types import Image
 
@@ -209,6 +212,9 @@ class Table:
         self.group = root.create_group(spec.name)
         self.grow_rows = rows * 16  # a multiple of the chunk keeps metadata writes rare
         self.committed = 0
+        """Rows written and counted in the store's ``committed`` attribute."""
+        self.rows = 0
+        """Rows handed to :meth:`prepare` (the caller's count: ``committed`` once written)."""
         self.arrays: dict[str, zarr.Array] = {}
         for name, col in spec.columns.items():
             self.arrays[name] = self.group.create_array(
@@ -231,31 +237,64 @@ class Table:
         RecorderError
             Columns missing, unknown, or with different row counts or wrong shapes.
         """
+        return self.write(*self.prepare(False, **columns))
+
+    def prepare(
+        self, copy: bool, **columns: npt.ArrayLike
+    ) -> tuple[dict[str, npt.NDArray[Any]], int]:
+        """Check rows of every column and give them their place: (rows, first row).
+
+        Runs on the caller's thread and advances :attr:`rows`; :meth:`write` then
+        writes them (on the writer thread). ``copy``: the arrays are copied, so that
+        the caller may reuse its own while the write waits.
+
+        Raises
+        ------
+        RecorderError
+            Columns missing, unknown, or with different row counts or wrong shapes.
+        """
         if set(columns) != set(self.arrays):
             raise RecorderError(
                 f"table {self.group.path!r}: columns {sorted(columns)} given, "
                 f"{sorted(self.arrays)} expected"
             )
-        rows = {k: np.asarray(v) for k, v in columns.items()}
+        rows = {k: np.array(v, copy=copy or None) for k, v in columns.items()}
         n_rows = {v.shape[0] if v.ndim else -1 for v in rows.values()}
         if len(n_rows) != 1 or -1 in n_rows:
             raise RecorderError(f"table {self.group.path!r}: columns differ in row count {n_rows}")
-        n = n_rows.pop()
-        start, stop = self.committed, self.committed + n
         for name, arr in self.arrays.items():
             if rows[name].shape[1:] != arr.shape[1:]:
                 raise RecorderError(
                     f"table {self.group.path!r}: column {name!r} rows of shape "
                     f"{rows[name].shape[1:]}, expected {arr.shape[1:]}"
                 )
-            if arr.shape[0] < stop:
-                grow = -(-(stop - arr.shape[0]) // self.grow_rows) * self.grow_rows
-                arr.resize((arr.shape[0] + grow, *arr.shape[1:]))
-        writes = [
-            a.async_array.setitem(slice(start, stop), rows[k]) for k, a in self.arrays.items()
-        ]
-        zarr_sync(_gather(writes))  # one trip to zarr's event loop for all columns
-        self.group.update_attributes({COMMITTED_ATTR: stop})
+        start = self.rows
+        self.rows += n_rows.pop()
+        return rows, start
+
+    def write(self, rows: Mapping[str, npt.NDArray[Any]], start: int) -> int:
+        """Write rows :meth:`prepare` placed at ``start``, then advance ``committed`` to
+        their end; returns it. Rows are written in the order they were prepared."""
+        if start != self.committed:
+            raise RecorderError(
+                f"table {self.group.path!r}: rows from {start} written after {self.committed}"
+            )
+        stop = start + next(iter(rows.values())).shape[0]
+        try:
+            for arr in self.arrays.values():
+                if arr.shape[0] < stop:
+                    grow = -(-(stop - arr.shape[0]) // self.grow_rows) * self.grow_rows
+                    arr.resize((arr.shape[0] + grow, *arr.shape[1:]))
+            writes = [
+                a.async_array.setitem(slice(start, stop), rows[k]) for k, a in self.arrays.items()
+            ]
+            zarr_sync(_gather(writes))  # one trip to zarr's event loop for all columns
+            self.group.update_attributes({COMMITTED_ATTR: stop})
+        except BaseException:
+            # not committed: the next rows take their place (a writer thread runs no
+            # write after a failed one, so none was placed after these)
+            self.rows = start
+            raise
         self.committed = stop
         return stop
 
@@ -290,6 +329,13 @@ class Recorder(Closing):
     live : LiveFeed, optional
         The live page's feed: each tile and autofocus row recorded is handed to it in
         memory, so that the page never opens the store.
+    writer_queue : int
+        Writes that may wait for the recorder's writer thread
+        (:class:`~sarmoco.daemon.writer.OrderedWriter`): every method then checks its
+        arguments, copies them and returns, and the thread writes in call order (the
+        ``committed`` counts advance after their rows, fsync every interval, as on one
+        thread); a failed write is raised by the next call. 0: each method writes
+        before it returns.
     """
 
     def __init__(
@@ -303,6 +349,7 @@ class Recorder(Closing):
         fsync_interval_s: float = 1.0,
         chunk_rows: int = 1024,
         live: LiveFeed | None = None,
+        writer_queue: int = 0,
     ) -> None:
         self.path = Path(path)
         self.live = live
@@ -342,12 +389,23 @@ class Recorder(Closing):
         self._images.update_attributes({COMMITTED_ATTR: 0})
         self.n_images = 0
         self._closed = False
+        self._writer = OrderedWriter(f"recorder {self.path.name}", writer_queue)
         self.sync()
 
     def _create(self, spec: TableSpec) -> Table:
         table = Table(self.root, spec, self._chunk[spec.per_pulse])
         self.tables[spec.name] = table
         return table
+
+    def _append(self, table: Table, **columns: npt.ArrayLike) -> None:
+        """Place rows in ``table`` now, write them on the writer thread (or now)."""
+        self._writer.raise_error()
+        rows, start = table.prepare(self._writer.threaded, **columns)
+        self._writer.submit(self._write_rows, table, rows, start)
+
+    def _write_rows(self, table: Table, rows: Mapping[str, npt.NDArray[Any]], start: int) -> None:
+        table.write(rows, start)
+        self._maybe_sync()
 
     def append_pulses(
         self,
@@ -377,8 +435,7 @@ class Recorder(Closing):
             if samples is None:
                 raise RecorderError("append_pulses: raw echoes are recorded, samples missing")
             cols["echo"] = samples
-        self.pulses.append(**cols)
-        self._maybe_sync()
+        self._append(self.pulses, **cols)
 
     def append_nav(
         self,
@@ -395,7 +452,8 @@ class Recorder(Closing):
         t = np.atleast_1d(np.asarray(t_ns, dtype=np.int64))
         lla = np.full((t.shape[0], 3), np.nan) if lla is None else lla
         rx = np.full(t.shape, -1, dtype=np.int64) if rx_ns is None else rx_ns
-        self.nav.append(
+        self._append(
+            self.nav,
             t_ns=t,
             rx_ns=np.atleast_1d(np.asarray(rx, dtype=np.int64)),
             kind=np.atleast_1d(np.asarray(kind, dtype=np.uint8)),
@@ -405,14 +463,12 @@ class Recorder(Closing):
             result=np.atleast_1d(np.asarray(result, dtype=np.int8)),
             lla=np.asarray(lla, dtype=np.float64).reshape(-1, 3),
         )
-        self._maybe_sync()
 
     def append_ins_bytes(self, data: bytes, rx_ns: int = -1) -> None:
         """Record raw bytes read from the INS link (bytes first, then their index row)."""
-        offset = self.ins_bytes.committed
-        self.ins_bytes.append(byte=np.frombuffer(data, dtype=np.uint8))
-        self.ins_raw.append(rx_ns=[rx_ns], offset=[offset], length=[len(data)])
-        self._maybe_sync()
+        offset = self.ins_bytes.rows
+        self._append(self.ins_bytes, byte=np.frombuffer(data, dtype=np.uint8))
+        self._append(self.ins_raw, rx_ns=[rx_ns], offset=[offset], length=[len(data)])
 
     def append_motion(
         self,
@@ -426,7 +482,8 @@ class Recorder(Closing):
         range_shift_m: npt.ArrayLike,
     ) -> None:
         """Record the motion solution of a block of pulses (NED m, m/s; LOS m; rad; m)."""
-        self.motion.append(
+        self._append(
+            self.motion,
             pulse_id=pulse_id,
             t_ns=t_ns,
             pos_ned=pos_ned,
@@ -436,7 +493,6 @@ class Recorder(Closing):
             phase_rad=phase_rad,
             range_shift_m=range_shift_m,
         )
-        self._maybe_sync()
 
     def append_rows(self, spec: TableSpec, columns: Mapping[str, npt.ArrayLike]) -> None:
         """Record rows of a table that appears with its first row (``autofocus``).
@@ -453,11 +509,11 @@ class Recorder(Closing):
         if table is None:
             if spec.name in self.root:
                 raise RecorderError(f"append_rows: {spec.name!r} is a fixed part of the store")
+            self._writer.drain()  # the writer thread is not writing while it is created
             table = self._create(spec)
-        table.append(**columns)
+        self._append(table, **columns)
         if self.live is not None and spec.name == schema.AUTOFOCUS.name:
             self.live.add_autofocus(columns)
-        self._maybe_sync()
 
     def add_image(
         self,
@@ -482,14 +538,27 @@ class Recorder(Closing):
             (:func:`~sarmoco.daemon.schema.encode_reference_track`).
         """
         index = self.n_images
-        group = create_tile(self._images, index, image.axis0_m, image.axis1_m)
-        write_tile(group, image, t0_ns, t1_ns, metrics, reference_track)
+        if self._writer.threaded:
+            image = Image(np.array(image.data), image.axis0_m, image.axis1_m, image.frame)
+        self._writer.submit(self._write_image, index, image, t0_ns, t1_ns, metrics, reference_track)
         self.n_images = index + 1
-        self._images.update_attributes({COMMITTED_ATTR: self.n_images})
         if self.live is not None:
             self.live.add_tile(index, image)
-        self._maybe_sync()
         return index
+
+    def _write_image(
+        self,
+        index: int,
+        image: Image,
+        t0_ns: int,
+        t1_ns: int,
+        metrics: Mapping[str, float] | None,
+        reference_track: Mapping[str, Any] | None,
+    ) -> None:
+        group = create_tile(self._images, index, image.axis0_m, image.axis1_m)
+        write_tile(group, image, t0_ns, t1_ns, metrics, reference_track)
+        self._images.update_attributes({COMMITTED_ATTR: index + 1})
+        self._maybe_sync()
 
     def flag_pulses(self, rows: npt.ArrayLike, flags: int) -> None:
         """Set ``flags`` (:class:`~sarmoco.daemon.flags.PulseFlag` bits) on recorded pulses.
@@ -505,11 +574,14 @@ class Recorder(Closing):
         if r.size == 0:
             return
         lo, hi = int(r.min()), int(r.max()) + 1
-        if lo < 0 or hi > self.pulses.committed:
+        if lo < 0 or hi > self.pulses.rows:
             raise RecorderError(f"flag_pulses: rows {lo}..{hi - 1} not all recorded")
+        self._writer.submit(self._write_flags, r - lo, lo, hi, flags)
+
+    def _write_flags(self, r: npt.NDArray[np.int64], lo: int, hi: int, flags: int) -> None:
         column = self.pulses.arrays["flags"]
         span = np.asarray(column[lo:hi])
-        span[r - lo] |= np.asarray(flags, dtype=span.dtype)
+        span[r] |= np.asarray(flags, dtype=span.dtype)
         column[lo:hi] = span
         self._maybe_sync()
 
@@ -531,6 +603,16 @@ class Recorder(Closing):
         attrs : mapping
             The product's attributes (JSON-able).
         """
+        self._writer.submit(
+            self._write_dem, name, dict(arrays), json.loads(json.dumps(dict(attrs)))
+        )
+
+    def _write_dem(
+        self,
+        name: str,
+        arrays: Mapping[str, tuple[tuple[str, ...], npt.NDArray[Any]]],
+        attrs: dict[str, Any],
+    ) -> None:
         dems = self.root.require_group(schema.DEM_GROUP)
         group = dems.create_group(name)
         for key, (dims, value) in arrays.items():
@@ -538,7 +620,7 @@ class Recorder(Closing):
                 key, shape=value.shape, chunks=value.shape, dtype=value.dtype, dimension_names=dims
             )
             arr[...] = value
-        group.update_attributes(json.loads(json.dumps(dict(attrs))))
+        group.update_attributes(attrs)
         self._maybe_sync()
 
     def set_metrics(self, metrics: Mapping[str, Any]) -> None:
@@ -547,10 +629,14 @@ class Recorder(Closing):
 
     def set_attribute(self, name: str, value: Mapping[str, Any]) -> None:
         """Store a JSON-able mapping in the root attribute ``name``."""
-        self.root.update_attributes({name: json.loads(json.dumps(dict(value), default=str))})
+        attrs = {name: json.loads(json.dumps(dict(value), default=str))}
+        self._writer.submit(self.root.update_attributes, attrs)
 
     def sync(self) -> int:
-        """fsync what was written since the last sync; returns the number of files."""
+        """fsync what was written since the last sync, after the writes handed over so far
+        (called on the writer thread, by a write: what was written before it); returns the
+        number of files."""
+        self._writer.drain()
         self._last_sync = time.monotonic()
         return self._store.sync()
 
@@ -559,9 +645,16 @@ class Recorder(Closing):
             self.sync()
 
     def close(self) -> None:
-        """Trim the arrays to their committed rows, mark the store complete, fsync."""
+        """Finish the writes handed over (a failed one is raised), trim the arrays to their
+        committed rows, mark the store complete, fsync."""
         if self._closed:
             return
+        self._writer.close()
+        try:
+            self._writer.raise_error()
+        except RecorderError:
+            self._closed = True
+            raise
         for table in self.tables.values():
             table.trim()
         self.root.update_attributes({schema.COMPLETE_ATTR: True})

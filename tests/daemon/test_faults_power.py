@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.store import open_store
@@ -40,11 +41,14 @@ class SnapshotRecorder(Recorder):
     """A recorder that copies its store right after each fsync (the hook of this test)."""
 
     snapshot_root: Path
+    writer_queue = 0
+    """The recorder's writer thread (its queue depth; 0: the caller's thread writes)."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         self.snapshots: list[Path] = []
         # chunks of 8 rows: the arrays grow (metadata rewritten) every 128 rows
-        super().__init__(*args, **(kwargs | {"chunk_pulses": 8, "chunk_rows": 8}))
+        extra = {"chunk_pulses": 8, "chunk_rows": 8, "writer_queue": self.writer_queue}
+        super().__init__(*args, **(kwargs | extra))
 
     def sync(self) -> int:
         n = super().sync()
@@ -84,10 +88,14 @@ def power_cut(synced: Path, later: Path, out: Path, rng: np.random.Generator) ->
     return taken
 
 
-def test_power_loss_keeps_every_row_below_the_last_fsynced_commit(tmp_path: Path) -> None:
+@pytest.mark.parametrize("writer_queue", [0, 4], ids=["caller-writes", "writer-thread"])
+def test_power_loss_keeps_every_row_below_the_last_fsynced_commit(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, writer_queue: int
+) -> None:
     snaps = tmp_path / "snapshots"
     snaps.mkdir()
-    SnapshotRecorder.snapshot_root = snaps
+    monkeypatch.setattr(SnapshotRecorder, "snapshot_root", snaps, raising=False)
+    monkeypatch.setattr(SnapshotRecorder, "writer_queue", writer_queue)
     rec = cw.new_recorder(str(tmp_path / "run.zarr"), 0, SnapshotRecorder)
     assert isinstance(rec, SnapshotRecorder)
     cw.write_rounds(rec, 60.0, rounds=12)  # 334 pulses, 3 tiles
