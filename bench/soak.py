@@ -2,7 +2,7 @@
 
 Run as a module (not part of the test suite; it takes the flight's length in wall time)::
 
-    .venv/bin/python -m bench.soak [--minutes 30] [--scale 0.1] [--work DIR]
+    .venv/bin/python -m bench.soak [--minutes 30] [--scale 0.1] [--nice N] [--work DIR]
 
 ``sarmoco sim --serve`` flies the ku-vehicle preset (straight track, turbulence, tactical
 INS) in real time at the scaled preset's own PRF (every pulse it defines, none thinned)
@@ -10,7 +10,11 @@ into ``sarmoco run`` over VITA 49/UDP and MAVLink/UDP on 127.0.0.1, with
 ``--fault loss=0.01@radar`` and ``--fault ins-dropout=60k:0.2`` for every minute k.
 The daemon runs as systemd would start it: ``NOTIFY_SOCKET`` is a real AF_UNIX datagram
 socket kept by this script and ``WATCHDOG_USEC`` is the unit's ``WatchdogSec``
-(``systemd/sarmoco.service``). Measured:
+(``systemd/sarmoco.service``). ``--nice N`` starts the simulator and the daemon at that
+niceness (negative: priority over the machine's other work, as an onboard computer gives
+its acquisition; needs CAP_SYS_NICE): on a shared machine whose other load leaves the
+daemon less CPU than a second of data costs, the soak otherwise measures the other load.
+Measured:
 
 - VmRSS of the daemon every second (``/proc``): medians of the first and last minute
   after a 60 s warm-up, the trend (least squares), the maximum;
@@ -46,7 +50,7 @@ import numpy as np
 import zarr
 
 from bench.bench_daemon import load_average
-from sarmoco.app.benchcmd import PY, SIM_ARGS, proc_status_kb, rss_trend_mb_per_min
+from sarmoco.app.benchcmd import PY, SIM_ARGS, proc_cpu_s, proc_status_kb, rss_trend_mb_per_min
 from sarmoco.app.demo import free_udp_port, read_json_line
 from sarmoco.app.simconfig import config_table, write_config
 from sarmoco.daemon import schema
@@ -60,7 +64,8 @@ from tests.daemon.test_faults_wire import wait_idle
 
 UNIT = Path(__file__).resolve().parents[1] / "systemd" / "sarmoco.service"
 SIM_START_S = 1800.0
-"""Longest wait for the simulator to synthesize every echo and open its links, s."""
+"""Longest wait for the simulator to make the trajectory and INS and open its links, s
+(echoes are synthesized as they are sent: :mod:`sarmoco.sim.echostream`)."""
 RSS_WARMUP_S = 60.0
 """RSS samples before this (imports, the first tiles, buffers filling) are not trended, s."""
 
@@ -143,8 +148,11 @@ def check_tiles(store: RunStore, tile_length_m: float) -> dict[str, Any]:
     }
 
 
-def soak(work: Path, minutes: float, scale: float, loss: float, dropout_s: float) -> dict[str, Any]:
-    """Run the soak in ``work``; returns the measured record."""
+def soak(
+    work: Path, minutes: float, scale: float, loss: float, dropout_s: float, nice: int = 0
+) -> dict[str, Any]:
+    """Run the soak in ``work`` (simulator and daemon at niceness ``nice``); returns the
+    measured record."""
     scn = load_preset("ku-vehicle", scale)
     n_pulses = round(minutes * 60.0 * scn.radar.prf_hz)
     watchdog_s = unit_watchdog_s()
@@ -152,7 +160,8 @@ def soak(work: Path, minutes: float, scale: float, loss: float, dropout_s: float
         f"ins-dropout={60.0 * k}:{dropout_s}" for k in range(1, math.ceil(minutes))
     ]
     record: dict[str, Any] = {
-        "command": f"python -m bench.soak --minutes {minutes:g} --scale {scale:g}",
+        "command": f"python -m bench.soak --minutes {minutes:g} --scale {scale:g} --nice {nice}",
+        "nice": nice,
         "pulses_sent": n_pulses,
         "prf_hz": scn.radar.prf_hz,
         "n_samples": scn.radar.n_samples,
@@ -161,8 +170,9 @@ def soak(work: Path, minutes: float, scale: float, loss: float, dropout_s: float
         "load_at_start": load_average(),
     }
     truth = work / "truth.json"
+    niced = ["nice", "-n", str(nice)] if nice else []
     sim = subprocess.Popen(
-        [*PY, "sim", "--preset", "ku-vehicle", "--scale", str(scale), "--pulses",
+        [*niced, *PY, "sim", "--preset", "ku-vehicle", "--scale", str(scale), "--pulses",
          str(n_pulses), *SIM_ARGS, "--serve", "--radar", f"udp://127.0.0.1:{free_udp_port()}",
          "--ins", f"mavlink:udpout:127.0.0.1:{free_udp_port()}", "--truth", str(truth),
          *(f"--fault={f}" for f in faults)],
@@ -190,7 +200,7 @@ def soak(work: Path, minutes: float, scale: float, loss: float, dropout_s: float
         env = notify.env(round(watchdog_s * 1e6))
         with (work / "daemon.log").open("w") as err:
             daemon = subprocess.Popen(
-                [*PY, "run", "--config", str(cfg_path), "--store", str(store)],
+                [*niced, *PY, "run", "--config", str(cfg_path), "--store", str(store)],
                 stdout=subprocess.PIPE, stderr=err, text=True, env=env,
             )  # fmt: skip
         read_json_line(daemon, "the daemon", 120.0)
@@ -203,6 +213,7 @@ def soak(work: Path, minutes: float, scale: float, loss: float, dropout_s: float
         record["status"] = {k: status[k] for k in ("counters", "gauges") if k in status}
         record["health"] = status.get("components")
         record["alive_at_end"] = daemon.poll() is None
+        record["daemon_cpu_s"] = proc_cpu_s(daemon.pid)  # its whole life, start-up included
         t_term = notify.now()
         daemon.send_signal(signal.SIGTERM)
         record["exit_status"] = daemon.wait(timeout=300)
@@ -278,11 +289,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scale", type=float, default=0.1, help="ku-vehicle scale")
     ap.add_argument("--loss", type=float, default=0.01, help="radar datagram loss probability")
     ap.add_argument("--dropout-s", type=float, default=0.2, help="INS dropout each minute, s")
+    ap.add_argument("--nice", type=int, default=0, help="niceness of simulator and daemon")
     ap.add_argument("--work", type=Path, default=None, help="folder (default: a new temp one)")
     args = ap.parse_args(argv)
     work = args.work or Path(tempfile.mkdtemp(prefix="sarmoco-soak-"))
     work.mkdir(parents=True, exist_ok=True)
-    record = soak(work, args.minutes, args.scale, args.loss, args.dropout_s)
+    record = soak(work, args.minutes, args.scale, args.loss, args.dropout_s, args.nice)
     (work / "soak.json").write_text(json.dumps(record, indent=1))
     shown = {k: v for k, v in record.items() if k != "status"}
     print(json.dumps(shown, indent=1))

@@ -21,6 +21,7 @@ import math
 import queue
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 from typing import Any, Protocol, TypeVar
 
@@ -71,6 +72,24 @@ class PulseSource(Protocol):
 def ring_format(cfg: Config) -> SampleFormat:
     """How echoes are held and recorded: int16 I/Q as on the wire, or complex64 for float32."""
     return "int16" if cfg.radar.sample_format == "int16" else "complex64"
+
+
+def nav_alignment(cfg: Config, ring: EchoRing, max_block: int) -> tuple[NavBuffer, Aligner]:
+    """A run's navigation buffer and the aligner that joins it to the pulses of ``ring``,
+    both configured from ``ins.*`` (clock-step tolerance, gap, bridged silence, latency
+    budget, lever arm), releasing at most ``max_block`` pulses at a time. One place for
+    both the single-channel and the array pipeline."""
+    nav = NavBuffer(clock_tolerance_ns=round(cfg.ins.clock_step_tolerance_s * 1e9))
+    aligner = Aligner(
+        ring,
+        nav,
+        max_gap_ns=round(cfg.ins.max_gap_s * 1e9),
+        latency_budget_ns=round(cfg.ins.latency_budget_s * 1e9),
+        lever_arm_body_m=cfg.ins.lever_arm_m,
+        max_block=max_block,
+        bridge_gap_ns=round(cfg.ins.bridge_gap_s * 1e9),
+    )
+    return nav, aligner
 
 
 @dataclass
@@ -201,16 +220,7 @@ class Pipeline:
         self.counters = counters
         capacity = max(1024, math.ceil(RING_SECONDS * cfg.radar.prf_hz))
         self.ring = EchoRing(capacity, cfg.radar.n_samples, ring_format(cfg))
-        self.nav = NavBuffer(clock_tolerance_ns=round(cfg.ins.clock_step_tolerance_s * 1e9))
-        self.aligner = Aligner(
-            self.ring,
-            self.nav,
-            max_gap_ns=round(cfg.ins.max_gap_s * 1e9),
-            latency_budget_ns=round(cfg.ins.latency_budget_s * 1e9),
-            lever_arm_body_m=cfg.ins.lever_arm_m,
-            max_block=cfg.imaging.block_pulses,
-            bridge_gap_ns=round(cfg.ins.bridge_gap_s * 1e9),
-        )
+        self.nav, self.aligner = nav_alignment(cfg, self.ring, cfg.imaging.block_pulses)
         self.focuser: Focuser | None = None
         self.summary = RunSummary()
         counters.add_source("pipeline", self.totals)
@@ -363,9 +373,13 @@ class Pipeline:
             elapsed = time.monotonic_ns() - self._latest_pulse_mono_ns if live else 0
             return self._latest_pulse_ns + elapsed
 
-    def process(self, now_ns: int | None) -> int:
+    def process(self, now_ns: int | None, on_block: Callable[[], None] | None = None) -> int:
         """Record queued INS samples (every :data:`INS_RECORD_S`), release aligned pulses,
         focus and record them.
+
+        ``on_block`` is called after each released block is recorded (and focused, when it
+        completes a processing block): a backlog takes many blocks in one call, and the
+        caller's watchdog must hear that the loop is progressing.
 
         Returns the number of pulses released by the aligner.
         """
@@ -377,6 +391,8 @@ class Pipeline:
         while (block := self.aligner.poll(now_ns)) is not None:
             released += len(block)
             self._accept(block)
+            if on_block is not None:
+                on_block()
         self._update_counters()
         return released
 
@@ -400,7 +416,7 @@ class Pipeline:
     def _accept(self, block: AlignedBlock) -> None:
         e = block.echoes
         if not self._pending:
-            self._pending_row = self.recorder.pulses.committed
+            self._pending_row = self.recorder.pulses.rows
         self.recorder.append_pulses(e.t_ns, e.pulse_id, e.channel, e.flags, e.samples)
         self.summary.pulses_received += len(block)
         self._pending.append(block)

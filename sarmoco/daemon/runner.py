@@ -62,6 +62,7 @@ def open_recorder(cfg: Config, path: Path, live: LiveFeed | None = None) -> Reco
         chunk_pulses=cfg.recorder.chunk_pulses,
         fsync_interval_s=cfg.recorder.fsync_interval_s,
         live=live,
+        writer_queue=cfg.recorder.writer_queue,
     )
 
 
@@ -372,12 +373,14 @@ class _LiveRun:
         runs (``sarmoco bench``'s ``realtime_ratio``).
         """
         last_status = 0.0
+        self._links_ok = False
         while not self.st.stop.is_set():
             start = time.monotonic()
             released = self._process()
             now = time.monotonic()
             self.counters.inc("processing_busy_seconds", now - start)
-            if self._update_health(now):
+            self._links_ok = self._update_health(now)
+            if self._links_ok:
                 self.notifier.keepalive()
             if now - last_status >= 1.0:
                 last_status = now
@@ -394,7 +397,7 @@ class _LiveRun:
         is counted and reported unhealthy until a pass succeeds.
         """
         try:
-            released = self.pipe.process(self._now_ns())
+            released = self.pipe.process(self._now_ns(), on_block=self._block_done)
         except SarmocoError as exc:
             self.counters.inc("processing_errors")
             self.health.set("processing", False, str(exc))
@@ -402,6 +405,13 @@ class _LiveRun:
             return 0
         self.health.set("processing", True)
         return released
+
+    def _block_done(self) -> None:
+        """A block was recorded within a pass: WATCHDOG=1 (at most every half period) if
+        the links were up at the last check. A pass through a backlog under load can take
+        longer than ``WatchdogSec``; a stalled one makes no block and sends nothing."""
+        if self._links_ok:
+            self.notifier.keepalive()
 
     def _nav_age(self, now: float) -> float:
         """Age of the newest INS sample (host clock), s; infinite before the first."""
