@@ -10,10 +10,11 @@ into ``sarmoco run`` over VITA 49/UDP and MAVLink/UDP on 127.0.0.1, with
 ``--fault loss=0.01@radar`` and ``--fault ins-dropout=60k:0.2`` for every minute k.
 The daemon runs as systemd would start it: ``NOTIFY_SOCKET`` is a real AF_UNIX datagram
 socket kept by this script and ``WATCHDOG_USEC`` is the unit's ``WatchdogSec``
-(``systemd/sarmoco.service``). ``--nice N`` starts the simulator and the daemon at that
-niceness (negative: priority over the machine's other work, as an onboard computer gives
-its acquisition; needs CAP_SYS_NICE): on a shared machine whose other load leaves the
-daemon less CPU than a second of data costs, the soak otherwise measures the other load.
+(``systemd/sarmoco.service``). ``--nice N`` runs this script (the watchdog listener), the
+simulator and the daemon at niceness N (negative: priority over the machine's other work,
+as an onboard computer gives its acquisition; needs CAP_SYS_NICE): on a shared machine
+whose other load leaves the daemon less CPU than a second of data costs, the soak
+otherwise measures the other load.
 Measured:
 
 - VmRSS of the daemon every second (``/proc``): medians of the first and last minute
@@ -151,8 +152,9 @@ def check_tiles(store: RunStore, tile_length_m: float) -> dict[str, Any]:
 def soak(
     work: Path, minutes: float, scale: float, loss: float, dropout_s: float, nice: int = 0
 ) -> dict[str, Any]:
-    """Run the soak in ``work`` (simulator and daemon at niceness ``nice``); returns the
-    measured record."""
+    """Run the soak in ``work`` (this process, the simulator and the daemon at niceness
+    ``nice``); returns the measured record."""
+    os.setpriority(os.PRIO_PROCESS, 0, nice)  # the children inherit it
     scn = load_preset("ku-vehicle", scale)
     n_pulses = round(minutes * 60.0 * scn.radar.prf_hz)
     watchdog_s = unit_watchdog_s()
@@ -170,9 +172,8 @@ def soak(
         "load_at_start": load_average(),
     }
     truth = work / "truth.json"
-    niced = ["nice", "-n", str(nice)] if nice else []
     sim = subprocess.Popen(
-        [*niced, *PY, "sim", "--preset", "ku-vehicle", "--scale", str(scale), "--pulses",
+        [*PY, "sim", "--preset", "ku-vehicle", "--scale", str(scale), "--pulses",
          str(n_pulses), *SIM_ARGS, "--serve", "--radar", f"udp://127.0.0.1:{free_udp_port()}",
          "--ins", f"mavlink:udpout:127.0.0.1:{free_udp_port()}", "--truth", str(truth),
          *(f"--fault={f}" for f in faults)],
@@ -200,7 +201,7 @@ def soak(
         env = notify.env(round(watchdog_s * 1e6))
         with (work / "daemon.log").open("w") as err:
             daemon = subprocess.Popen(
-                [*niced, *PY, "run", "--config", str(cfg_path), "--store", str(store)],
+                [*PY, "run", "--config", str(cfg_path), "--store", str(store)],
                 stdout=subprocess.PIPE, stderr=err, text=True, env=env,
             )  # fmt: skip
         read_json_line(daemon, "the daemon", 120.0)
