@@ -32,15 +32,14 @@ from typing import Any
 import numpy as np
 
 from sarmoco.daemon import schema
-from sarmoco.daemon.aligner import AlignedBlock, Aligner
+from sarmoco.daemon.aligner import AlignedBlock
 from sarmoco.daemon.channelgroup import ChannelGrouper
 from sarmoco.daemon.config import Config
 from sarmoco.daemon.echoring import EchoRing, sample_dtype, sample_shape, to_complex64
 from sarmoco.daemon.flags import FLAG_DTYPE
 from sarmoco.daemon.focuser import radar_params
 from sarmoco.daemon.links import open_ins, open_radar
-from sarmoco.daemon.navbuffer import NavBuffer
-from sarmoco.daemon.pipeline import ring_format
+from sarmoco.daemon.pipeline import nav_alignment, ring_format
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.runner import open_recorder, record_ins_format
 from sarmoco.drivers.samples import AttitudeSample, VelocitySample
@@ -130,15 +129,7 @@ class ArrayPipeline:
         row = sample_shape(n_s, fmt)
         self.grouper = ChannelGrouper(n_c, row, sample_dtype(fmt))
         self.ring = EchoRing(RING_PULSES, n_c * n_s, fmt)
-        self.nav = NavBuffer(clock_tolerance_ns=round(cfg.ins.clock_step_tolerance_s * 1e9))
-        self.aligner = Aligner(
-            self.ring,
-            self.nav,
-            max_gap_ns=round(cfg.ins.max_gap_s * 1e9),
-            latency_budget_ns=round(cfg.ins.latency_budget_s * 1e9),
-            lever_arm_body_m=cfg.ins.lever_arm_m,
-            max_block=RING_PULSES,
-        )
+        self.nav, self.aligner = nav_alignment(cfg, self.ring, RING_PULSES)
         self._scratch = np.empty((READ_PACKETS, *row), sample_dtype(fmt))
         self._row = row
         self._nav_rows: list[schema.NavRow] = []
