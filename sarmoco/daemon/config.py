@@ -156,6 +156,14 @@ class InsConfig:
     signing_key_hex: str = _key(
         "", "MAVLink 2 signing key (64 hex digits); when set, unsigned packets are rejected"
     )
+    mavlink_system_id: int = _key(
+        0,
+        "MAVLink system id of the vehicle whose navigation is used; messages of other "
+        "systems on the link are ignored and counted (ins rejected). 0: the system of the "
+        "first message heard",
+        ge=0,
+        le=255,
+    )
 
 
 @dataclass(frozen=True)

@@ -110,6 +110,7 @@ def _open_mavlink(ins: InsConfig, link: str) -> Source:
         signing_key=bytes.fromhex(ins.signing_key_hex) if ins.signing_key_hex else None,
         baudrate=ins.baudrate,
         rates_hz=_mavlink_rates(ins.rate_hz),
+        system_id=ins.mavlink_system_id,
     )
 
 

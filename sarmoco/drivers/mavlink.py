@@ -17,7 +17,10 @@ onto GPS time by :class:`BootClockModel`:
 A boot time that goes backwards (reboot) resets both. The wanted message rates
 are requested with MAV_CMD_SET_MESSAGE_INTERVAL when the autopilot's first
 HEARTBEAT arrives and again after a reboot. With a signing key, unsigned and
-badly signed packets are rejected and counted in ``counters.rejected``.
+badly signed packets are rejected and counted in ``counters.rejected``. Only one
+system's messages are used (``system_id``; by default the first system heard):
+another system on the same link (a second vehicle, a companion computer relaying
+its own estimate) is ignored and its messages counted in ``counters.rejected``.
 
 pymavlink picks MAVLink 1 or 2 from the ``MAVLINK20`` environment variable at
 import time; this module sets it (to MAVLink 2) unless the caller already did.
@@ -312,6 +315,10 @@ class MavlinkSource(Source):
         Serial line rate, baud.
     source_system, source_component : int
         Our MAVLink identity.
+    system_id : int
+        MAVLink system id of the vehicle whose messages are used; 0: the system of the
+        first message heard. Messages from other systems are counted in
+        ``counters.rejected`` and ignored.
     """
 
     raw_format = "tlog"
@@ -327,6 +334,7 @@ class MavlinkSource(Source):
         baudrate: int = 115200,
         source_system: int = 255,
         source_component: int = mavlink2.MAV_COMP_ID_ONBOARD_COMPUTER,
+        system_id: int = 0,
     ) -> None:
         super().__init__()
         if signing_key is not None and len(signing_key) != 32:  # before a socket is opened
@@ -356,6 +364,10 @@ class MavlinkSource(Source):
         self._outstanding: dict[int, int] = {}
         self._target: tuple[int, int] | None = None
         self._loss_seen = 0
+        self.system_id = system_id
+        """The vehicle's system id (0 until the first message when not configured)."""
+        self._foreign = 0
+        """Messages of other systems ignored."""
         if isinstance(self._conn, mavutil.mavtcp):
             # pymavlink prints and carries on (returning no data) when the peer goes away
             self._conn.handle_eof = self._conn.handle_disconnect = self._peer_closed
@@ -431,7 +443,7 @@ class MavlinkSource(Source):
                 if self.is_file:
                     self.eof = True
                 break
-            if not self._count(msg):
+            if not self._count(msg) or not self._from_vehicle(msg):
                 continue
             if self._raw is not None:
                 self._keep(tlog_record(msg))
@@ -472,11 +484,22 @@ class MavlinkSource(Source):
             self.counters.parse_errors += 1
         return False
 
+    def _from_vehicle(self, msg: Any) -> bool:
+        """Whether ``msg`` comes from the vehicle's system (the first one heard when not
+        configured); counts the others."""
+        sysid = msg.get_srcSystem()
+        if self.system_id == 0:
+            self.system_id = sysid
+        if sysid == self.system_id:
+            return True
+        self._foreign += 1
+        return False
+
     def _sync_counters(self) -> None:
         mav = self._conn.mav
         self.counters.bytes = mav.total_bytes_received
-        if mav.signing.secret_key is not None:
-            self.counters.rejected = mav.signing.reject_count
+        signing = mav.signing.reject_count if mav.signing.secret_key is not None else 0
+        self.counters.rejected = signing + self._foreign
 
     def _peer_closed(self) -> None:
         raise DriverError(f"mavlink {self.url}: peer closed the connection")

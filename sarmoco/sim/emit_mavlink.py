@@ -70,6 +70,20 @@ def dead_reckoned(t_ns: np.ndarray, vel_ned: FloatArray) -> FloatArray:
     return np.concatenate([np.zeros((1, 3)), np.cumsum(steps, axis=0)])
 
 
+ROGUE_BOOT_AHEAD_MS = 7
+"""How far the second system's boot clock runs ahead of the vehicle's, ms (its samples fall
+between the vehicle's, so that mixing them in would not be caught as duplicates)."""
+ROGUE_VEL_NED = np.array([5.0, 0.0, 0.0])
+"""What the second system's velocity adds to the vehicle's, NED m/s."""
+
+
+def _yawed_90(q: FloatArray) -> FloatArray:
+    """Body-to-NED quaternion ``q`` (scalar first) turned 90 degrees further in heading."""
+    c = s = np.sqrt(0.5)  # yaw of 90 deg about NED z: (cos 45, 0, 0, sin 45)
+    w, x, y, z = q
+    return np.array([c * w - s * z, c * x - s * y, c * y + s * x, c * z + s * w])
+
+
 class _PacketSink:
     """The file pymavlink writes to: each write is one packet, handed to the emitter."""
 
@@ -94,6 +108,10 @@ class MavlinkEmitter(Emitter):
         a ``.tlog`` is usually written at the INS rate).
     signing_key : bytes, optional
         32-byte MAVLink 2 signing secret: sign every packet.
+    rogue_system : int
+        A fault: a second system with this id (0: none) sends the same messages on the
+        link, its boot clock :data:`ROGUE_BOOT_AHEAD_MS` ahead, its velocity
+        :data:`ROGUE_VEL_NED` more and its heading 90 degrees off (counted as ``ROGUE``).
     faults, seed, rank
         See :class:`~sarmoco.sim.emitter.Emitter`.
     """
@@ -107,6 +125,7 @@ class MavlinkEmitter(Emitter):
         *,
         rates_hz: Mapping[str, float] | None = None,
         signing_key: bytes | None = None,
+        rogue_system: int = 0,
         faults: PacketFaults | None = None,
         seed: int = 0,
         rank: int = 1,
@@ -129,6 +148,11 @@ class MavlinkEmitter(Emitter):
             self._tx.signing.sign_outgoing = True
             self._tx.signing.timestamp = 1
         self._rx = mavlink2.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        self._rogue = (
+            mavlink2.MAVLink(_PacketSink(self), srcSystem=rogue_system, srcComponent=COMPONENT_ID)
+            if rogue_system
+            else None
+        )
         self._rx.robust_parsing = True
         self.peer_heard = False
         self._last_preroll_heartbeat = -HEARTBEAT_PERIOD_S
@@ -163,8 +187,8 @@ class MavlinkEmitter(Emitter):
         else:
             self.link.write(packet)
 
-    def _count(self, name: str) -> None:
-        self.sent[name] = self.sent.get(name, 0) + 1
+    def _count(self, name: str, n: int = 1) -> None:
+        self.sent[name] = self.sent.get(name, 0) + n
 
     def _due(self, name: str, index: int) -> bool:
         hz = self.rates_hz.get(name, 0.0)
@@ -183,6 +207,12 @@ class MavlinkEmitter(Emitter):
         flags = _EKF_FLAGS_BASE | (_EKF_FLAGS_POSITION if self.feed.pos_ned is not None else 0)
         self._tx.ekf_status_report_send(flags, 0.0, 0.0, 0.0, 0.0, 0.0)
         self._count("EKF_STATUS_REPORT")
+        if self._rogue is not None:
+            self._rogue.heartbeat_send(
+                mavlink2.MAV_TYPE_QUADROTOR, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0,
+                mavlink2.MAV_STATE_ACTIVE,
+            )  # fmt: skip
+            self._count("ROGUE")
 
     def _sample(self, i: int) -> None:
         f = self.feed
@@ -204,6 +234,23 @@ class MavlinkEmitter(Emitter):
             w, qx, qy, qz = (float(v) for v in f.quat[i])
             self._tx.attitude_quaternion_send(boot_ms, w, qx, qy, qz, 0.0, 0.0, 0.0)
             self._count("ATTITUDE_QUATERNION")
+        if self._rogue is not None:
+            self._rogue_sample(i, boot_ms + ROGUE_BOOT_AHEAD_MS, up_ns)
+
+    def _rogue_sample(self, i: int, boot_ms: int, up_ns: int) -> None:
+        """The second system's copy of sample ``i`` (see ``rogue_system``)."""
+        assert self._rogue is not None
+        f, k = self.feed, int(self.feed.index[i])
+        if self._due("SYSTEM_TIME", k):
+            t_ref = int(f.t_ns[i]) + boot_ms * 1_000_000 - up_ns - ROGUE_BOOT_AHEAD_MS * 10**6
+            self._rogue.system_time_send(round(self.wire.unix_ns(t_ref) / 1000), boot_ms)
+            self._count("ROGUE")
+        x, y, z = (float(v) for v in self.pos_ned[i])
+        vx, vy, vz = (float(v) for v in f.vel_ned[i] + ROGUE_VEL_NED)
+        self._rogue.local_position_ned_send(boot_ms, x, y, z, vx, vy, vz)
+        w, qx, qy, qz = (float(v) for v in _yawed_90(f.quat[i]))
+        self._rogue.attitude_quaternion_send(boot_ms, w, qx, qy, qz, 0.0, 0.0, 0.0)
+        self._count("ROGUE", 2)
 
     # --- answering --------------------------------------------------------------------
 

@@ -15,7 +15,13 @@ Switches (``sarmoco sim --fault SPEC``, repeatable):
                                   stay honest: a correct driver recovers GPS time)
 ``clock-drift=PPM``               INS device clock rate error, ppm (time messages honest)
 ``clock-step=AT:STEP``            the INS device clock jumps by STEP s at AT s after the first
-                                  pulse (repeatable; time messages follow the new clock)
+                                  pulse (repeatable; time messages follow the new clock; a
+                                  step back to near zero is an autopilot reboot)
+``ins-late=S``                    every INS message leaves S s after its sample time (on top
+                                  of the INS's own output latency): the INS lags the radar
+``mavlink-rogue=SYSID``           a second MAVLink system SYSID on the INS link sends the same
+                                  messages with its own boot clock (7 ms ahead) and values
+                                  (velocity 5 m/s more north, heading 90 deg off)
 ================================  ===========================================================
 
 ``LINK`` is ``radar`` or ``ins``; without it the packet fault applies to both.
@@ -82,6 +88,10 @@ class Faults:
         INS device clock rate error, ppm.
     clock_steps_s : tuple of (at_s, step_s)
         INS device clock steps: at ``at_s`` after the first pulse the clock jumps by ``step_s``.
+    ins_late_s : float
+        Extra delay of every INS message after its sample time, s.
+    mavlink_rogue_system : int
+        System id of a second MAVLink system on the INS link (0: none).
     """
 
     radar: PacketFaults = PacketFaults()
@@ -90,6 +100,8 @@ class Faults:
     clock_offset_s: float = 0.0
     clock_drift_ppm: float = 0.0
     clock_steps_s: tuple[tuple[float, float], ...] = ()
+    ins_late_s: float = 0.0
+    mavlink_rogue_system: int = 0
 
     def to_dict(self) -> dict[str, object]:
         """JSON-able form (for truth.json)."""
@@ -157,11 +169,21 @@ def parse_faults(specs: list[str] | None) -> Faults:
             faults = replace(faults, clock_drift_ppm=_number(spec, value))
         elif key == "clock-step":
             faults = replace(faults, clock_steps_s=(*faults.clock_steps_s, _pair(spec, value)))
+        elif key == "ins-late":
+            late = _number(spec, value)
+            if not late >= 0:
+                raise ConfigError(f"--fault {spec!r}: delay {late} is not >= 0")
+            faults = replace(faults, ins_late_s=late)
+        elif key == "mavlink-rogue":
+            sysid = _number(spec, value)
+            if sysid not in range(1, 256):
+                raise ConfigError(f"--fault {spec!r}: system id {value!r} is not 1..255")
+            faults = replace(faults, mavlink_rogue_system=int(sysid))
         else:
             known = ", ".join([*_PACKET_KEYS, "burst", "ins-dropout", "clock-offset",
-                               "clock-drift"])  # fmt: skip
+                               "clock-drift", "clock-step", "ins-late"])  # fmt: skip
             raise ConfigError(
-                f"--fault {spec!r}: unknown fault {key!r} (known: {known}, clock-step)"
+                f"--fault {spec!r}: unknown fault {key!r} (known: {known}, mavlink-rogue)"
             )
     return faults
 

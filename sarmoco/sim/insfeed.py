@@ -113,6 +113,7 @@ class InsFeed:
             grade=ins.grade,
             clock=clock,
             rate_hz=rate,
+            latency_ns=round((OUTPUT_LATENCY_S + faults.ins_late_s) * 1e9),
             start_pos_ned=start[0] if start.size else np.zeros(3),
         )
 

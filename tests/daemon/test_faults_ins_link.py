@@ -1,0 +1,130 @@
+"""INS link faults through the real processes: ``sarmoco sim --serve`` into ``sarmoco run``
+over MAVLink/UDP and VITA/UDP, ku-vehicle x0.1 (465 pulses, 2.66 s), ``/status`` polled
+while the daemon runs.
+
+- **Autopilot reboot and a second system**: at 1.0 s the autopilot reboots (its boot clock,
+  ``time_boot_ms``, falls from 601 s to 0.2 s; its SYSTEM_TIME follows), and all along a
+  second MAVLink system (id 7) sends the same messages with its own boot clock and values
+  (5 m/s more north, heading 90 degrees off). The daemon uses the first system only
+  (``ins.mavlink_system_id`` 0: the first heard), counts the other's messages in
+  ``ins_rejected``, records no sample with the other's velocity, and focuses no pulse with
+  navigation further than 1 m/s from the truth (the other system's velocity is 5 m/s
+  off; single pulses up to 0.18 m/s off occur in fault-free runs too, not explained yet).
+- **INS later than the latency budget**: every INS message leaves 1.0 s after its sample
+  (``ins.latency_budget_s`` 0.5 s): every pulse is flagged ``NAV_TIMEOUT`` (counted in
+  ``pipeline_pulses_nav_timeout``), none is focused with navigation, the late samples are
+  recorded, and the daemon stays up and exits 0.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from sarmoco.app.demo import run_loopback
+from sarmoco.daemon.flags import NAV_UNUSABLE, PulseFlag
+from sarmoco.daemon.store import open_store
+from sarmoco.sim.emit_mavlink import ROGUE_VEL_NED
+
+SCALE = 0.1
+
+
+def _free_tcp_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _run_watched(out: Path, faults: tuple[str, ...]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """run_loopback with ``faults``; (the report summary, the last /status read while the
+    daemon ran)."""
+    port = _free_tcp_port()
+    last: dict[str, Any] = {}
+    done = threading.Event()
+
+    def watch() -> None:
+        while not done.is_set():
+            try:
+                with socket.create_connection(("127.0.0.1", port), timeout=1.0) as s:
+                    s.sendall(b"GET /status HTTP/1.0\r\nHost: x\r\n\r\n")
+                    body = b"".join(iter(lambda: s.recv(65536), b"")).split(b"\r\n\r\n", 1)
+                last.update(json.loads(body[1]))
+            except (OSError, ValueError, IndexError):
+                pass
+            time.sleep(0.2)
+
+    watcher = threading.Thread(target=watch, daemon=True)
+    watcher.start()
+    try:
+        summary = run_loopback(out, SCALE, faults=faults, status={"http_port": port})
+    finally:
+        done.set()
+        watcher.join()
+    return summary, last
+
+
+def _truth_vel(truth: dict[str, Any], t_ns: np.ndarray) -> np.ndarray:
+    """True INS-rate velocity at wire times ``t_ns`` (GPS ns), NED m/s."""
+    t = np.asarray(truth["ins"]["t_ns"]) + truth["wire"]["shift_ns"]
+    v = np.asarray(truth["ins"]["vel_ned"])
+    return np.stack([np.interp(t_ns, t, v[:, j]) for j in range(3)], axis=1)
+
+
+def test_autopilot_reboot_and_second_system(tmp_path_factory: pytest.TempPathFactory) -> None:
+    out = tmp_path_factory.mktemp("reboot_rogue")
+    summary, status = _run_watched(out, ("clock-step=1.0:-600.8", "mavlink-rogue=7"))
+    store = open_store(out / "run.zarr")
+    assert store.attrs["complete"]
+    truth = json.loads((out / "truth.json").read_text())
+    sent = truth["wire"]["links"]["ins1"]["stats"]["messages"]
+    c = status["counters"]
+    nav = store.read("nav", ["t_ns", "vel_ned"])
+    kin = np.isfinite(nav["vel_ned"]).all(axis=1)
+    err = np.linalg.norm(nav["vel_ned"][kin] - _truth_vel(truth, nav["t_ns"][kin]), axis=1)
+    pulses = store.read("pulses", ["t_ns", "flags"])
+    t_s = (pulses["t_ns"] - truth["wire"]["shift_ns"] - truth["t0_ns"]) / 1e9
+    usable = (pulses["flags"] & np.uint32(NAV_UNUSABLE)) == 0
+    motion = store.read("motion", ["t_ns", "vel_ned"])
+    ok = np.isfinite(motion["vel_ned"]).all(axis=1)
+    pulse_err = np.linalg.norm(
+        motion["vel_ned"][ok] - _truth_vel(truth, motion["t_ns"][ok]), axis=1
+    )
+    pslr = [p["pslr_az_db"] for p in summary["image"]["points"][:3]]
+    print(f"reboot + second system: rogue messages sent {sent.get('ROGUE')}, ins_rejected "
+          f"{c.get('ins_rejected')}; {kin.sum()} velocity samples recorded, max |error| "
+          f"{err.max():.3f} m/s; {(~usable).sum()} of {usable.size} pulses flagged "
+          f"({t_s[~usable].min() if (~usable).any() else None} .. "
+          f"{t_s[~usable].max() if (~usable).any() else None} s); focused pulses' max "
+          f"|velocity error| {pulse_err.max():.3f} m/s; azimuth PSLR {pslr} dB")  # fmt: skip
+    assert sent["ROGUE"] > 100
+    assert c["ins_rejected"] >= 0.9 * sent["ROGUE"]  # the last /status read may trail
+    assert err.max() < 0.5 * np.linalg.norm(ROGUE_VEL_NED)
+    assert pulse_err.max() < 0.2 * np.linalg.norm(ROGUE_VEL_NED)  # 1 m/s: no foreign nav
+    assert usable[t_s < 0.99].all()  # nothing lost before the reboot
+    assert usable[t_s > 2.0].all()  # navigation back within a second of the reboot
+
+
+def test_ins_later_than_the_latency_budget(tmp_path_factory: pytest.TempPathFactory) -> None:
+    out = tmp_path_factory.mktemp("ins_late")
+    _, status = _run_watched(out, ("ins-late=1.0",))
+    store = open_store(out / "run.zarr")
+    assert store.attrs["complete"]
+    c = status["counters"]
+    flags = store.read("pulses", ["flags"])["flags"]
+    timeout = (flags & np.uint32(PulseFlag.NAV_TIMEOUT)) != 0
+    metrics = store.attrs["metrics"]
+    n_nav = store.committed("nav")
+    print(f"INS 1.0 s late (budget 0.5 s): {timeout.sum()} of {flags.size} pulses NAV_TIMEOUT, "
+          f"pipeline_pulses_nav_timeout {c.get('pipeline_pulses_nav_timeout')}, "
+          f"{metrics['pulses_processed']} focused; {n_nav} INS samples recorded")  # fmt: skip
+    assert flags.size > 400 and timeout.all()
+    assert c["pipeline_pulses_nav_timeout"] >= 0.9 * flags.size
+    assert metrics["pulses_processed"] == 0
+    assert n_nav > 400
