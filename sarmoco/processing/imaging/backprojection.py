@@ -249,6 +249,88 @@ def _bp_kernel(
                             out[i, 2 * j + 1] += v_re * sin_ph[j] + v_im * cos_ph[j]
 
 
+@dataclass(frozen=True)
+class PulseGeometry:
+    """The checked arguments of a backprojection, as its kernels take them.
+
+    Attributes
+    ----------
+    rows : ndarray of int64, shape (Q,)
+        Rows of the lines (pulses) to use.
+    geo : ndarray of float64, shape (P, 5)
+        Per pulse (every row of the lines), in the grid's coordinates: the APC's offset
+        from the grid origin along axis 0 ``u`` and axis 1 ``w`` (m), its squared height
+        above the grid plane ``h^2`` (m²), the reference range ``R_ref`` (m) and
+        ``k ΔY`` (rad/m · m: the compensated displacement of eq. 29 times ``k``; 0 without).
+    k : float
+        Two-way wavenumber 4 pi / lambda, rad/m.
+    inv_tan2 : float
+        1 / tan² of the beam half-angle (beam culling), 0: no culling.
+    squint : bool
+        The eq. 29 squint residual is removed (``compensated_dy_m`` given).
+    """
+
+    rows: IntArray
+    geo: FloatArray
+    k: float
+    inv_tan2: float
+    squint: bool
+
+
+def pulse_geometry(
+    caller: str,
+    out: ComplexArray,
+    lines: RangeLines,
+    apc_m: FloatArray,
+    wavelength_m: float,
+    grid: PlaneGrid,
+    ref_range_m: FloatArray | None,
+    pulses: IntArray | None,
+    beam_half_angle_rad: float | None,
+    compensated_dy_m: FloatArray | None,
+) -> PulseGeometry:
+    """Check the arguments of :func:`backproject_into` (or of a kernel that takes the
+    same, e.g. :func:`~sarmoco.processing.imaging.ffbp.ffbp_into`) and turn them into
+    the per-pulse geometry its kernels read.
+
+    Raises
+    ------
+    ProcessingError
+        Named after ``caller``: shapes that disagree with the lines, an accumulator that
+        is not C-contiguous complex64 of the grid's shape, pulse indices out of range, a
+        beam half-angle outside (0, pi/2), a ΔY that is not finite.
+    """
+    n_p = lines.data.shape[0]
+    shape = (grid.axis0_m.size, grid.axis1_m.size)
+    if apc_m.shape != (n_p, 3):
+        raise ProcessingError(f"{caller}: {n_p} lines, apc {apc_m.shape}")
+    if out.shape != shape or out.dtype != np.complex64 or not out.flags.c_contiguous:
+        raise ProcessingError(f"{caller}: out {out.shape} {out.dtype}, not C {shape} complex64")
+    ref = np.zeros(n_p) if ref_range_m is None else np.asarray(ref_range_m, dtype=np.float64)
+    if ref.shape != (n_p,):
+        raise ProcessingError(f"{caller}: ref_range_m shape {ref.shape} is not ({n_p},)")
+    rows = np.arange(n_p) if pulses is None else np.asarray(pulses, dtype=np.int64)
+    if rows.size and (rows.min() < 0 or rows.max() >= n_p):
+        raise ProcessingError(f"{caller}: pulse indices outside 0..{n_p - 1}")
+    inv_tan2 = 0.0
+    if beam_half_angle_rad is not None:
+        if not 0.0 < beam_half_angle_rad < np.pi / 2:
+            raise ProcessingError(f"{caller}: beam half-angle {beam_half_angle_rad!r} rad")
+        inv_tan2 = float(np.tan(beam_half_angle_rad) ** -2)
+    k = 4.0 * np.pi / wavelength_m
+    k_dy = np.zeros(n_p)
+    if compensated_dy_m is not None:
+        k_dy = k * np.asarray(compensated_dy_m, dtype=np.float64)
+        if k_dy.shape != (n_p,) or not np.all(np.isfinite(k_dy)):
+            raise ProcessingError(
+                f"{caller}: compensated_dy_m shape {k_dy.shape} is not ({n_p},) or not finite"
+            )
+    e0, e1 = grid.unit_vectors
+    d = np.asarray(apc_m, dtype=np.float64) - np.asarray(grid.origin_m, dtype=np.float64)
+    geo = np.column_stack([d @ e0, d @ e1, d[:, 2] ** 2, ref, k_dy])
+    return PulseGeometry(rows, geo, k, inv_tan2, compensated_dy_m is not None)
+
+
 def backproject_into(
     out: ComplexArray,
     lines: RangeLines,
@@ -288,45 +370,21 @@ def backproject_into(
         m. Given, every pixel gets its squint residual removed (eq. 29, module
         docstring); None: no such term.
     """
-    n_p = lines.data.shape[0]
-    shape = (grid.axis0_m.size, grid.axis1_m.size)
-    if apc_m.shape != (n_p, 3):
-        raise ProcessingError(f"backproject: {n_p} lines, apc {apc_m.shape}")
-    if out.shape != shape or out.dtype != np.complex64 or not out.flags.c_contiguous:
-        raise ProcessingError(f"backproject: out {out.shape} {out.dtype}, not C {shape} complex64")
-    ref = np.zeros(n_p) if ref_range_m is None else np.asarray(ref_range_m, dtype=np.float64)
-    if ref.shape != (n_p,):
-        raise ProcessingError(f"backproject: ref_range_m shape {ref.shape} is not ({n_p},)")
-    rows = np.arange(n_p) if pulses is None else np.asarray(pulses, dtype=np.int64)
-    if rows.size and (rows.min() < 0 or rows.max() >= n_p):
-        raise ProcessingError(f"backproject: pulse indices outside 0..{n_p - 1}")
-    inv_tan2 = 0.0
-    if beam_half_angle_rad is not None:
-        if not 0.0 < beam_half_angle_rad < np.pi / 2:
-            raise ProcessingError(f"backproject: beam half-angle {beam_half_angle_rad!r} rad")
-        inv_tan2 = float(np.tan(beam_half_angle_rad) ** -2)
-    k = 4.0 * np.pi / wavelength_m
-    k_dy = np.zeros(n_p)
-    if compensated_dy_m is not None:
-        k_dy = k * np.asarray(compensated_dy_m, dtype=np.float64)
-        if k_dy.shape != (n_p,) or not np.all(np.isfinite(k_dy)):
-            raise ProcessingError(
-                f"backproject: compensated_dy_m shape {k_dy.shape} is not ({n_p},) or not finite"
-            )
-    e0, e1 = grid.unit_vectors
-    d = np.asarray(apc_m, dtype=np.float64) - np.asarray(grid.origin_m, dtype=np.float64)
-    geo = np.column_stack([d @ e0, d @ e1, d[:, 2] ** 2, ref, k_dy])
+    pg = pulse_geometry(
+        "backproject", out, lines, apc_m, wavelength_m, grid,
+        ref_range_m, pulses, beam_half_angle_rad, compensated_dy_m,
+    )  # fmt: skip
     _bp_kernel(
         lines.data,
-        rows,
+        pg.rows,
         lines.r_first_m,
         lines.dr_m,
-        geo,
+        pg.geo,
         np.asarray(grid.axis0_m, dtype=np.float64),
         np.asarray(grid.axis1_m, dtype=np.float64),
-        k,
-        inv_tan2,
-        compensated_dy_m is not None,
+        pg.k,
+        pg.inv_tan2,
+        pg.squint,
         out.view(np.float32),
     )
 

@@ -48,7 +48,12 @@ import numba
 import numpy as np
 
 from sarmoco.errors import ProcessingError
-from sarmoco.processing.imaging.backprojection import RangeLines, _sincos, backproject_into
+from sarmoco.processing.imaging.backprojection import (
+    RangeLines,
+    _sincos,
+    backproject_into,
+    pulse_geometry,
+)
 from sarmoco.processing.imaging.grid import PlaneGrid
 from sarmoco.processing.imaging.interp import fft_upsample
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
@@ -522,36 +527,15 @@ def ffbp_into(
     Factorisation
         The one used (``stages`` 0: the direct kernel ran).
     """
-    n_p = lines.data.shape[0]
-    shape = (grid.axis0_m.size, grid.axis1_m.size)
-    if apc_m.shape != (n_p, 3):
-        raise ProcessingError(f"ffbp: {n_p} lines, apc {apc_m.shape}")
-    if out.shape != shape or out.dtype != np.complex64 or not out.flags.c_contiguous:
-        raise ProcessingError(f"ffbp: out {out.shape} {out.dtype}, not C {shape} complex64")
-    ref = np.zeros(n_p) if ref_range_m is None else np.asarray(ref_range_m, dtype=np.float64)
-    if ref.shape != (n_p,):
-        raise ProcessingError(f"ffbp: ref_range_m shape {ref.shape} is not ({n_p},)")
-    rows = np.arange(n_p) if pulses is None else np.asarray(pulses, dtype=np.int64)
-    if rows.size and (rows.min() < 0 or rows.max() >= n_p):
-        raise ProcessingError(f"ffbp: pulse indices outside 0..{n_p - 1}")
+    pg = pulse_geometry(
+        "ffbp", out, lines, apc_m, wavelength_m, grid,
+        ref_range_m, pulses, beam_half_angle_rad, compensated_dy_m,
+    )  # fmt: skip
+    rows, k, inv_tan2 = pg.rows, pg.k, pg.inv_tan2
     if rows.size == 0:
         return Factorisation(2, 0, budget_rad)
-    inv_tan2 = 0.0
-    if beam_half_angle_rad is not None:
-        if not 0.0 < beam_half_angle_rad < np.pi / 2:
-            raise ProcessingError(f"ffbp: beam half-angle {beam_half_angle_rad!r} rad")
-        inv_tan2 = float(np.tan(beam_half_angle_rad) ** -2)
-    k = 4.0 * np.pi / wavelength_m
-    k_dy = np.zeros(n_p)
-    if compensated_dy_m is not None:
-        k_dy = k * np.asarray(compensated_dy_m, dtype=np.float64)
-        if k_dy.shape != (n_p,) or not np.all(np.isfinite(k_dy)):
-            raise ProcessingError(f"ffbp: compensated_dy_m shape {k_dy.shape} is not ({n_p},)")
-    e0, e1 = grid.unit_vectors
-    d = np.asarray(apc_m, dtype=np.float64)[rows] - np.asarray(grid.origin_m, dtype=np.float64)
-    order = np.argsort(d @ e0, kind="stable")
-    d = d[order]
-    geo = np.column_stack([d @ e0, d @ e1, d[:, 2] ** 2, ref[rows][order], k_dy[rows][order]])
+    order = np.argsort(pg.geo[rows, 0], kind="stable")
+    geo = pg.geo[rows[order]]
     plan = factorisation or plan_factorisation(geo, grid, dr_m, wavelength_m, budget_rad, inv_tan2)
     if plan.stages == 0:
         backproject_into(
@@ -578,7 +562,7 @@ def ffbp_into(
     data = np.zeros((first.size - 1, n_a, n_r), np.complex64)
     _pulses_to_polar(
         line, lines.r_first_m, lines.dr_m, geo, first, cgeo, alpha0, d_alpha, r0, dr_m,
-        side, k, inv_tan2, compensated_dy_m is not None, data,
+        side, k, inv_tan2, pg.squint, data,
     )  # fmt: skip
     level = _upsampled(_Level(cgeo, alpha0, d_alpha, r0, dr_m, data, length))
     for _ in range(plan.stages - 1):
