@@ -93,6 +93,23 @@ def _check(bands: ComplexArray, t_s: FloatArray, rate: FloatArray) -> None:
         raise ProcessingError(f"doppler_rate: {t_s.shape[0]} pulses is too few for a subaperture")
 
 
+def _rescale(spectrum: FloatArray, scale: float) -> FloatArray:
+    """Magnitude spectra (N, n_fft) of a look sampled every ``scale dt`` taken to the
+    frequency axis of spacing dt (bin k of that axis is bin ``k scale`` of the look's,
+    signed bins, linear interpolation across the wrap; 4-fold zero padding makes the
+    magnitudes smooth enough for it)."""
+    if scale == 1.0:
+        return spectrum
+    n_fft = spectrum.shape[-1]
+    signed = (np.arange(n_fft) + n_fft // 2) % n_fft - n_fft // 2
+    pos = signed * scale
+    i0 = np.floor(pos).astype(np.int64)
+    frac = pos - i0
+    return np.asarray(
+        (1.0 - frac) * spectrum[:, i0 % n_fft] + frac * spectrum[:, (i0 + 1) % n_fft], dtype=float
+    )
+
+
 def map_drift(
     bands: ComplexArray,
     t_s: FloatArray,
@@ -130,12 +147,16 @@ def map_drift(
     tc = t_s - 0.5 * (t_s[0] + t_s[-1])
     dt = float(t_s[-1] - t_s[0]) / (m - 1)
     separation = float(np.mean(t_s[half : 2 * half]) - np.mean(t_s[:half]))
+    # each look's spectrum on the frequency axis of the mean spacing dt (k / (n_fft dt))
+    scale_a = float(t_s[half - 1] - t_s[0]) / (half - 1) / dt
+    scale_b = float(t_s[2 * half - 1] - t_s[half]) / (half - 1) / dt
     delta = np.zeros(bands.shape[0])
     quality = np.zeros(bands.shape[0])
     for _ in range(n_iter):
         d = _dechirp(bands, tc, rate_ref + delta)
-        a = np.abs(scipy.fft.fft(d[..., :half], n_fft, axis=-1)).sum(axis=1)
+        a = _rescale(np.abs(scipy.fft.fft(d[..., :half], n_fft, axis=-1)).sum(axis=1), scale_a)
         b = np.abs(scipy.fft.fft(d[..., half : 2 * half], n_fft, axis=-1)).sum(axis=1)
+        b = _rescale(b, scale_b)
         a -= a.mean(axis=-1, keepdims=True)
         b -= b.mean(axis=-1, keepdims=True)
         spec = scipy.fft.rfft(b, axis=-1) * np.conj(scipy.fft.rfft(a, axis=-1))
