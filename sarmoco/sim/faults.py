@@ -19,6 +19,10 @@ Switches (``sarmoco sim --fault SPEC``, repeatable):
                                   step back to near zero is an autopilot reboot)
 ``ins-late=S``                    every INS message leaves S s after its sample time (on top
                                   of the INS's own output latency): the INS lags the radar
+``serial-garbage=AT:DURATION``    the INS line carries random bytes instead of its frames for
+                                  DURATION s from AT s after its first packet
+``serial-baud=AT:DURATION:RATIO`` the INS frames of that window are read at RATIO x the
+                                  sender's baud rate (:func:`~sarmoco.sim.uart.misread`)
 ``mavlink-rogue=SYSID``           a second MAVLink system SYSID on the INS link sends the same
                                   messages with its own boot clock (7 ms ahead) and values
                                   (velocity 5 m/s more north, heading 90 deg off)
@@ -41,6 +45,7 @@ import numpy as np
 
 from sarmoco.errors import ConfigError
 from sarmoco.processing.types import IntArray
+from sarmoco.sim.uart import misread
 
 LINKS = ("radar", "ins")
 
@@ -57,6 +62,16 @@ class PacketFaults:
     """Period of the loss bursts, s (0: none)."""
     burst_s: float = 0.0
     """Length of each loss burst, s."""
+    garbage_at_s: float = 0.0
+    """Start of the window of random bytes, s after the link's first packet."""
+    garbage_s: float = 0.0
+    """Length of the window of random bytes, s (0: none)."""
+    baud_at_s: float = 0.0
+    """Start of the window read at the wrong baud rate, s after the link's first packet."""
+    baud_s: float = 0.0
+    """Length of the window read at the wrong baud rate, s (0: none)."""
+    baud_ratio: float = 0.0
+    """Receiver over sender baud rate in that window."""
 
     def in_burst(self, since_first_ns: int) -> bool:
         """Whether a packet sent ``since_first_ns`` after the link's first one falls in a
@@ -174,6 +189,17 @@ def parse_faults(specs: list[str] | None) -> Faults:
             if not late >= 0:
                 raise ConfigError(f"--fault {spec!r}: delay {late} is not >= 0")
             faults = replace(faults, ins_late_s=late)
+        elif key == "serial-garbage":
+            at, duration = _pair(spec, value)
+            faults = replace(faults, ins=replace(faults.ins, garbage_at_s=at, garbage_s=duration))
+        elif key == "serial-baud":
+            at_duration, _, ratio_text = value.rpartition(":")
+            at, duration = _pair(spec, at_duration)
+            ratio = _number(spec, ratio_text)
+            if not ratio > 0:
+                raise ConfigError(f"--fault {spec!r}: baud ratio {ratio} is not > 0")
+            baud = {"baud_at_s": at, "baud_s": duration, "baud_ratio": ratio}
+            faults = replace(faults, ins=replace(faults.ins, **baud))
         elif key == "mavlink-rogue":
             sysid = _number(spec, value)
             if sysid not in range(1, 256):
@@ -181,7 +207,8 @@ def parse_faults(specs: list[str] | None) -> Faults:
             faults = replace(faults, mavlink_rogue_system=int(sysid))
         else:
             known = ", ".join([*_PACKET_KEYS, "burst", "ins-dropout", "clock-offset",
-                               "clock-drift", "clock-step", "ins-late"])  # fmt: skip
+                               "clock-drift", "clock-step", "ins-late", "serial-garbage",
+                               "serial-baud"])  # fmt: skip
             raise ConfigError(
                 f"--fault {spec!r}: unknown fault {key!r} (known: {known}, mavlink-rogue)"
             )
@@ -223,6 +250,8 @@ class FaultCounts:
     corrupted: int = 0
     duplicated: int = 0
     reordered: int = 0
+    garbled: int = 0
+    """Packets replaced by random bytes or read at the wrong baud rate."""
 
 
 @dataclass
@@ -274,6 +303,15 @@ class PacketFaultInjector:
             if f.in_burst(t_ns - self._first_ns):
                 self.counts.lost += 1
                 self.counts.burst_lost += 1
+                return
+            since_s = (t_ns - self._first_ns) * 1e-9
+            if f.garbage_at_s <= since_s < f.garbage_at_s + f.garbage_s:
+                self.counts.garbled += 1
+                write(self._rng.integers(0, 256, len(data), dtype=np.uint8).tobytes())
+                return
+            if f.baud_at_s <= since_s < f.baud_at_s + f.baud_s:
+                self.counts.garbled += 1
+                write(misread(data, f.baud_ratio))
                 return
         if u_loss < f.loss:
             self.counts.lost += 1
