@@ -9,7 +9,8 @@ see :func:`integrate_velocity`) it reduces exactly to linear interpolation of
 the velocity. Attitude: SLERP between the bracketing quaternions.
 
 A pulse is valid only when samples bracket it and the bracketing interval is
-not longer than ``max_gap_ns``; gaps are flagged, never bridged silently.
+not longer than ``max_gap_ns``; gaps are flagged, never bridged silently (a caller bridges
+a short silence with :func:`bridge_gap` and flags what it bridged).
 All times are GPS ns (``int64``); positions NED m, velocities NED m/s.
 """
 
