@@ -103,12 +103,12 @@ class Sampler(threading.Thread):
                 self.load.append((t, os.getloadavg()[0]))
 
 
-def rss_summary(rss: list[tuple[float, int]]) -> dict[str, float]:
-    """Medians of the first and last minute after :data:`RSS_WARMUP_S`, the maximum and the
-    trend (least squares), MB."""
+def rss_summary(rss: list[tuple[float, int]], warmup_s: float = RSS_WARMUP_S) -> dict[str, float]:
+    """Medians of the first and last minute after ``warmup_s``, the maximum and the trend
+    (least squares), MB."""
     t = np.array([r[0] for r in rss], dtype=np.float64)
     mb = np.array([r[1] for r in rss], dtype=np.float64) / 1024.0
-    keep = t >= RSS_WARMUP_S
+    keep = t >= warmup_s
     if np.count_nonzero(keep) < 10:
         return {}
     t, mb = t[keep], mb[keep]
@@ -117,7 +117,7 @@ def rss_summary(rss: list[tuple[float, int]]) -> dict[str, float]:
         "first_min_median_mb": float(np.median(mb[t < t[0] + 60.0])),
         "last_min_median_mb": float(np.median(mb[t > t[-1] - 60.0])),
         "max_mb": float(mb.max()),
-        "slope_mb_per_min": rss_trend_mb_per_min(rss, RSS_WARMUP_S),
+        "slope_mb_per_min": rss_trend_mb_per_min(rss, warmup_s),
     }
 
 
@@ -150,16 +150,31 @@ def check_tiles(store: RunStore, tile_length_m: float) -> dict[str, Any]:
 
 
 def soak(
-    work: Path, minutes: float, scale: float, loss: float, dropout_s: float, nice: int = 0
+    work: Path,
+    minutes: float,
+    scale: float,
+    loss: float,
+    dropout_s: float,
+    nice: int = 0,
+    *,
+    dropout_every_s: float = 60.0,
+    watchdog_s: float | None = None,
+    rss_warmup_s: float = RSS_WARMUP_S,
 ) -> dict[str, Any]:
     """Run the soak in ``work`` (this process, the simulator and the daemon at niceness
-    ``nice``); returns the measured record."""
+    ``nice``); returns the measured record.
+
+    An INS dropout of ``dropout_s`` starts every ``dropout_every_s``; ``watchdog_s`` is
+    the daemon's ``WATCHDOG_USEC`` (default the unit's ``WatchdogSec``); RSS is trended
+    after ``rss_warmup_s`` (short runs: ``tests/daemon/test_soak_short.py``).
+    """
     os.setpriority(os.PRIO_PROCESS, 0, nice)  # the children inherit it
     scn = load_preset("ku-vehicle", scale)
     n_pulses = round(minutes * 60.0 * scn.radar.prf_hz)
-    watchdog_s = unit_watchdog_s()
+    watchdog_s = unit_watchdog_s() if watchdog_s is None else watchdog_s
     faults = [f"loss={loss}@radar"] + [
-        f"ins-dropout={60.0 * k}:{dropout_s}" for k in range(1, math.ceil(minutes))
+        f"ins-dropout={dropout_every_s * k}:{dropout_s}"
+        for k in range(1, math.ceil(minutes * 60.0 / dropout_every_s))
     ]
     record: dict[str, Any] = {
         "command": f"python -m bench.soak --minutes {minutes:g} --scale {scale:g} --nice {nice}",
@@ -244,7 +259,7 @@ def soak(
         "t_term_s": round(t_term, 2),
     }
     assert sampler is not None
-    record["rss"] = rss_summary(sampler.rss)
+    record["rss"] = rss_summary(sampler.rss, rss_warmup_s)
     record["load_per_minute"] = [round(v, 2) for _, v in sampler.load]
     record["load_at_end"] = load_average()
     run = open_store(store)
