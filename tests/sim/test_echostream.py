@@ -73,7 +73,7 @@ def test_peak_bound_holds_and_is_tight_for_point_targets() -> None:
 
 
 def test_streamed_radar_packets_saturate_nothing(tmp_path: Path) -> None:
-    whole, stream = run_pair(0.0, n_pulses=300)
+    _, stream = run_pair(0.0, n_pulses=300)
     scn = stream.scenario
     em = RadarEmitter(FileLink(tmp_path / "r.vrt"), scn.radar, stream.t_ns, stream)
     assert em.iq_scale == pytest.approx(INT16_PEAK / stream.peak_iq_bound())
