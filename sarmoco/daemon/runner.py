@@ -62,6 +62,7 @@ def open_recorder(cfg: Config, path: Path, live: LiveFeed | None = None) -> Reco
         chunk_pulses=cfg.recorder.chunk_pulses,
         fsync_interval_s=cfg.recorder.fsync_interval_s,
         live=live,
+        writer_queue=cfg.recorder.writer_queue,
     )
 
 
