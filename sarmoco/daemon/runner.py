@@ -89,6 +89,8 @@ class _LiveState:
     last_pulse_mono: float = 0.0
     first_pulse_mono: float = 0.0
     link_down: str = ""
+    ins_bus_fault: str = ""
+    """What the INS link's adapter reports wrong with its bus (CAN bus-off), if anything."""
     finished: set[str] = field(default_factory=set)
     """Links that were files and reached their end (not a failure)."""
 
@@ -282,6 +284,7 @@ class _LiveRun:
             return self._read_ins_file(link)
         samples = link.poll(POLL_S)
         rx_ns = time.monotonic_ns()
+        self.st.ins_bus_fault = link.bus_fault
         self.pipe.add_ins_raw(link.take_raw(), rx_ns)
         if samples:
             self.st.last_nav_mono = time.monotonic()
@@ -421,7 +424,8 @@ class _LiveRun:
         """Set the ``links`` and ``ins`` health checks; returns whether every link is up.
 
         A reader that stopped because its file ended is not down; an INS log read to its
-        end is healthy however old its last sample.
+        end is healthy however old its last sample. The INS is unhealthy while its link's
+        adapter reports a bus fault (CAN error passive or bus-off; the link stays up).
         """
         st, ended = self.st, sorted(self.st.finished)
         ok = all(t.is_alive() or t.name in ended for t in self.threads) and not st.link_down
@@ -430,7 +434,10 @@ class _LiveRun:
         ins_detail = f"newest sample {nav_age:.2f} s old"
         if "ins" in ended:  # a log read to its end: no newer sample will come
             ins_detail = f"{_finished_text(['ins'])}, {ins_detail}"
-        self.health.set("ins", nav_age < INS_STALE_S or "ins" in ended, ins_detail)
+        if st.ins_bus_fault:
+            ins_detail = f"{st.ins_bus_fault}, {ins_detail}"
+        fresh = nav_age < INS_STALE_S or "ins" in ended
+        self.health.set("ins", fresh and not st.ins_bus_fault, ins_detail)
         return ok
 
     def _publish_status(self, now: float) -> None:

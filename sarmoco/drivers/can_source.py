@@ -1,7 +1,9 @@
 """SBG CAN sources over python-can: live buses and log replay.
 
 * :class:`CanSource` wraps any python-can bus: ``socketcan`` on the aircraft,
-  ``slcan`` (a serial adapter, or a simulated one on a pseudo-terminal),
+  ``slcan`` (a serial adapter, or a simulated one on a pseudo-terminal; opened as
+  :class:`~sarmoco.drivers.slcan_status.SlcanStatusBus`, which also reads the
+  adapter's error state: :attr:`Source.bus_fault` while it is passive or bus-off),
   ``socketcand`` (TCP), ``virtual`` (in-process). Open one with
   :meth:`CanSource.open`.
 * :class:`CanLogSource` replays candump ``.log``, ``.asc``, ``.blf`` (anything
@@ -23,6 +25,7 @@ from sarmoco.drivers.clock import GPS_LEAP_SECONDS_DEFAULT
 from sarmoco.drivers.counters import BurstLog
 from sarmoco.drivers.samples import Sample
 from sarmoco.drivers.sbg_can import SbgCanDecoder
+from sarmoco.drivers.slcan_status import BusState, SlcanStatusBus
 from sarmoco.drivers.source import Source
 from sarmoco.errors import DriverError
 
@@ -111,6 +114,7 @@ class CanSource(_CanSourceBase):
         self._link = link
         self._errors_in_row = 0
         self._closed = False
+        self._bus_state = BusState.OK
 
     @classmethod
     def open(
@@ -126,7 +130,10 @@ class CanSource(_CanSourceBase):
         ``("socketcand", "can0", host="127.0.0.1", port=29536)``, ``("virtual", "sim")``.
         """
         try:
-            bus = can.Bus(interface=interface, channel=channel, **bus_kwargs)
+            if interface == "slcan":
+                bus: can.BusABC = SlcanStatusBus(channel, **bus_kwargs)
+            else:
+                bus = can.Bus(interface=interface, channel=channel, **bus_kwargs)
         except (can.CanError, OSError, ValueError) as exc:
             raise DriverError(f"can {interface}:{channel}: cannot open: {exc}") from exc
         return cls(bus, leap_s, f"sbg-can {interface}:{channel}")
@@ -154,7 +161,25 @@ class CanSource(_CanSourceBase):
             self._errors_in_row = 0
             wait = 0.0
             self._frame(msg, out)
+        self._check_bus_state()
         return out
+
+    def _check_bus_state(self) -> None:
+        """Follow the adapter's reported bus state (slcan): count each step into a worse
+        error state, log each change once, and set :attr:`bus_fault` while passive or off."""
+        if not isinstance(self.bus, SlcanStatusBus):
+            return
+        state = self.bus.bus_state
+        if state is None or state == self._bus_state:
+            return
+        what = f"CAN bus {state.label} (adapter status flags 0x{self.bus.status_flags:02X})"
+        if state > self._bus_state:
+            self.counters.bus_error_states += 1
+            log.warning("%s: %s", self._link, what)
+        else:
+            log.info("%s: %s again", self._link, what)
+        self._bus_state = state
+        self.bus_fault = what if state >= BusState.PASSIVE else ""
 
     def close(self) -> None:
         """Shut the bus down; idempotent, and quiet when the device is already gone."""

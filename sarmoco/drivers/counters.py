@@ -36,6 +36,9 @@ class DriverCounters:
         configured channel's).
     skipped_bytes : int
         Bytes skipped while resynchronising a byte stream.
+    bus_error_states : int
+        Times the link's adapter reported its bus in a worse error state than before
+        (CAN error warning, error passive, bus-off).
     """
 
     bytes: int = 0
@@ -46,6 +49,7 @@ class DriverCounters:
     drops: int = 0
     rejected: int = 0
     skipped_bytes: int = 0
+    bus_error_states: int = 0
 
     def snapshot(self) -> dict[str, int]:
         """A copy of the counters as a plain dict (for status and the recorder)."""

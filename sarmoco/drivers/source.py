@@ -28,6 +28,9 @@ class Source(Closing):
         frames each after an 8-byte big-endian receive time in UNIX µs, a telemetry
         log), ``"sbgecom"`` (the bytes as read from the serial line or file),
         ``"candump"`` (``candump -L`` log lines); empty when the source keeps none.
+    bus_fault : str
+        What the link's adapter reports wrong with its bus now (e.g. a CAN adapter
+        bus-off); empty when nothing is, or the link reports nothing.
     """
 
     raw_format = ""
@@ -35,6 +38,7 @@ class Source(Closing):
     def __init__(self) -> None:
         self.counters = DriverCounters()
         self.eof = False
+        self.bus_fault = ""
         self._raw: bytearray | None = None
 
     def keep_raw(self) -> bool:

@@ -11,8 +11,10 @@ Framings of a CAN frame on the three links:
 
 * ``slcan``: the adapter side of the Lawicel serial protocol on the pty master
   (``tIIILDD..\\r``); it answers the host's commands (``C``, ``O``, ``L``,
-  ``S0``-``S8``, ``V``, ``N``, ``Z``, ``F``, ...) with ``\\r`` and forwards
-  frames only while the channel is open, as a real adapter does;
+  ``S0``-``S8``, ``V``, ``N``, ``Z``, ...) with ``\\r``, the status request ``F`` with
+  ``Fxx\\r`` (the Lawicel status flags: ``00``, or those of the ``can-errors`` and
+  ``can-bus-off`` faults while they last), and forwards frames only while the channel
+  is open, as a real adapter does;
 * ``socketcand``: ``< hi >`` on connect, ``< ok >`` to ``< open CH >`` and
   ``< rawmode >``, then ``< frame III SEC.USEC DATA >``;
 * ``candump``: ``(SEC.USEC) can0 III#DATA`` lines, readable by ``can.LogReader``.
@@ -31,6 +33,7 @@ from sarmoco.drivers import sbg_can as sc
 from sarmoco.drivers import sbg_codec
 from sarmoco.drivers.attitude import quat_to_euler
 from sarmoco.drivers.clock import NS_PER_S
+from sarmoco.drivers.slcan_status import BUS_ERROR, ERROR_PASSIVE, ERROR_WARNING
 from sarmoco.sim.emit_sbg import (
     SOLUTION_NAV_POSITION,
     UTC_STATUS,
@@ -52,6 +55,11 @@ SOCKETCAND_SETTLE_S = 0.1
 handshake answer with one ``recv``; a frame in the same segment would spoil it), s."""
 SLCAN_VERSION = b"V1013\r"
 SLCAN_SERIAL = b"NSIM1\r"
+SLCAN_FLAGS_PASSIVE = ERROR_WARNING | ERROR_PASSIVE
+"""Status flags of an error-passive bus (0x24)."""
+SLCAN_FLAGS_BUS_OFF = SLCAN_FLAGS_PASSIVE | BUS_ERROR
+"""Status flags of a bus-off adapter (0xA4; read as bus-off by
+:func:`~sarmoco.drivers.slcan_status.bus_state`)."""
 
 
 def _unix_seconds(unix_ns: int) -> str:
@@ -92,6 +100,10 @@ class SbgCanEmitter(SbgDevice):
         """Frames the adapter could not forward (channel closed)."""
         self._greeted = 0
         """Connections greeted (socketcand)."""
+        self.status_answers = 0
+        """Status requests (slcan ``F``) answered."""
+        self.error_answers = 0
+        """Of those, the answers with an error flag set."""
 
     # --- schedule -------------------------------------------------------------------
 
@@ -170,13 +182,25 @@ class SbgCanEmitter(SbgDevice):
         if self.framing == "slcan":
             *lines, self._rx = self._rx.split(b"\r")
             for line in lines:
-                self.link.write(self._slcan_command(line))
+                self.link.write(self._slcan_command(line, now_ns))
         elif self.framing == "socketcand":
             while b">" in self._rx:
                 cmd, _, self._rx = self._rx.partition(b">")
                 self._socketcand_command(cmd.strip(b"< ").decode("ascii", "replace"))
 
-    def _slcan_command(self, line: bytes) -> bytes:
+    def _slcan_flags(self, now_ns: int | None) -> int:
+        """The Lawicel status flags at scenario time ``now_ns`` (the CAN faults' windows)."""
+        since_s = self.injector.since_first_s(now_ns)
+        f = self.injector.faults
+        if since_s is None:
+            return 0
+        if f.bus_off_at_s <= since_s < f.bus_off_at_s + f.bus_off_s:
+            return SLCAN_FLAGS_BUS_OFF
+        if f.can_errors_at_s <= since_s < f.can_errors_at_s + f.can_errors_s:
+            return SLCAN_FLAGS_PASSIVE
+        return 0
+
+    def _slcan_command(self, line: bytes, now_ns: int | None) -> bytes:
         cmd = line[:1]
         if cmd in (b"O", b"L"):
             self.channel_open = True
@@ -187,7 +211,10 @@ class SbgCanEmitter(SbgDevice):
         elif cmd == b"N":
             return SLCAN_SERIAL
         elif cmd == b"F":
-            return b"F00\r"
+            flags = self._slcan_flags(now_ns)
+            self.status_answers += 1
+            self.error_answers += flags != 0
+            return f"F{flags:02X}\r".encode()
         elif cmd not in (
             b"S",
             b"s",
@@ -236,4 +263,10 @@ class SbgCanEmitter(SbgDevice):
         return {"framing": self.framing, "connect": bus}
 
     def stats(self) -> dict[str, Any]:
-        return {**super().stats(), "frames": self.frames_sent, "frames_unsent": self.frames_unsent}
+        return {
+            **super().stats(),
+            "frames": self.frames_sent,
+            "frames_unsent": self.frames_unsent,
+            "status_answers": self.status_answers,
+            "error_answers": self.error_answers,
+        }

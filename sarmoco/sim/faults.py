@@ -23,6 +23,12 @@ Switches (``sarmoco sim --fault SPEC``, repeatable):
                                   DURATION s from AT s after its first packet
 ``serial-baud=AT:DURATION:RATIO`` the INS frames of that window are read at RATIO x the
                                   sender's baud rate (:func:`~sarmoco.sim.uart.misread`)
+``can-errors=AT:DURATION``        the slcan adapter reports its CAN bus error passive (status
+                                  flags 0x24) for DURATION s from AT s after the INS link's first
+                                  packet; frames still pass
+``can-bus-off=AT:DURATION``       the slcan adapter's CAN bus is off (status flags 0xA4) for
+                                  DURATION s from AT s after the INS link's first packet: every
+                                  CAN frame of that window is lost
 ``mavlink-rogue=SYSID``           a second MAVLink system SYSID on the INS link sends the same
                                   messages with its own boot clock (7 ms ahead) and values
                                   (velocity 5 m/s more north, heading 90 deg off)
@@ -72,6 +78,14 @@ class PacketFaults:
     """Length of the window read at the wrong baud rate, s (0: none)."""
     baud_ratio: float = 0.0
     """Receiver over sender baud rate in that window."""
+    can_errors_at_s: float = 0.0
+    """Start of the CAN error-passive window, s after the link's first packet."""
+    can_errors_s: float = 0.0
+    """Length of the CAN error-passive window, s (0: none)."""
+    bus_off_at_s: float = 0.0
+    """Start of the CAN bus-off, s after the link's first packet."""
+    bus_off_s: float = 0.0
+    """Length of the CAN bus-off, s (0: none); its frames are lost."""
 
     def in_burst(self, since_first_ns: int) -> bool:
         """Whether a packet sent ``since_first_ns`` after the link's first one falls in a
@@ -200,6 +214,13 @@ def parse_faults(specs: list[str] | None) -> Faults:
                 raise ConfigError(f"--fault {spec!r}: baud ratio {ratio} is not > 0")
             baud = {"baud_at_s": at, "baud_s": duration, "baud_ratio": ratio}
             faults = replace(faults, ins=replace(faults.ins, **baud))
+        elif key in ("can-errors", "can-bus-off"):
+            at, duration = _pair(spec, value)
+            if not duration > 0:
+                raise ConfigError(f"--fault {spec!r}: duration {duration} is not > 0")
+            field_ = "can_errors" if key == "can-errors" else "bus_off"
+            window = {f"{field_}_at_s": at, f"{field_}_s": duration}
+            faults = replace(faults, ins=replace(faults.ins, **window))
         elif key == "mavlink-rogue":
             sysid = _number(spec, value)
             if sysid not in range(1, 256):
@@ -208,7 +229,7 @@ def parse_faults(specs: list[str] | None) -> Faults:
         else:
             known = ", ".join([*_PACKET_KEYS, "burst", "ins-dropout", "clock-offset",
                                "clock-drift", "clock-step", "ins-late", "serial-garbage",
-                               "serial-baud"])  # fmt: skip
+                               "serial-baud", "can-errors", "can-bus-off"])  # fmt: skip
             raise ConfigError(
                 f"--fault {spec!r}: unknown fault {key!r} (known: {known}, mavlink-rogue)"
             )
@@ -252,6 +273,8 @@ class FaultCounts:
     reordered: int = 0
     garbled: int = 0
     """Packets replaced by random bytes or read at the wrong baud rate."""
+    bus_off_lost: int = 0
+    """CAN frames lost while the adapter's bus was off."""
 
 
 @dataclass
@@ -313,6 +336,9 @@ class PacketFaultInjector:
                 self.counts.garbled += 1
                 write(misread(data, f.baud_ratio))
                 return
+            if f.bus_off_at_s <= since_s < f.bus_off_at_s + f.bus_off_s:
+                self.counts.bus_off_lost += 1
+                return
         if u_loss < f.loss:
             self.counts.lost += 1
             return
@@ -332,6 +358,13 @@ class PacketFaultInjector:
         for _ in range(copies):
             write(data)
         self.flush(write)
+
+    def since_first_s(self, t_ns: int | None) -> float | None:
+        """Time from the link's first packet to scenario time ``t_ns``, s (None before the
+        first packet or without a time)."""
+        if t_ns is None or self._first_ns is None:
+            return None
+        return (t_ns - self._first_ns) * 1e-9
 
     def flush(self, write: Callable[[bytes], None]) -> None:
         """Send a packet still held back for reordering."""
