@@ -246,6 +246,8 @@ def _serve(args: argparse.Namespace, run: SimRun, faults: Faults) -> int:
             )  # fmt: skip
         for k, spec in enumerate(args.ins or [], start=1):
             options: dict[str, Any] = {"faults": faults.ins, "seed": args.seed * 16 + k, "rank": k}
+            if faults.mavlink_rogue_system:
+                options["rogue_system"] = faults.mavlink_rogue_system
             emitters[f"ins{k}"] = live_ins_emitter(spec, feed, options)
         _print_line(
             {
