@@ -360,7 +360,7 @@ class RecorderConfig:
     chunk_pulses: int = _key(256, "Pulses per chunk of the echo arrays", gt=0)
     fsync_interval_s: float = _key(1.0, "Interval between fsyncs of committed data", unit="s", gt=0)
     writer_queue: int = _key(
-        8,
+        0,
         "Writes (blocks of pulses, tiles, table rows) that may wait for the recorder's writer "
         "thread while processing goes on; when it is full, processing waits. 0: the "
         "processing loop writes itself",

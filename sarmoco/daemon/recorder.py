@@ -66,7 +66,18 @@ class _SyncingStore(LocalStore):
         self._dirty: set[str] = set()
         self._dirty_lock = threading.Lock()
 
+    def _removed(self) -> RecorderError | None:
+        """The error of a store whose directory is gone (its root ``zarr.json`` missing)."""
+        if (self._root / "zarr.json").is_file():
+            return None
+        return RecorderError(f"recorder: {self._root}: the store's directory was removed")
+
     def _refused(self, key: str, exc: OSError) -> RecorderError:
+        """A refused write's error; a write that failed because the store's directory went
+        away meanwhile says so (the file system only says the folder does not exist)."""
+        removed = self._removed()
+        if removed is not None:
+            return removed
         return RecorderError(f"recorder: {self._root}: cannot write {key!r}: {exc.strerror}")
 
     async def set(self, key: str, value: Buffer) -> None:
@@ -84,8 +95,9 @@ class _SyncingStore(LocalStore):
     async def _set_checked(
         self, key: str, value: Buffer, write: Callable[[str, Buffer], Awaitable[None]]
     ) -> None:
-        if key != "zarr.json" and not (self._root / "zarr.json").is_file():
-            raise RecorderError(f"recorder: {self._root}: the store's directory was removed")
+        removed = None if key == "zarr.json" else self._removed()
+        if removed is not None:
+            raise removed
         try:
             await write(key, value)
         except OSError as exc:

@@ -110,10 +110,11 @@ def browsed_run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         try:
             # the autofocus releases nothing before its pin window (2 s by default) is
             # covered: with 0.5 s the 4 s flight releases tiles over its last 2.5 s, not in
-            # a burst at its end that the page may show as one strip
+            # a burst at its end that the page may show as one strip; 5 m tiles (not 10)
+            # give the page, which renders at most once a second, twice as many to follow
             run_loopback(
                 out, SCALE, scene="extended", status={"http_port": port},
-                autofocus={"pin_window_s": 0.5},
+                autofocus={"pin_window_s": 0.5}, imaging={"tile_length_m": 5.0},
             )  # fmt: skip
         except BaseException as exc:  # handed to the test
             errors.append(exc)

@@ -188,7 +188,9 @@ def _says_why(run: UdpRun, store: Path, reason: str, metrics: str, exit_status: 
     errors = [
         r for r in log if r.get("level") == "error" and r.get("logger", "").startswith("sarmoco")
     ]
-    assert errors and all(str(store) in r["error"] and reason in r["error"] for r in errors)
+    assert errors and all(str(store) in r["error"] and reason in r["error"] for r in errors), [
+        r["error"] for r in errors
+    ]
     assert log[-1]["msg"].startswith("sarmoco: error: recorder: ") and reason in log[-1]["msg"]
 
 

@@ -151,6 +151,7 @@ print("KILLED", n)
 """
 
 
+@pytest.mark.bench  # the longer marked run (57 s); the suite kills 12 daemons elsewhere
 def test_sigkill_at_60_random_moments_keeps_committed_rows(tmp_path: Path) -> None:
     t0 = time.monotonic()
     done = subprocess.run(
