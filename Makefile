@@ -28,7 +28,7 @@ bench: $(STAMP)
 # 2 cores). The longer runs the README cites (bench_daemon --live-s 600, bench_drivers,
 # bench_tile_pga, bench_survey, the end-to-end tests) are not in it.
 figures: $(STAMP)
-	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/processing/test_imaging_acceptance.py
+	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/processing/imaging/test_imaging_acceptance.py
 	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/processing/test_rangecomp.py -k point_target_peak
 	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/processing/test_gotcha.py
 	$(BIN)/python -m bench.thz_table2 --sweep-seeds 6

@@ -32,7 +32,7 @@ from sarmoco.processing.types import ComplexArray, FloatArray, Image
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import Target, load_preset
 from sarmoco.sim.trajectory import MotionSpec
-from tests.processing.test_tiles import (
+from tests.processing.imaging.test_tiles import (
     HEADING_ERROR_RAD,
     SQUINT_TOLERANCE_RAD,
     Case,
