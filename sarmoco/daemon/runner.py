@@ -24,6 +24,7 @@ from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.sdnotify import Notifier
 from sarmoco.daemon.status import Counters, Health, LiveView, StatusServer
 from sarmoco.daemon.store import StoreNav, StorePulses, open_store
+from sarmoco.daemon.warmup import warm_up_kernels
 from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource
 from sarmoco.drivers.samples import Sample
 from sarmoco.drivers.source import Source
@@ -201,6 +202,9 @@ def _stop_on_signals(stop: threading.Event) -> None:
 class _LiveRun:
     """A live run: status endpoint, store, links, reader threads, and the processing loop.
 
+    The processing's numba kernels are compiled (or loaded from numba's cache) first,
+    before the links open and READY=1 (:func:`~sarmoco.daemon.warmup.warm_up_kernels`).
+
     Parameters
     ----------
     cfg : Config
@@ -215,6 +219,7 @@ class _LiveRun:
         self.cfg = cfg
         self.path = path
         self.notifier = Notifier()
+        warm_up_kernels(cfg, self.notifier)  # before the links: nothing waits for a compile
         self.counters, self.health = Counters(), Health()
         self.st = _LiveState(stop)
         live = LiveFeed()

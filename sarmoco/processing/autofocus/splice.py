@@ -207,3 +207,13 @@ def phase_screen(cycles_per_order: FloatArray, delta_range_m: FloatArray) -> Flo
     """
     powers = np.vstack([np.ones_like(delta_range_m), delta_range_m, delta_range_m**2])
     return np.asarray(2.0 * np.pi * (cycles_per_order @ powers), dtype=float)
+
+
+def warm_up() -> None:
+    """Compile the kernel of :func:`remove_phase` (or load it from numba's cache) on
+    complex64 pulses, the range-compressed data's dtype.
+
+    numba compiles at a kernel's first call: seconds on an idle board, tens of seconds
+    under load. The daemon calls this before it reads its links (``sarmoco run``).
+    """
+    remove_phase(np.ones((2, 4), np.complex64), np.zeros((2, 3)), 0.1 * np.arange(4.0))

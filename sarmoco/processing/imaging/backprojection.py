@@ -434,3 +434,42 @@ def backproject(
         np.asarray(grid.axis1_m, dtype=np.float64),
         grid.frame,
     )
+
+
+@dataclass(frozen=True)
+class WarmUpScene:
+    """A tiny image (4 pulses, 4 x 4 pixels) that the kernels' warm-ups focus.
+
+    Its arrays have the dtypes, dimensions and layouts the real calls pass
+    (:meth:`TileImager <sarmoco.processing.imaging.tiles.TileImager>`'s), so numba
+    compiles, or loads from its cache, the one specialisation those calls use.
+    """
+
+    out: ComplexArray
+    lines: RangeLines
+    apc_m: FloatArray
+    grid: PlaneGrid
+    wavelength_m: float = 0.02
+
+    @classmethod
+    def make(cls) -> WarmUpScene:
+        """The scene: a 4 x 4 grid of 0.1 m pixels 10 m to the side of 4 pulses 5 m up."""
+        grid = PlaneGrid(0.1 * np.arange(4.0), 10.0 + 0.1 * np.arange(4.0))
+        apc = np.column_stack([0.1 * np.arange(4.0), np.zeros(4), np.full(4, 5.0)])
+        rc = np.ones((4, 8), np.complex64)
+        lines = RangeLines.upsample(rc, 10.0 + 0.05 * np.arange(8.0), 2)
+        return cls(np.zeros((4, 4), np.complex64), lines, apc, grid)
+
+
+def warm_up() -> None:
+    """Compile :func:`backproject_into`'s kernel (or load it from numba's cache) by
+    focusing :class:`WarmUpScene` once with every option a real call uses.
+
+    numba compiles at a kernel's first call: seconds on an idle board, tens of seconds
+    under load. The daemon calls this before it reads its links (``sarmoco run``).
+    """
+    s = WarmUpScene.make()
+    backproject_into(
+        s.out, s.lines, s.apc_m, s.wavelength_m, s.grid, pulses=np.flatnonzero(s.apc_m[:, 0] >= 0),
+        beam_half_angle_rad=0.1, compensated_dy_m=np.zeros(4),
+    )  # fmt: skip

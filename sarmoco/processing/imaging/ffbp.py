@@ -50,6 +50,7 @@ import numpy as np
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.imaging.backprojection import (
     RangeLines,
+    WarmUpScene,
     _sincos,
     backproject_into,
     pulse_geometry,
@@ -582,3 +583,17 @@ def ffbp_into(
         k, plan.angle_order, out.view(np.float32),
     )  # fmt: skip
     return plan
+
+
+def warm_up() -> None:
+    """Compile :func:`ffbp_into`'s three kernels (or load them from numba's cache) by
+    focusing :class:`~sarmoco.processing.imaging.backprojection.WarmUpScene` once in two
+    stages, so that each kernel runs (the planner would pick the direct kernel for so few
+    pulses; that one is :func:`~sarmoco.processing.imaging.backprojection.warm_up`'s).
+    """
+    s = WarmUpScene.make()
+    ffbp_into(
+        s.out, s.lines, 2.0 * s.lines.dr_m, s.apc_m, s.wavelength_m, s.grid, 0.3,
+        pulses=np.flatnonzero(s.apc_m[:, 0] >= 0), beam_half_angle_rad=0.1,
+        compensated_dy_m=np.zeros(4), factorisation=Factorisation(2, 2, 0.15),
+    )  # fmt: skip

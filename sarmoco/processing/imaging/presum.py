@@ -305,3 +305,15 @@ def _concat(
     if not data:
         return _empty(n_samples)
     return np.concatenate(data), np.concatenate(times)
+
+
+def warm_up() -> None:
+    """Compile the FIR kernel of :class:`AzimuthPrefilter` (or load it from numba's cache)
+    by filtering 63 pulses of 4 samples, one slot empty, and flushing.
+
+    numba compiles at a kernel's first call: seconds on an idle board, tens of seconds
+    under load. The daemon calls this before it reads its links (``sarmoco run``).
+    """
+    pre = AzimuthPrefilter(1000.0, 50.0)
+    pre.push(np.ones((63, 4), np.complex64), np.delete(1_000_000 * np.arange(64), 7))
+    pre.flush()
