@@ -378,6 +378,13 @@ class StatusConfig:
         ge=0,
         le=65535,
     )
+    live_render_interval_s: float = _key(
+        1.0,
+        "Shortest time between two renderings of the live page's tile strip (rendered in "
+        "the HTTP thread, only when a tile was added)",
+        unit="s",
+        gt=0,
+    )
     log_level: Literal["debug", "info", "warning", "error"] = _key("info", "Log level")
 
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import FrameType
 
-from sarmoco.daemon.config import Config, config_to_dict
+from sarmoco.daemon.config import Config, StatusConfig, config_to_dict
 from sarmoco.daemon.focuser import SinkFactory
 from sarmoco.daemon.links import open_ins, open_radar
 from sarmoco.daemon.livefeed import LiveFeed
@@ -140,20 +140,22 @@ def _finished_text(names: list[str]) -> str:
 
 
 def _start_status(
-    counters: Counters, health: Health, port: int, store: Path, live: LiveFeed
+    counters: Counters, health: Health, cfg: StatusConfig, store: Path, live: LiveFeed
 ) -> StatusServer | None:
-    """The status endpoint on 127.0.0.1:``port`` with the live page of ``live``, the feed
-    of the recorder of ``store`` (None: port 0).
+    """The status endpoint on 127.0.0.1:``cfg.http_port`` with the live page of ``live``,
+    the feed of the recorder of ``store`` (None: port 0).
 
     Raises
     ------
     ConfigError
         If the port cannot be bound (in use, or privileged).
     """
+    port = cfg.http_port
     if not port:
         return None
+    view = LiveView(store, live, cfg.live_render_interval_s)
     try:
-        return StatusServer(counters, health, port=port, live=LiveView(store, live)).start()
+        return StatusServer(counters, health, port=port, live=view).start()
     except OSError as exc:
         raise ConfigError(f"status.http_port: {port} cannot be bound: {exc.strerror}") from exc
 
@@ -223,7 +225,7 @@ class _LiveRun:
         self.counters, self.health = Counters(), Health()
         self.st = _LiveState(stop)
         live = LiveFeed()
-        self.status = _start_status(self.counters, self.health, cfg.status.http_port, path, live)
+        self.status = _start_status(self.counters, self.health, cfg.status, path, live)
         self.recorder = open_recorder(cfg, path, live)
         radar = open_radar(cfg)
         ins = open_ins(cfg, keep_raw=cfg.recorder.raw_ins)
