@@ -232,8 +232,11 @@ class Aligner:
             identity = np.tile([1.0, 0.0, 0.0, 0.0], (tk.shape[0], 1))
             kin_nav = NavSamples(tk, vk[:, :3], identity, vk[:, 3:] if has_pos else None)
             att_nav = self._lever_track(ta, qa)
-            kin = self._bridge(kin_nav, tq, interpolate_nav(kin_nav, tq, self.bridge_gap_ns,
-                                                            strict=False))  # fmt: skip
+            # the INS's own velocity, not its positions' derivative (navinterp: velocity)
+            kin_q = interpolate_nav(
+                kin_nav, tq, self.bridge_gap_ns, strict=False, velocity="samples"
+            )
+            kin = self._bridge(kin_nav, tq, kin_q)
             att = interpolate_nav(att_nav, tq, self.bridge_gap_ns, strict=False)
             pos_q, vel_q = kin.pos_ned, kin.vel_ned
             if self.lever_arm_body_m is not None:

@@ -3,10 +3,12 @@
 Position: cubic Hermite between the two bracketing samples using the INS
 velocity as the end-point derivatives (local, so it streams: a pulse needs
 only the sample before and the sample after it). Velocity: the derivative of
-that same Hermite cubic, so position and velocity stay consistent; when the
-positions are the trapezoidal integral of the velocities (an INS-only stream,
-see :func:`integrate_velocity`) it reduces exactly to linear interpolation of
-the velocity. Attitude: SLERP between the bracketing quaternions.
+that same Hermite cubic, so position and velocity stay consistent, or (for an
+INS's own positions, whose updates and stamp quantisation the derivative would
+amplify) the samples' velocity interpolated linearly; when the positions are
+the trapezoidal integral of the velocities (an INS-only stream, see
+:func:`integrate_velocity`) the two are the same. Attitude: SLERP between the
+bracketing quaternions.
 
 A pulse is valid only when samples bracket it and the bracketing interval is
 not longer than ``max_gap_ns``; gaps are flagged, never bridged silently (a caller bridges
@@ -17,6 +19,7 @@ All times are GPS ns (``int64``); positions NED m, velocities NED m/s.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -137,6 +140,7 @@ def interpolate_nav(
     *,
     strict: bool = True,
     pos0_ned: FloatArray | None = None,
+    velocity: Literal["positions", "samples"] = "positions",
 ) -> PulseNav:
     """Navigation state at pulse times.
 
@@ -154,6 +158,14 @@ def interpolate_nav(
         ``valid`` False (False).
     pos0_ned : ndarray, shape (3,), optional
         Start position for the integration when ``nav`` has no position, NED, m.
+    velocity : {"positions", "samples"}
+        ``"positions"``: the derivative of the position cubic (consistent with the
+        position; right for exact tracks such as the rotated lever arm). ``"samples"``: the
+        samples' own velocity, interpolated linearly: an aided INS's positions carry its
+        position updates and stamps quantised to its clock (MAVLink: 1 ms, 17 mm along
+        track at 17 m/s), which the cubic's derivative over a 10 ms interval turns into
+        m/s; its velocity carries neither. The same when the positions are the velocity's
+        trapezoidal integral.
 
     Raises
     ------
@@ -189,12 +201,15 @@ def interpolate_nav(
         + (-2 * s3 + 3 * s2) * p1
         + (s3 - s2) * h * v1
     )
-    vel = (
-        (6 * s2 - 6 * s) * p0 / h
-        + (3 * s2 - 4 * s + 1) * v0
-        + (-6 * s2 + 6 * s) * p1 / h
-        + (3 * s2 - 2 * s) * v1
-    )
+    if velocity == "samples":
+        vel = (1.0 - s) * v0 + s * v1
+    else:
+        vel = (
+            (6 * s2 - 6 * s) * p0 / h
+            + (3 * s2 - 4 * s + 1) * v0
+            + (-6 * s2 + 6 * s) * p1 / h
+            + (3 * s2 - 2 * s) * v1
+        )
     quat = slerp(src.quat[idx], src.quat[idx + 1], s[:, 0])
     pos[~valid] = np.nan
     vel[~valid] = np.nan
