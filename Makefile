@@ -16,9 +16,10 @@ demo: $(STAMP)
 
 # Two phases (tests/conftest.py REALTIME says which tests are `realtime` and why): the
 # rest on two pytest-xdist workers, a module's tests on one worker (its fixtures built
-# once), then the realtime tests alone, one after the other. Both phases always run; the
-# target fails when either does (pytest's 5, no test collected, included). The second -m
-# replaces pyproject's, so it names bench and fuzz_long again.
+# once; test_install's two in-tree pip builds never overlap), then the realtime tests
+# alone, one after the other. Both phases always run; the target fails when either does
+# (pytest's 5, no test collected, included). The second -m replaces pyproject's, so it
+# names bench and fuzz_long again.
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadscope --durations=15 \
 	  -m "not realtime and not bench and not fuzz_long"; status=$$?; \
