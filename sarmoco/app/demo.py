@@ -81,7 +81,6 @@ def run_loopback(
     platform: Sequence[str] = (),
     faults: Sequence[str] = (),
     scene: str = "points",
-    pulses: int | None = None,
     **sections: dict[str, Any],
 ) -> dict[str, Any]:
     """Play a scaled ku-vehicle scenario from ``sarmoco sim --serve`` into ``sarmoco run``.
@@ -114,9 +113,6 @@ def run_loopback(
         ``sarmoco sim --scene``: "points" (the preset's targets) or "extended" (terrain
         clutter and corner reflectors, :mod:`sarmoco.sim.extended`); the report's
         comparison then covers the whole clutter patch.
-    pulses : int, optional
-        ``sarmoco sim --pulses``: pulses to play (default: the scenario's); more fly on
-        along the track past the targets (a longer run, the same targets).
     **sections : dict
         Extra configuration keys per section (e.g. ``autofocus={"enabled": False}``).
 
@@ -133,7 +129,7 @@ def run_loopback(
          "--motion-seed", "1", "--ins-grade", "tactical", "--serve", "--radar", radar_url,
          "--ins", f"{ins}:{INS_EMITTERS[ins].loopback.format(port=free_udp_port())}",
          "--truth", str(out / "truth.json"), "--scene", scene, *platform,
-         *(f"--fault={f}" for f in faults), *([] if pulses is None else ["--pulses", str(pulses)])],
+         *(f"--fault={f}" for f in faults)],
         stdout=subprocess.PIPE, text=True,
     )  # fmt: skip
     daemon: subprocess.Popen[str] | None = None

@@ -123,7 +123,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def add_platform_arguments(p: argparse.ArgumentParser) -> None:
-    """The platform's arguments: track heading, look side, lever arm."""
+    """The platform's arguments: track heading, look side, lever arm, approach."""
     p.add_argument(
         "--heading-deg", type=float, default=0.0, help="track heading, deg from north (default 0)"
     )
@@ -136,6 +136,10 @@ def add_platform_arguments(p: argparse.ArgumentParser) -> None:
         help="INS to antenna phase centre, body frame, m (default: the preset's "
         f"{','.join(map(str, DEFAULT_LEVER_ARM_M))})",
     )
+    p.add_argument(
+        "--approach-s", type=float, default=0.0, metavar="S",
+        help="fly S s of straight track before the targets' aperture (default 0)",
+    )  # fmt: skip
 
 
 def _lever_arm(text: str) -> tuple[float, float, float]:
@@ -155,13 +159,16 @@ def platform_arguments(argv: Sequence[str]) -> argparse.Namespace:
 
 
 def scenario_overrides(args: argparse.Namespace) -> dict[str, Any]:
-    """The :func:`load_preset` overrides of the platform arguments (heading, look side, arm)."""
+    """The :func:`load_preset` overrides of the platform arguments (heading, look side, arm,
+    approach)."""
     over: dict[str, Any] = {
         "heading_rad": math.radians(args.heading_deg),
         "look_side": args.look_side,
     }
     if args.lever_arm is not None:
         over["lever_arm_m"] = args.lever_arm
+    if args.approach_s:
+        over["approach_s"] = args.approach_s
     return over
 
 

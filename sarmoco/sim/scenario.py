@@ -411,7 +411,9 @@ def _receiver(p: dict[str, Any], near_m: float, far_m: float, r_c: float) -> tup
     return n, float(gate)
 
 
-def load_preset(name: str, scale: float = 1.0, **overrides: Any) -> Scenario:
+def load_preset(
+    name: str, scale: float = 1.0, approach_s: float = 0.0, **overrides: Any
+) -> Scenario:
     """Load a shipped scenario preset.
 
     Parameters
@@ -420,6 +422,11 @@ def load_preset(name: str, scale: float = 1.0, **overrides: Any) -> Scenario:
         One of :data:`PRESETS`.
     scale : float
         0 < scale <= 1: shrinks swath, pulse width (samples) and PRF, keeping the resolutions.
+    approach_s : float
+        Straight flight before the targets' aperture, s (>= 0): the track starts
+        ``approach_s * speed_mps`` earlier and the run lasts ``approach_s`` longer; the
+        receive window, PRF and targets stay the preset's (the targets then come into the
+        beam ``approach_s`` after the first pulse).
     **overrides
         Any :class:`RadarParams` field (e.g. ``prf_hz``, ``receive``, ``n_samples``,
         ``chirp_direction``, ``iq_conjugate``) or
@@ -454,6 +461,10 @@ def load_preset(name: str, scale: float = 1.0, **overrides: Any) -> Scenario:
     p.setdefault("aperture_s", _aperture_s(p, t_ned, ground_c))
     p.setdefault("track_start_north_m", _track_start(p, t_ned))
     radar, (near, far) = _radar(p, float(raw["radar"]["prf_hz"]), scale, t_ned, ground_c)
+    if not approach_s >= 0.0:
+        raise ConfigError(f"scenario.approach_s: {approach_s!r} is not >= 0")
+    p["track_start_north_m"] -= approach_s * p["speed_mps"]
+    p["aperture_s"] += approach_s
     look_side, heading, lever = _orientation(p)
     rot = _track_to_ned(heading, look_side)
     notes = {k: float(raw[k]) for k in _PRESET_KEYS if k in raw}

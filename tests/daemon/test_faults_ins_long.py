@@ -1,10 +1,11 @@
 """A 10 s INS silence through the real processes: ``sarmoco sim --serve`` into ``sarmoco run``
-over MAVLink/UDP and VITA/UDP, ku-vehicle x0.03 (232 samples, 175 Hz PRF) played for
-14.5 s (``sarmoco sim --pulses``: the platform flies on along the track past the targets,
-whose aperture is the first 2.63 s), ``/status`` polled every 0.1 s while the daemon runs.
+over MAVLink/UDP and VITA/UDP, ku-vehicle x0.03 (232 samples, 175 Hz PRF) with 11.5 s of
+straight approach before the targets' aperture (``sarmoco sim --approach-s``: 14.1 s of
+pulses, the targets in the beam over the last 2.6 s), ``/status`` polled every 0.1 s while
+the daemon runs. One run serves both tests.
 
-The INS sends nothing from 3.0 s to 13.0 s after the first pulse (``ins-dropout=3:10``,
-issue 12's longest dropout). Checked:
+The INS sends nothing from 1.0 s to 11.0 s after the first pulse (``ins-dropout=1:10``,
+issue 12's longest dropout), 0.5 s before the targets come into the beam. Checked:
 
 - every pulse sent is in the store (complete), and the pulses of the silence, and only
   they, are flagged ``NAV_TIMEOUT`` or ``NAV_GAP`` and not focused: the store's focused
@@ -13,18 +14,24 @@ issue 12's longest dropout). Checked:
 - ``/status`` says the INS is unhealthy, its newest sample older than
   :data:`~sarmoco.daemon.runner.INS_STALE_S` and growing to about 10 s, during the silence,
   and healthy again (a fresh sample) after it; the daemon stays up and exits 0;
-- the pulses after the silence are focused (their tiles hold echo), and the target
-  (imaged before the silence) keeps its azimuth PSLR within 1 dB of the sinc's.
+- the targets, imaged after the silence, are focused: azimuth PSLR within 1 dB of the
+  sinc's; and (xfail, open) their azimuth IRW within 10 % of theory: 0.205-0.214 m = 1.16-1.21 x
+  (0.177 m) in the runs so far, 0.178 m in the same flight without the silence.
 
-The targets are all imaged before the silence: a preset flight cannot place one after it.
+Marked ``bench`` (``pytest -m bench tests/daemon/test_faults_ins_long.py``): the run takes
+59-65 s on the 2 shared cores at load 3.5-4.7 (14.1 s of flight, the rest starting the
+simulator and daemon, draining and the report), over the suite's 40 s for one live test.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import re
 import threading
 import time
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -34,25 +41,35 @@ from sarmoco.app.demo import run_loopback
 from sarmoco.daemon.flags import NAV_UNUSABLE
 from sarmoco.daemon.runner import INS_STALE_S
 from sarmoco.daemon.store import open_store
-from sarmoco.sim.scenario import load_preset
 from tests.daemon.test_faults_can_bus import _status
 from tests.daemon.test_faults_ins_link import _free_tcp_port
 from tests.daemon.test_faults_wire import SINC_PSLR_DB
 
 SCALE = 0.03
-FLIGHT_S = 14.5
-"""Seconds of pulses played."""
-SILENCE_S = (3.0, 10.0)
+APPROACH_S = 11.5
+"""Straight flight before the targets' aperture, s."""
+SILENCE_S = (1.0, 10.0)
 """INS silence: start after the first pulse, and length, s."""
 EDGE_S = 0.05
 """Pulses this close to the silence's ends may go either way (the INS samples at 200 Hz), s."""
 AGE = re.compile(r"newest sample ([0-9.]+|inf) s old")
 
+pytestmark = pytest.mark.bench
 
-def test_ten_second_ins_silence(tmp_path_factory: pytest.TempPathFactory) -> None:
+
+@dataclass(frozen=True)
+class _Run:
+    out: Path
+    summary: dict[str, Any]
+    status: list[dict[str, Any]]
+    """The ``/status`` documents read while the daemon ran, in order."""
+
+
+@pytest.fixture(scope="module")
+def silence_run(tmp_path_factory: pytest.TempPathFactory) -> _Run:
+    """The flight with the 10 s INS silence, played into the daemon once for the module."""
     out = tmp_path_factory.mktemp("ins_silence_10s")
     port = _free_tcp_port()
-    n_pulses = round(FLIGHT_S * load_preset("ku-vehicle", SCALE).radar.prf_hz)
     seen: list[dict[str, Any]] = []
     done = threading.Event()
 
@@ -67,12 +84,17 @@ def test_ten_second_ins_silence(tmp_path_factory: pytest.TempPathFactory) -> Non
     watcher.start()
     try:
         summary = run_loopback(
-            out, SCALE, faults=(f"ins-dropout={SILENCE_S[0]}:{SILENCE_S[1]}",),
-            pulses=n_pulses, status={"http_port": port},
+            out, SCALE, platform=("--approach-s", str(APPROACH_S)),
+            faults=(f"ins-dropout={SILENCE_S[0]}:{SILENCE_S[1]}",), status={"http_port": port},
         )  # fmt: skip
     finally:
         done.set()
         watcher.join()
+    return _Run(out, summary, seen)
+
+
+def test_ten_second_ins_silence(silence_run: _Run) -> None:
+    out, seen = silence_run.out, silence_run.status
     store = open_store(out / "run.zarr")
     assert store.attrs["complete"]
     truth = json.loads((out / "truth.json").read_text())
@@ -90,19 +112,21 @@ def test_ten_second_ins_silence(tmp_path_factory: pytest.TempPathFactory) -> Non
     ins = [(d["components"]["ins"], d["healthy"]) for d in seen if "ins" in d["components"]]
     ages = [float(m[1]) if (m := AGE.search(c["detail"])) else np.nan for c, _ in ins]
     stale = [i for i, a in enumerate(ages) if INS_STALE_S < a < np.inf]  # inf: before the first
-    pslr = summary["image"]["points"][0]["pslr_az_db"]
-    print(f"INS silent {SILENCE_S[1]} s from {start} s, {FLIGHT_S} s flight: {t_s.size} of "
-          f"{sent_ns.size} pulses stored, {flagged.sum()} flagged ({flagged[inside].sum()} of "
-          f"{inside.sum()} inside, {flagged[outside].sum()} outside; span "
-          f"{t_s[flagged].min() if flagged.any() else None} .. "
+    points = silence_run.summary["image"]["points"]
+    targets = [p for p in points if p["peak_db"] > -6.0]  # the bright ones, not noise peaks
+    print(f"INS silent {SILENCE_S[1]} s from {start} s, {t_s.size and t_s.max():.2f} s flight: "
+          f"{t_s.size} of {sent_ns.size} pulses stored, {flagged.sum()} flagged "
+          f"({flagged[inside].sum()} of {inside.sum()} inside, {flagged[outside].sum()} outside; "
+          f"span {t_s[flagged].min() if flagged.any() else None} .. "
           f"{t_s[flagged].max() if flagged.any() else None} s), "
           f"{metrics['pulses_processed']} focused; tiles with echo by aperture end (s): "
           f"{[(round(float(t), 2), bool(e)) for t, e in zip(tile_t1_s, tile_echo, strict=True)]}; "
           f"/status: {len(stale)} of {len(ins)} reads stale, ages "
           f"{ages[stale[0]] if stale else None} .. {max(ages[i] for i in stale) if stale else None}"
-          f" s, last {ins[-1]}; brightest target azimuth PSLR {pslr:.2f} dB")  # fmt: skip
+          f" s, last {ins[-1]}; targets after the silence (azimuth PSLR dB, IRW m): "
+          f"{[(round(p['pslr_az_db'], 2), round(p['irw_az_m'], 3)) for p in targets]}")  # fmt: skip
     # every pulse stored; the silence's pulses flagged, nothing else
-    assert t_s.size == sent_ns.size == n_pulses
+    assert t_s.size == sent_ns.size
     assert np.array_equal(np.sort(got["t_ns"]), np.sort(sent_ns))
     assert flagged[inside].all() and not flagged[outside].any()
     assert metrics["pulses_nav_flagged"] == flagged.sum()
@@ -112,7 +136,6 @@ def test_ten_second_ins_silence(tmp_path_factory: pytest.TempPathFactory) -> Non
     assert silent.sum() >= 0.6 * SILENCE_S[1] * 17.5 / 10.0, silent.sum()  # 10 m tiles, 17.5 m/s
     assert ((tile_t1_s[silent] > start) & (tile_t1_s[silent] <= end)).all()
     assert tile_echo[(tile_t1_s <= start) | (tile_t1_s > end + EDGE_S)].all()
-    assert (tile_t1_s > end + 1.0).any()  # tiles whose aperture is mostly after the silence
     # /status: stale during the silence, healthy after; the daemon stayed up
     assert stale and all(not c["ok"] and not healthy for c, healthy in (ins[i] for i in stale))
     # stale from early in the silence until late in it (read between processing passes)
@@ -121,4 +144,21 @@ def test_ten_second_ins_silence(tmp_path_factory: pytest.TempPathFactory) -> Non
     assert stale == list(range(stale[0], stale[-1] + 1))  # one stretch
     after = ins[stale[-1] + 1 :]
     assert after and after[0][0]["ok"] and ages[stale[-1] + 1] < 1.0, after[:1]
-    assert pslr <= SINC_PSLR_DB + 1.0, pslr
+    # the targets, whose aperture is all after the silence, are focused
+    assert targets and all(p["pslr_az_db"] <= SINC_PSLR_DB + 1.0 for p in targets), points
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="open: after the 10 s silence the targets' azimuth IRW is 1.16-1.21 x theory "
+    "(0.205-0.214 m; 0.178 m in the same flight without the silence); the daemon starts a "
+    "new segment at the first NAV_GAP pulse, before the INS returns",
+)
+def test_focus_resolution_after_ten_second_ins_silence(silence_run: _Run) -> None:
+    scn = json.loads((silence_run.out / "truth.json").read_text())["scenario"]
+    lam = 299_792_458.0 / scn["radar"]["carrier_hz"]
+    irw_az = 0.886 * lam / (4 * math.sin(scn["integration_angle_rad"] / 2))
+    targets = [p for p in silence_run.summary["image"]["points"] if p["peak_db"] > -6.0]
+    print(f"after the 10 s silence: azimuth IRW {[p['irw_az_m'] for p in targets]} m, "
+          f"theory {irw_az:.3f} m")  # fmt: skip
+    assert targets and all(p["irw_az_m"] <= 1.1 * irw_az for p in targets), targets

@@ -132,3 +132,16 @@ def test_scene_targets() -> None:
     assert len(tg) == 300
     assert np.all(np.abs(pos[:, 1] - scn.scene_center_ned[1]) <= scn.swath_m / 2)
     assert np.mean([abs(t.amplitude) ** 2 for t in tg]) == pytest.approx(1.0, rel=0.2)
+
+
+def test_approach_lengthens_the_track_before_the_targets() -> None:
+    base = load_preset("ku-vehicle", 0.03)
+    longer = load_preset("ku-vehicle", 0.03, approach_s=11.5)
+    assert longer.radar == base.radar and longer.targets == base.targets
+    assert longer.aperture_s == pytest.approx(base.aperture_s + 11.5)
+    assert longer.track_start_north_m == pytest.approx(
+        base.track_start_north_m - 11.5 * base.speed_mps
+    )
+    assert longer.n_pulses - base.n_pulses == pytest.approx(11.5 * base.radar.prf_hz, abs=1)
+    with pytest.raises(ConfigError, match="approach_s"):
+        load_preset("ku-vehicle", 0.03, approach_s=-1.0)
