@@ -20,6 +20,7 @@ thread (:mod:`sarmoco.daemon.writer`), off the caller's.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import datetime
 import importlib.metadata
 import json
@@ -27,7 +28,7 @@ import os
 import platform
 import threading
 import time
-from collections.abc import Awaitable, Callable, Coroutine, Mapping
+from collections.abc import Awaitable, Callable, Coroutine, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -65,6 +66,8 @@ class _SyncingStore(LocalStore):
         self._root = root
         self._dirty: set[str] = set()
         self._dirty_lock = threading.Lock()
+        self._rooted = False
+        """The root ``zarr.json`` was written: from then on, its absence means removed."""
 
     def _removed(self) -> RecorderError | None:
         """The error of a store whose directory is gone (its root ``zarr.json`` missing)."""
@@ -95,13 +98,16 @@ class _SyncingStore(LocalStore):
     async def _set_checked(
         self, key: str, value: Buffer, write: Callable[[str, Buffer], Awaitable[None]]
     ) -> None:
-        removed = None if key == "zarr.json" else self._removed()
+        # the root's metadata may be written where there is none only when the store is
+        # created: later, it would recreate a removed store (a root attribute update)
+        removed = None if key == "zarr.json" and not self._rooted else self._removed()
         if removed is not None:
             raise removed
         try:
             await write(key, value)
         except OSError as exc:
             raise self._refused(key, exc) from exc
+        self._rooted = self._rooted or key == "zarr.json"
         with self._dirty_lock:
             self._dirty.add(key)
 
@@ -126,6 +132,39 @@ class _SyncingStore(LocalStore):
 
 async def _gather(writes: list[Coroutine[Any, Any, None]]) -> None:
     await asyncio.gather(*writes)
+
+
+def _settle_zarr_tasks() -> None:
+    """Wait until every other task on zarr's event loop has ended, retrieving their exceptions.
+
+    Called when a write fails (:class:`~sarmoco.daemon.writer.OrderedWriter`'s
+    ``on_failure``, :func:`_settling`). A zarr write returns at its first failure
+    (``asyncio.gather``) while the other writes it started go on; if one of those fails
+    too, its exception is retrieved only by a callback of that gather, which never runs
+    when the loop stops first (zarr stops it at interpreter exit): asyncio then logs
+    "Task exception was never retrieved", "Future exception was never retrieved" or
+    "Task was destroyed but it is pending!" for it, after the daemon's last word. The
+    failure is reported once, by the exception of the write that failed first.
+    """
+    zarr_sync(_settle())
+
+
+@contextlib.contextmanager
+def _settling() -> Iterator[None]:
+    """Run zarr writes made outside the writer (table creation, the close); on a failure,
+    :func:`_settle_zarr_tasks` before it goes on."""
+    try:
+        yield
+    except BaseException:
+        _settle_zarr_tasks()
+        raise
+
+
+async def _settle() -> None:
+    current = asyncio.current_task()
+    await asyncio.gather(
+        *(t for t in asyncio.all_tasks() if t is not current), return_exceptions=True
+    )
 
 
 def _fsync_path(path: Path, flags: int) -> None:
@@ -346,8 +385,8 @@ class Recorder(Closing):
         (:class:`~sarmoco.daemon.writer.OrderedWriter`): every method then checks its
         arguments, copies them and returns, and the thread writes in call order (the
         ``committed`` counts advance after their rows, fsync every interval, as on one
-        thread); a failed write is raised by the next call. 0: each method writes
-        before it returns.
+        thread); a failed write is raised by the next call, and is
+        :attr:`write_failure` meanwhile. 0: each method writes before it returns.
     """
 
     def __init__(
@@ -401,7 +440,9 @@ class Recorder(Closing):
         self._images.update_attributes({COMMITTED_ATTR: 0})
         self.n_images = 0
         self._closed = False
-        self._writer = OrderedWriter(f"recorder {self.path.name}", writer_queue)
+        self._writer = OrderedWriter(
+            f"recorder {self.path.name}", writer_queue, on_failure=_settle_zarr_tasks
+        )
         self.sync()
 
     def _create(self, spec: TableSpec) -> Table:
@@ -522,7 +563,8 @@ class Recorder(Closing):
             if spec.name in self.root:
                 raise RecorderError(f"append_rows: {spec.name!r} is a fixed part of the store")
             self._writer.drain()  # the writer thread is not writing while it is created
-            table = self._create(spec)
+            with _settling():
+                table = self._create(spec)
         self._append(table, **columns)
         if self.live is not None and spec.name == schema.AUTOFOCUS.name:
             self.live.add_autofocus(columns)
@@ -644,6 +686,17 @@ class Recorder(Closing):
         attrs = {name: json.loads(json.dumps(dict(value), default=str))}
         self._writer.submit(self.root.update_attributes, attrs)
 
+    @property
+    def write_failure(self) -> RecorderError | None:
+        """The store write failure that stands (None: none).
+
+        With the writer thread, its first failure: the store takes no write after it and
+        every later call raises it; a caller that makes no more calls (the last pulses
+        recorded) sees it here. Without, the last write's failure (which that call
+        raised) until a write succeeds.
+        """
+        return self._writer.failure
+
     def sync(self) -> int:
         """fsync what was written since the last sync, after the writes handed over so far
         (called on the writer thread, by a write: what was written before it); returns the
@@ -667,8 +720,9 @@ class Recorder(Closing):
         except RecorderError:
             self._closed = True
             raise
-        for table in self.tables.values():
-            table.trim()
-        self.root.update_attributes({schema.COMPLETE_ATTR: True})
-        self.sync()
+        with _settling():
+            for table in self.tables.values():
+                table.trim()
+            self.root.update_attributes({schema.COMPLETE_ATTR: True})
+            self.sync()
         self._closed = True

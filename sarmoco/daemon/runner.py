@@ -236,6 +236,8 @@ class _LiveRun:
         """The INS link is a log file, read at its own pace (see :meth:`_now_ns`)."""
         self._ins_backlog: deque[Sample] = deque()
         """Samples read from an INS log and not yet offered (:meth:`_read_ins_file`)."""
+        self._write_failure_reported = False
+        """The recorder's writer thread failed and that was counted and logged."""
         record_ins_format(self.recorder, ins)
         self.counters.add_source("radar", radar.decoder.counters.snapshot)
         self.counters.add_source("ins", ins.counters.snapshot)
@@ -404,17 +406,31 @@ class _LiveRun:
         """One pass of the pipeline; returns the pulses released.
 
         A processing error loses only this block's focus (its pulses are recorded): it
-        is counted and reported unhealthy until a pass succeeds.
+        is counted and reported unhealthy until a pass succeeds; a store write failure
+        until a write succeeds (:attr:`Recorder.write_failure`; a pass with nothing to
+        write does not clear it). A write that failed on the recorder's writer thread
+        (``recorder.writer_queue``) is raised by the next call to the recorder; if the
+        pass made no call after it, it is counted and reported here, once, and
+        processing stays unhealthy (the thread writes nothing after it).
         """
         try:
             released = self.pipe.process(self._now_ns(), on_block=self._block_done)
         except SarmocoError as exc:
-            self.counters.inc("processing_errors")
-            self.health.set("processing", False, str(exc))
-            log.error("processing error, block skipped", extra={"error": str(exc)})
+            self._processing_failed(exc)
             return 0
-        self.health.set("processing", True)
+        failure = self.recorder.write_failure
+        if failure is None:
+            self.health.set("processing", True)
+        elif not self._write_failure_reported:
+            self._processing_failed(failure)
         return released
+
+    def _processing_failed(self, exc: SarmocoError) -> None:
+        """Count, log and report unhealthy a failed pass (or writer thread)."""
+        self.counters.inc("processing_errors")
+        self.health.set("processing", False, str(exc))
+        log.error("processing error, block skipped", extra={"error": str(exc)})
+        self._write_failure_reported = self.recorder.write_failure is not None
 
     def _block_done(self) -> None:
         """A block was recorded within a pass: WATCHDOG=1 (at most every half period) if

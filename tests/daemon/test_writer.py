@@ -6,16 +6,20 @@ Its durability under power loss and SIGKILL is tested with the other recorder cr
 
 from __future__ import annotations
 
+import asyncio
 import shutil
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
+from zarr.core.buffer import Buffer
+from zarr.core.sync import sync as zarr_sync
 
 from sarmoco.daemon.flags import PulseFlag
-from sarmoco.daemon.recorder import Recorder
+from sarmoco.daemon.recorder import Recorder, _SyncingStore
 from sarmoco.daemon.store import open_store
 from sarmoco.daemon.writer import OrderedWriter
 from sarmoco.errors import RecorderError
@@ -128,3 +132,116 @@ def test_a_failed_write_on_the_thread_is_raised_by_a_later_call_and_by_close(
     with pytest.raises(RecorderError, match="directory was removed"):
         rec.close()
     rec.close()  # closed once
+
+
+def test_a_failure_after_the_last_call_is_there_to_see_and_the_hook_runs_first() -> None:
+    """A caller that makes no more calls sees the thread's failure without one (the live
+    runner's health check); ``on_failure`` runs on the writer thread before it is kept."""
+    seen: list[tuple[str, bool]] = []
+    writer: OrderedWriter
+
+    def on_failure() -> None:
+        seen.append((threading.current_thread().name, writer.failure is None))
+
+    writer = OrderedWriter("test", depth=4, on_failure=on_failure)
+    writer.submit(lambda: None)
+    assert writer.failure is None
+    writer.submit(_refuse)
+    deadline = time.monotonic() + 10.0
+    while writer.failure is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert "No space" in str(writer.failure)
+    assert seen == [("test", True)]
+    writer.close()
+
+
+def _refuse() -> None:
+    raise RecorderError("recorder: /x: cannot write 'pulses/echo/c/0': No space")
+
+
+@pytest.mark.parametrize("writer_queue", [0, 4])
+def test_a_failed_write_leaves_no_zarr_task_running(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, writer_queue: int
+) -> None:
+    """When a failed write reaches the caller no write it started still runs on zarr's loop.
+
+    One column's chunk is refused at once, another's 0.3 s later: zarr's gather returns at
+    the first failure and the second, finishing later, would be an exception retrieved only
+    by a callback that does not run if the loop stops first (at interpreter exit: asyncio's
+    "Task exception was never retrieved" after the daemon's last word, CI8).
+    """
+    real_set = _SyncingStore.set
+
+    async def refusing_set(self: _SyncingStore, key: str, value: Buffer) -> None:
+        if key.startswith(("pulses/t_ns/c/", "pulses/flags/c/")):
+            await asyncio.sleep(0.3 if "flags" in key else 0.0)
+            raise RecorderError(f"recorder: refused {key!r}: No space left on device")
+        await real_set(self, key, value)
+
+    rec = Recorder(tmp_path / "r.zarr", cw.N_SAMPLES, "int16", writer_queue=writer_queue)
+    monkeypatch.setattr(_SyncingStore, "set", refusing_set)
+    rows = cw.pulse_rows(np.arange(4, dtype=np.int64))
+    with pytest.raises(RecorderError, match="t_ns"):  # the first failure, once
+        rec.append_pulses(
+            rows["t_ns"], rows["pulse_id"], rows["channel"], rows["flags"], rows["echo"]
+        )
+        rec.close()
+    assert zarr_sync(_other_tasks()) == []
+
+
+def test_a_failed_close_leaves_no_zarr_task_running(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The same for the close's own zarr calls: trimming the arrays deletes their chunks past
+    the committed rows concurrently; one refused at once, the others 0.3 s later (CI run
+    bt5 here: asyncio logged five such "Future exception was never retrieved" at exit)."""
+    real_delete = _SyncingStore.delete
+
+    async def refusing_delete(self: _SyncingStore, key: str) -> None:
+        if key.startswith("pulses/t_ns/c/"):
+            await asyncio.sleep(0.0 if key.endswith("/2") else 0.3)
+            raise RecorderError(f"recorder: refused {key!r}: Read-only file system")
+        await real_delete(self, key)
+
+    rec = Recorder(tmp_path / "r.zarr", cw.N_SAMPLES, "int16", chunk_pulses=2)
+    rows = cw.pulse_rows(np.arange(3, dtype=np.int64))
+    rec.append_pulses(rows["t_ns"], rows["pulse_id"], rows["channel"], rows["flags"], rows["echo"])
+    monkeypatch.setattr(_SyncingStore, "delete", refusing_delete)
+    with pytest.raises(RecorderError, match="c/2'"):
+        rec.close()
+    assert zarr_sync(_other_tasks()) == []
+
+
+async def _other_tasks() -> list[asyncio.Task[Any]]:
+    current = asyncio.current_task()
+    return [t for t in asyncio.all_tasks() if t is not current]
+
+
+@pytest.mark.parametrize("writer_queue", [0, 4])
+def test_a_root_attribute_after_the_store_was_removed_does_not_recreate_it(
+    tmp_path: Path, writer_queue: int
+) -> None:
+    """The removed-store check held for every file but the root's metadata, so a root
+    attribute update (or a new table's group) after ``rm -rf`` of the store made a new
+    store there, and the writes after it went on unreported (test_faults_host, writer thread)."""
+    path = tmp_path / "gone.zarr"
+    rec = Recorder(path, cw.N_SAMPLES, "int16", writer_queue=writer_queue)
+    cw.write_rounds(rec, 60.0, rounds=1)
+    rec.sync()
+    shutil.rmtree(path)
+    with pytest.raises(RecorderError, match="directory was removed"):
+        rec.set_attribute("late", {"k": 1})
+        rec.close()
+    assert not path.exists()
+
+
+def test_without_the_thread_a_failure_stands_until_a_write_succeeds() -> None:
+    """The caller's call raises it; the caller's health reads it until a write succeeds
+    (a pass of the daemon with nothing to write must not report the store healthy)."""
+    writer = OrderedWriter("test", depth=0)
+    with pytest.raises(RecorderError, match="No space"):
+        writer.submit(_refuse)
+    assert "No space" in str(writer.failure)
+    writer.raise_error()  # the next write is tried (the disk may have room again)
+    writer.submit(lambda: None)
+    assert writer.failure is None

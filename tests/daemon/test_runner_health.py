@@ -1,0 +1,54 @@
+"""A store write that fails on the recorder's writer thread after the processing loop's
+last call to the recorder (the last pulses recorded, nothing more to write) reaches the
+processing health, the error counter and the log once, and the exit status at the stop.
+
+Before, such a failure waited for a call that never came: with ``recorder.writer_queue``
+on, test_faults_host's disk-full and removed-store checks saw /status healthy for 60 s.
+(The same checks with real file systems, both ways, are in test_faults_host.py.)
+"""
+
+from __future__ import annotations
+
+import logging
+import shutil
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from sarmoco.app.simconfig import scenario_config
+from sarmoco.daemon.runner import _LiveRun
+from sarmoco.errors import RecorderError
+from sarmoco.sim.scenario import load_preset
+
+
+def test_a_failure_after_the_last_write_is_reported_once_and_stays(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    cfg = scenario_config(
+        load_preset("ku-vehicle", 0.05),
+        radar={"link": "udp://127.0.0.1:0"},
+        ins={"protocol": "mavlink", "link": "udpin:127.0.0.1:0"},
+        recorder={"directory": str(tmp_path), "writer_queue": 4},
+        status={"http_port": 0},
+    )
+    run = _LiveRun(cfg, tmp_path / "run.zarr", threading.Event())
+    try:
+        assert run._process() == 0
+        assert run.health.components()["processing"]["ok"]
+        shutil.rmtree(run.path)  # the store vanishes
+        run.recorder.set_attribute("late", {"k": 1})  # written, and refused, on the thread
+        deadline = time.monotonic() + 10.0
+        while run.recorder.write_failure is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        with caplog.at_level(logging.ERROR, logger="sarmoco"):
+            for _ in range(3):  # passes with nothing to write
+                run._process()
+        processing = run.health.components()["processing"]
+        assert not processing["ok"] and "directory was removed" in processing["detail"]
+        assert run.counters.snapshot()["counters"]["processing_errors"] == 1
+        assert [r.getMessage() for r in caplog.records] == ["processing error, block skipped"]
+    finally:
+        with pytest.raises(RecorderError, match="directory was removed"):  # exit status 2
+            run.shut_down()
