@@ -15,7 +15,7 @@ import numpy as np
 import scipy.fft
 
 from sarmoco.errors import ProcessingError
-from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
+from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, IntArray
 
 
 def nominal_rate(range_m: FloatArray, speed_mps: float, wavelength_m: float) -> FloatArray:
@@ -110,6 +110,80 @@ def _rescale(spectrum: FloatArray, scale: float) -> FloatArray:
     )
 
 
+CROWDED_DB = 20.0
+"""A line whose azimuth spectrum holds a second scatterer within this many dB of its strongest
+(and :data:`SCATTERER_DB` over the noise) is crowded: map drift then tapers its looks."""
+
+SCATTERER_DB = 15.0
+"""A spectral peak counts as a scatterer when it stands this far over the line's median."""
+
+
+def _hann(n: int) -> FloatArray:
+    """Hann taper of n samples without its zero end points, float32."""
+    return np.hanning(n + 2)[1:-1].astype(np.float32)
+
+
+def _crowded(bands: ComplexArray, tc: FloatArray, rate: FloatArray, n_fft: int) -> BoolArray:
+    """Whether each line (N,) holds more than one scatterer: a peak of its Hann-tapered
+    azimuth spectrum, dechirped with ``rate``, outside three mainlobe half-widths of the
+    strongest, within :data:`CROWDED_DB` of it and :data:`SCATTERER_DB` over the median."""
+    m = tc.shape[0]
+    d = _dechirp(bands, tc, rate) * _hann(m)
+    power = np.square(np.abs(scipy.fft.fft(d, n_fft, axis=-1)), dtype=np.float64).sum(axis=1)
+    k = np.argmax(power, axis=-1)
+    signed = (np.arange(n_fft)[None, :] - k[:, None] + n_fft // 2) % n_fft - n_fft // 2
+    others = np.where(np.abs(signed) > 6 * n_fft / m, power, 0.0).max(axis=-1)
+    peak = power.max(axis=-1)
+    floor = np.median(power, axis=-1) * 10.0 ** (SCATTERER_DB / 10.0)
+    return np.asarray((others >= peak * 10.0 ** (-CROWDED_DB / 10.0)) & (others >= floor))
+
+
+def _drift(
+    bands: ComplexArray,
+    t_s: FloatArray,
+    rate_ref: FloatArray,
+    taper: FloatArray,
+    n_iter: int,
+    oversample: int,
+    delta: FloatArray,
+) -> tuple[FloatArray, FloatArray]:
+    """:func:`map_drift`'s passes from the rate error ``delta``, each look weighted by
+    ``taper`` (shape (M // 2,))."""
+    m = t_s.shape[0]
+    half = m // 2
+    n_fft = oversample * int(2 ** np.ceil(np.log2(half)))
+    tc = t_s - 0.5 * (t_s[0] + t_s[-1])
+    dt = float(t_s[-1] - t_s[0]) / (m - 1)
+    separation = float(np.mean(t_s[half : 2 * half]) - np.mean(t_s[:half]))
+    # each look's spectrum on the frequency axis of the mean spacing dt (k / (n_fft dt))
+    scale_a = float(t_s[half - 1] - t_s[0]) / (half - 1) / dt
+    scale_b = float(t_s[2 * half - 1] - t_s[half]) / (half - 1) / dt
+    quality = np.zeros(bands.shape[0])
+    for _ in range(n_iter):
+        d = _dechirp(bands, tc, rate_ref + delta)
+        a = np.abs(scipy.fft.fft(d[..., :half] * taper, n_fft, axis=-1)).sum(axis=1)
+        a = _rescale(a, scale_a)
+        b = np.abs(scipy.fft.fft(d[..., half : 2 * half] * taper, n_fft, axis=-1)).sum(axis=1)
+        b = _rescale(b, scale_b)
+        a -= a.mean(axis=-1, keepdims=True)
+        b -= b.mean(axis=-1, keepdims=True)
+        spec = scipy.fft.rfft(b, axis=-1) * np.conj(scipy.fft.rfft(a, axis=-1))
+        xc = np.asarray(scipy.fft.irfft(spec, n_fft, axis=-1), dtype=float)
+        k = np.argmax(xc, axis=-1)
+        rows = np.arange(xc.shape[0])
+        y0, y1, y2 = xc[rows, k - 1], xc[rows, k], xc[rows, (k + 1) % n_fft]
+        den = y0 - 2.0 * y1 + y2
+        frac = np.where(den < 0, 0.5 * (y0 - y2) / np.where(den < 0, den, -1.0), 0.0)
+        shift = (k + n_fft // 2) % n_fft - n_fft // 2 + frac
+        delta = delta + shift / (n_fft * dt) / separation
+        # float64 sums: squares of full-scale single-precision data overflow float32
+        norm = np.sqrt(np.sum(np.square(a, dtype=np.float64), axis=-1)) * np.sqrt(
+            np.sum(np.square(b, dtype=np.float64), axis=-1)
+        )
+        quality = np.clip(y1 / np.where(norm > 0, norm, 1.0), 0.0, 1.0)
+    return delta, quality
+
+
 def map_drift(
     bands: ComplexArray,
     t_s: FloatArray,
@@ -118,6 +192,12 @@ def map_drift(
     oversample: int = 4,
 ) -> tuple[FloatArray, FloatArray]:
     """Doppler-rate error by map drift (two looks, magnitude cross-correlation, sub-bin peak).
+
+    Lines that hold more than one scatterer (:func:`_crowded`, at the rate found) are
+    measured again with Hann-tapered looks, from that rate: untapered, the sidelobes of one
+    scatterer's compressed response move another's peak differently in the two looks (three
+    scatterers 0.5 s apart on a line, no rate error: 0.16 Hz/s rms, 0.007 tapered); a lone
+    scatterer is located more precisely untapered (0.18 against 0.31 Hz/s rms at 10 dB).
 
     Parameters
     ----------
@@ -141,38 +221,16 @@ def map_drift(
         Normalised correlation peak of the last pass, in [0, 1].
     """
     _check(bands, t_s, rate_ref)
-    m = t_s.shape[0]
-    half = m // 2
-    n_fft = oversample * int(2 ** np.ceil(np.log2(half)))
+    half = t_s.shape[0] // 2
+    flat = np.ones(half, dtype=np.float32)
+    delta, quality = _drift(bands, t_s, rate_ref, flat, n_iter, oversample, np.zeros(len(bands)))
+    n_fft = oversample * int(2 ** np.ceil(np.log2(t_s.shape[0])))
     tc = t_s - 0.5 * (t_s[0] + t_s[-1])
-    dt = float(t_s[-1] - t_s[0]) / (m - 1)
-    separation = float(np.mean(t_s[half : 2 * half]) - np.mean(t_s[:half]))
-    # each look's spectrum on the frequency axis of the mean spacing dt (k / (n_fft dt))
-    scale_a = float(t_s[half - 1] - t_s[0]) / (half - 1) / dt
-    scale_b = float(t_s[2 * half - 1] - t_s[half]) / (half - 1) / dt
-    delta = np.zeros(bands.shape[0])
-    quality = np.zeros(bands.shape[0])
-    for _ in range(n_iter):
-        d = _dechirp(bands, tc, rate_ref + delta)
-        a = _rescale(np.abs(scipy.fft.fft(d[..., :half], n_fft, axis=-1)).sum(axis=1), scale_a)
-        b = np.abs(scipy.fft.fft(d[..., half : 2 * half], n_fft, axis=-1)).sum(axis=1)
-        b = _rescale(b, scale_b)
-        a -= a.mean(axis=-1, keepdims=True)
-        b -= b.mean(axis=-1, keepdims=True)
-        spec = scipy.fft.rfft(b, axis=-1) * np.conj(scipy.fft.rfft(a, axis=-1))
-        xc = np.asarray(scipy.fft.irfft(spec, n_fft, axis=-1), dtype=float)
-        k = np.argmax(xc, axis=-1)
-        rows = np.arange(xc.shape[0])
-        y0, y1, y2 = xc[rows, k - 1], xc[rows, k], xc[rows, (k + 1) % n_fft]
-        den = y0 - 2.0 * y1 + y2
-        frac = np.where(den < 0, 0.5 * (y0 - y2) / np.where(den < 0, den, -1.0), 0.0)
-        shift = (k + n_fft // 2) % n_fft - n_fft // 2 + frac
-        delta = delta + shift / (n_fft * dt) / separation
-        # float64 sums: squares of full-scale single-precision data overflow float32
-        norm = np.sqrt(np.sum(np.square(a, dtype=np.float64), axis=-1)) * np.sqrt(
-            np.sum(np.square(b, dtype=np.float64), axis=-1)
+    crowded = _crowded(bands, tc, rate_ref + delta, n_fft)
+    if np.any(crowded):
+        delta[crowded], quality[crowded] = _drift(
+            bands[crowded], t_s, rate_ref[crowded], _hann(half), n_iter, oversample, delta[crowded]
         )
-        quality = np.clip(y1 / np.where(norm > 0, norm, 1.0), 0.0, 1.0)
     return delta, quality
 
 
