@@ -3,8 +3,9 @@
 Run as ``.venv/bin/python -m bench.run_ends [--seeds 0 1 2] [--uniform] [--no-autofocus]``.
 
 ku-vehicle ×0.1 flown with the motion of a real ArduPilot flight log (18.5 → 19.5 m/s),
-tactical INS, 9 targets (3 along track 15 m apart × 3 ranges; the first aperture starts at
-the run's first pulse, the last ends at its last), simulated, written as ``.vrt`` and
+tactical INS, 9 targets (3 along track 15 m apart × 3 ranges; the start group is lit from
+the run's first pulses, the end group leaves the beam 0.4 s, one subaperture, before the
+last: the log flies faster than the preset's 17.5 m/s), simulated, written as ``.vrt`` and
 ``.tlog`` and replayed (``mocomp.along_track`` on unless ``--uniform``). Prints the azimuth
 PSLR of the start, middle and end targets (each three ranges): the strip's nine brightest
 points, as the report measures them.
