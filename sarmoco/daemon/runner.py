@@ -44,6 +44,9 @@ INS_ENDED_NOW_NS = 2**62
 INS_STALE_S = 2.0
 """The INS counts as unhealthy when its newest sample is older than this (host clock), s."""
 
+HEALTH_PERIOD_S = 0.1
+"""Period of the links' and the INS's health checks (:meth:`_LiveRun._watch_links`), s."""
+
 
 def new_store_path(directory: str | Path, kind: str) -> Path:
     """A fresh store name ``<directory>/<kind>-<UTC time>.zarr``."""
@@ -249,6 +252,10 @@ class _LiveRun:
                 "ins", lambda: open_ins(cfg, keep_raw=cfg.recorder.raw_ins), ins, self._read_ins
             ),
         ]
+        self._links_ok = False
+        """Every link up at the last look of :meth:`_watch_links` (WATCHDOG=1 needs it)."""
+        self.monitor = threading.Thread(target=self._watch_links, name="health", daemon=True)
+        self.monitor.start()
         log.info("sarmoco running", extra={"store": str(path), "radar": cfg.radar.link,
                                             "ins": cfg.ins.link})  # fmt: skip
         port = self.status.port if self.status else 0
@@ -384,19 +391,13 @@ class _LiveRun:
         data seconds processed over it is how many times faster than real time the loop
         runs (``sarmoco bench``'s ``realtime_ratio``).
         """
-        last_status = 0.0
-        self._links_ok = False
         while not self.st.stop.is_set():
             start = time.monotonic()
             released = self._process()
             now = time.monotonic()
             self.counters.inc("processing_busy_seconds", now - start)
-            self._links_ok = self._update_health(now)
             if self._links_ok:
                 self.notifier.keepalive()
-            if now - last_status >= 1.0:
-                last_status = now
-                self._publish_status(now)
             if self._idle(now, idle_exit_s):
                 break
             if released == 0:
@@ -439,21 +440,40 @@ class _LiveRun:
         if self._links_ok:
             self.notifier.keepalive()
 
+    def _watch_links(self) -> None:
+        """Keep the links' and the INS's health current every ``HEALTH_PERIOD_S``, and the
+        age gauges and ``STATUS=`` every second, on their own thread: a processing pass
+        through a backlog can take seconds, and /status must show a link or INS fault
+        while it lasts (set between passes, a 0.4 s CAN bus fault showed in no read)."""
+        last_status = -math.inf
+        while not self.st.stop.wait(HEALTH_PERIOD_S):
+            now = time.monotonic()
+            self._links_ok = self._update_health(now)
+            if now - last_status >= 1.0:
+                last_status = now
+                self._publish_status(now)
+
     def _nav_age(self, now: float) -> float:
         """Age of the newest INS sample (host clock), s; infinite before the first."""
         return now - self.st.last_nav_mono if self.st.last_nav_mono else float("inf")
 
     def _update_health(self, now: float) -> bool:
-        """Set the ``links`` and ``ins`` health checks; returns whether every link is up.
+        """Set the ``links`` and ``ins`` health checks and the INS and radar age gauges;
+        returns whether every link is up.
 
         A reader that stopped because its file ended is not down; an INS log read to its
         end is healthy however old its last sample. The INS is unhealthy while its link's
         adapter reports a bus fault (CAN error passive or bus-off; the link stays up).
+        ``radar_age_seconds``: host time since the radar link last gave a pulse (infinite
+        before the first): a stalled peer shows here while the link stays up.
         """
         st, ended = self.st, sorted(self.st.finished)
         ok = all(t.is_alive() or t.name in ended for t in self.threads) and not st.link_down
         self.health.set("links", ok, st.link_down or _finished_text(ended))
         nav_age = self._nav_age(now)
+        self.counters.set("ins_age_seconds", nav_age)
+        last_pulse = st.last_pulse_mono
+        self.counters.set("radar_age_seconds", now - last_pulse if last_pulse else math.inf)
         ins_detail = f"newest sample {nav_age:.2f} s old"
         if "ins" in ended:  # a log read to its end: no newer sample will come
             ins_detail = f"{_finished_text(['ins'])}, {ins_detail}"
@@ -464,16 +484,9 @@ class _LiveRun:
         return ok
 
     def _publish_status(self, now: float) -> None:
-        """The INS and radar age gauges and the systemd ``STATUS=`` line.
-
-        ``radar_age_seconds``: host time since the radar link last gave a pulse (infinite
-        before the first): a stalled peer shows here while the link stays up.
-        """
+        """The systemd ``STATUS=`` line."""
         nav_age = self._nav_age(now)
         ended = sorted(self.st.finished)
-        self.counters.set("ins_age_seconds", nav_age)
-        last_pulse = self.st.last_pulse_mono
-        self.counters.set("radar_age_seconds", now - last_pulse if last_pulse else math.inf)
         self.notifier.status(
             f"{self.pipe.summary.pulses_received} pulses, INS age {nav_age:.2f} s, "
             f"backlog {len(self.pipe.ring)}{'; ' if ended else ''}{_finished_text(ended)}"
@@ -492,7 +505,7 @@ class _LiveRun:
         """Stop the readers, release and focus what is left, close the store and endpoints."""
         self.notifier.stopping()
         self.st.stop.set()
-        for t in self.threads:
+        for t in [*self.threads, self.monitor]:
             t.join(timeout=5.0)
         try:
             summary = self.pipe.finish()

@@ -52,3 +52,35 @@ def test_a_failure_after_the_last_write_is_reported_once_and_stays(
     finally:
         with pytest.raises(RecorderError, match="directory was removed"):  # exit status 2
             run.shut_down()
+
+
+def test_link_health_follows_the_links_without_a_processing_pass(tmp_path: Path) -> None:
+    """The links' and the INS's health are kept on their own thread: with no processing
+    pass at all (as during a long one through a backlog), /status still sees the INS go
+    from never heard to fresh to stale. Set between passes, a 0.4 s CAN bus fault showed
+    in no /status read while passes took up to 0.9 s."""
+    cfg = scenario_config(
+        load_preset("ku-vehicle", 0.05),
+        radar={"link": "udp://127.0.0.1:0"},
+        ins={"protocol": "mavlink", "link": "udpin:127.0.0.1:0"},
+        recorder={"directory": str(tmp_path)},
+        status={"http_port": 0},
+    )
+    run = _LiveRun(cfg, tmp_path / "run.zarr", threading.Event())
+
+    def ins_after(seconds: float) -> dict[str, object]:
+        time.sleep(seconds)
+        return run.health.components()["ins"]
+
+    try:
+        first = ins_after(0.5)
+        assert not first["ok"] and "inf s old" in str(first["detail"]), first
+        assert run.health.components()["links"]["ok"]
+        run.st.last_nav_mono = time.monotonic()  # what the INS reader does with a sample
+        assert ins_after(0.5)["ok"]
+        assert run.counters.snapshot()["gauges"]["ins_age_seconds"] < 2.0
+        run.st.last_nav_mono = time.monotonic() - 10.0
+        stale = ins_after(0.5)
+        assert not stale["ok"] and "10." in str(stale["detail"]), stale
+    finally:
+        run.shut_down()
