@@ -11,29 +11,19 @@ from __future__ import annotations
 
 import logging
 import shutil
-import threading
 import time
 from pathlib import Path
 
 import pytest
 
-from sarmoco.app.simconfig import scenario_config
-from sarmoco.daemon.runner import _LiveRun
 from sarmoco.errors import RecorderError
-from sarmoco.sim.scenario import load_preset
+from tests.daemon.idle_run import idle_run
 
 
 def test_a_failure_after_the_last_write_is_reported_once_and_stays(
     tmp_path: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
-    cfg = scenario_config(
-        load_preset("ku-vehicle", 0.05),
-        radar={"link": "udp://127.0.0.1:0"},
-        ins={"protocol": "mavlink", "link": "udpin:127.0.0.1:0"},
-        recorder={"directory": str(tmp_path), "writer_queue": 4},
-        status={"http_port": 0},
-    )
-    run = _LiveRun(cfg, tmp_path / "run.zarr", threading.Event())
+    run = idle_run(tmp_path, writer_queue=4)
     try:
         assert run._process() == 0
         assert run.health.components()["processing"]["ok"]
@@ -59,14 +49,7 @@ def test_link_health_follows_the_links_without_a_processing_pass(tmp_path: Path)
     pass at all (as during a long one through a backlog), /status still sees the INS go
     from never heard to fresh to stale. Set between passes, a 0.4 s CAN bus fault showed
     in no /status read while passes took up to 0.9 s."""
-    cfg = scenario_config(
-        load_preset("ku-vehicle", 0.05),
-        radar={"link": "udp://127.0.0.1:0"},
-        ins={"protocol": "mavlink", "link": "udpin:127.0.0.1:0"},
-        recorder={"directory": str(tmp_path)},
-        status={"http_port": 0},
-    )
-    run = _LiveRun(cfg, tmp_path / "run.zarr", threading.Event())
+    run = idle_run(tmp_path)
 
     def ins_after(seconds: float) -> dict[str, object]:
         time.sleep(seconds)

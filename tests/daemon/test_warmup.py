@@ -13,16 +13,13 @@ import json
 import socket
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import pytest
 
-from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon import warmup
-from sarmoco.daemon.runner import _LiveRun
-from sarmoco.sim.scenario import load_preset
+from tests.daemon.idle_run import idle_run
 
 _FOCUS = """
 import json, sys
@@ -106,14 +103,7 @@ def test_ready_comes_after_the_warm_up(tmp_path: Path, monkeypatch: pytest.Monke
         before_ready.extend(_received(listener))
 
     monkeypatch.setattr(warmup, "kernel_warm_ups", lambda cfg: [*real(cfg), last_step])
-    cfg = scenario_config(
-        load_preset("ku-vehicle", 0.05),
-        radar={"link": "udp://127.0.0.1:0"},
-        ins={"protocol": "mavlink", "link": "udpin:127.0.0.1:0"},
-        recorder={"directory": str(tmp_path)},
-        status={"http_port": 0},
-    )
-    run = _LiveRun(cfg, tmp_path / "run.zarr", threading.Event())
+    run = idle_run(tmp_path)
     run.shut_down()
     after = _received(listener)
     listener.close()
