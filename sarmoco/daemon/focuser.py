@@ -492,7 +492,13 @@ class Focuser:
         """Azimuth pre-filter of the current (or last) segment."""
         return self._last.prefilter
 
-    def push(self, raw: ComplexArray, t_ns: IntArray, vel_ned: FloatArray) -> FocusOutput:
+    def push(
+        self,
+        raw: ComplexArray,
+        t_ns: IntArray,
+        vel_ned: FloatArray,
+        known: BoolArray | None = None,
+    ) -> FocusOutput:
         """Process one block of aligned raw pulses.
 
         Parameters
@@ -504,6 +510,9 @@ class Focuser:
         vel_ned : ndarray, shape (P, 3)
             Antenna phase centre velocity at the pulses (the aligner adds the lever
             arm's rate to the IMU velocity), NED, m/s.
+        known : ndarray of bool, shape (P,), optional
+            Pulses with navigation (false: zeroed echoes with a placeholder velocity
+            across a navigation gap, which never sets a segment's track); all when omitted.
         """
         # range compression here, or after the pre-filter (imaging.presum_first)
         rc = raw if self._last.presum_first else rangecomp.compress(self.radar, raw, self.window)
@@ -514,7 +523,7 @@ class Focuser:
             out.motion, tiles = self.segment.push(rc, t_ns, vel_ned)
             out.add_tiles(tiles, self.segment.track)
             return out
-        plan = self.segmenter.plan(t_ns, vel_ned)
+        plan = self.segmenter.plan(t_ns, vel_ned, known)
         out.turn = plan.turn
         new = dict(zip(plan.starts.tolist(), plan.tracks, strict=True))
         cuts = np.flatnonzero(np.diff(plan.turn)) + 1

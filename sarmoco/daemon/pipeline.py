@@ -442,7 +442,7 @@ class Pipeline:
         if p.usable.any():
             k = int(np.flatnonzero(p.usable)[-1])
             self._last_nav = (int(p.t_ns[k]), p.vel_ned[k], p.quat[k])
-        out = self.focuser.push(p.raw, p.t_ns, p.vel_ned)
+        out = self.focuser.push(p.raw, p.t_ns, p.vel_ned, p.usable)
         self.summary.pulses_processed += int(np.count_nonzero(p.usable))
         self._record_motion(p, out)
         self._record(out)

@@ -23,6 +23,17 @@ and its own D_los starting at 0:
   longer than the window): after a turn the first track's heading rests on one window
   of turbulent flight (about 0.3° off in the survey simulation), the next one on the
   whole leg so far, so a leg is rarely cut twice.
+- **After a navigation gap**: pulses without navigation (``known`` false: the daemon
+  gives them placeholder velocities, held or interpolated across the hole) never start
+  a segment and never enter a track's velocity. Where the known pulses are more than
+  ``window_s`` apart, a segment starts at the first known pulse after the gap, its track
+  along the mean velocity of the known pulses of the next ``window_s`` that the block
+  holds: the flight before the gap, or the placeholders, may head elsewhere. A pixel
+  takes the pulses within half the beam plus the squint tolerance of the track's
+  broadside, so a track off the beam's heading cuts the aperture: after a 10 s INS
+  silence on ku-vehicle x0.03 the segment started inside the silence along the held
+  placeholder velocity, -14.2 mrad against the simulator's beam at 0, and the targets
+  after it focused at 1.2 x the azimuth IRW (9 of the 50 mrad aperture cut).
 
 Everything here is a function of pulse times (GPS ns) and APC velocities (NED, m/s);
 the :class:`Segmenter` carries the state from one block to the next, so feeding a strip
@@ -124,8 +135,13 @@ class Segmenter:
         self._t = np.zeros(0, dtype=np.int64)
         self._v = np.zeros((0, 3))
         self._psi = np.zeros(0)
+        self._known = np.zeros(0, dtype=bool)
+        self._last_known_ns = track.t0_ns
+        """Time of the last pulse with navigation so far, GPS ns."""
 
-    def plan(self, t_ns: IntArray, vel_ned: FloatArray) -> SegmentPlan:
+    def plan(
+        self, t_ns: IntArray, vel_ned: FloatArray, known: BoolArray | None = None
+    ) -> SegmentPlan:
         """Decide turns and segment starts for the next block and advance the state.
 
         Parameters
@@ -134,15 +150,22 @@ class Segmenter:
             Pulse times, strictly increasing across calls, GPS ns.
         vel_ned : ndarray of float64, shape (P, 3)
             APC velocity at the pulses, NED, m/s.
+        known : ndarray of bool, shape (P,), optional
+            Pulses whose velocity is measured (false: a placeholder across a navigation
+            gap); all when omitted.
         """
         t = np.asarray(t_ns, dtype=np.int64)
         v = np.asarray(vel_ned, dtype=np.float64)
-        if v.shape != (t.shape[0], 3):
-            raise ProcessingError(f"Segmenter: t_ns {t.shape} and vel_ned {v.shape} disagree")
+        ok = np.ones(t.shape[0], dtype=bool) if known is None else np.asarray(known, dtype=bool)
+        if v.shape != (t.shape[0], 3) or ok.shape != t.shape:
+            raise ProcessingError(
+                f"Segmenter: t_ns {t.shape}, vel_ned {v.shape} and known {ok.shape} disagree"
+            )
         if t.size == 0:
             return SegmentPlan(np.zeros(0, bool), np.zeros(0, np.int64), ())
         pos, self._pos = integrate_los(t, v, self._pos)
-        mean_v, turn = self._windowed(t, v)
+        mean_v, turn = self._windowed(t, v, ok)
+        gap = self._after_gap(t, ok)
         starts: list[int] = []
         tracks: list[ReferenceTrack] = []
         k, n = 0, t.size
@@ -151,23 +174,29 @@ class Segmenter:
                 self._restart = True
                 k += int(np.argmin(turn[k:])) if not turn[k:].all() else n - k
                 continue
-            if self._restart:
+            if gap[k]:
+                self._start(k, t, self._ahead(t, v, ok, k), pos, starts, tracks)
+            elif self._restart:
                 self._start(k, t, mean_v[k], pos, starts, tracks)
-            end = k + (int(np.argmax(turn[k:])) if turn[k:].any() else n - k)
+            cut = turn[k:] | gap[k:]
+            cut[0] = False
+            end = k + (int(np.argmax(cut)) if cut.any() else n - k)
             vel_img = vector_to_imaging(v[k:end], self.track)[:, 1:3]
             disp, state = integrate_los(t[k:end], vel_img, self._disp)
-            over = np.flatnonzero(np.hypot(disp[:, 0], disp[:, 1]) > self.limits.deviation_m)
+            over = np.flatnonzero(
+                (np.hypot(disp[:, 0], disp[:, 1]) > self.limits.deviation_m) & ok[k:end]
+            )
             if over.size:  # a segment starts there (its deviation restarts at 0)
                 m = k + int(over[0])
-                seg_n = self._seg_n + m - k
-                long_v = (self._seg_sum + v[k:m].sum(axis=0)) / max(seg_n, 1)
+                seg_n = self._seg_n + int(ok[k:m].sum())
+                long_v = (self._seg_sum + v[k:m][ok[k:m]].sum(axis=0)) / max(seg_n, 1)
                 use_long = seg_n > 0 and (t[m] - self.track.t0_ns) * 1e-9 > self.limits.window_s
                 self._start(m, t, long_v if use_long else mean_v[m], pos, starts, tracks)
                 k = m
                 continue
             self._disp = state
-            self._seg_sum += v[k:end].sum(axis=0)
-            self._seg_n += end - k
+            self._seg_sum += v[k:end][ok[k:end]].sum(axis=0)
+            self._seg_n += int(ok[k:end].sum())
             k = end
         return SegmentPlan(turn, np.asarray(starts, dtype=np.int64), tuple(tracks))
 
@@ -189,19 +218,48 @@ class Segmenter:
         starts.append(k)
         tracks.append(self.track)
 
-    def _windowed(self, t: IntArray, v: FloatArray) -> tuple[FloatArray, BoolArray]:
-        """Window-mean velocity (P, 3) and the turn mask (P,) of the block; keeps the history."""
+    def _windowed(
+        self, t: IntArray, v: FloatArray, known: BoolArray
+    ) -> tuple[FloatArray, BoolArray]:
+        """Window-mean velocity of the known pulses (P, 3) (of all where the window holds
+        none) and the turn mask (P,) of the block (from all pulses: the placeholders across
+        a gap are smooth); keeps the history."""
         w_ns = round(self.limits.window_s * 1e9)
         n_hist = self._t.size
         t_all = np.concatenate([self._t, t])
         v_all = np.concatenate([self._v, v])
-        cum = np.concatenate([np.zeros((1, 3)), np.cumsum(v_all, axis=0)])
+        k_all = np.concatenate([self._known, known])
         rows = np.arange(n_hist, t_all.size)
         first = np.searchsorted(t_all, t_all[rows] - w_ns, side="right")
-        mean_v = (cum[rows + 1] - cum[first]) / (rows + 1 - first)[:, None]
+
+        def window_sum(x: FloatArray) -> FloatArray:
+            cum = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x, axis=0)])
+            return np.asarray(cum[rows + 1] - cum[first], dtype=np.float64)
+
+        mean_v = window_sum(v_all) / (rows + 1 - first)[:, None]
+        n_known = window_sum(k_all[:, None].astype(np.float64))
+        known_v = window_sum(v_all * k_all[:, None]) / np.maximum(n_known, 1.0)
         psi_all = np.concatenate([self._psi, _heading(mean_v)])
         before = psi_all[np.maximum(first - 1, 0)]
         turn = np.abs(_wrap(psi_all[rows] - before)) > self.limits.turn_rad
         keep = t_all > t_all[-1] - 2 * w_ns - 1
         self._t, self._v, self._psi = t_all[keep], v_all[keep], psi_all[keep]
-        return mean_v, np.asarray(turn, dtype=bool)
+        self._known = k_all[keep]
+        return np.where(n_known > 0, known_v, mean_v), np.asarray(turn, dtype=bool)
+
+    def _after_gap(self, t: IntArray, known: BoolArray) -> BoolArray:
+        """Known pulses (P,) more than ``window_s`` after the known pulse before them."""
+        rows = np.flatnonzero(known)
+        prev = np.concatenate([[self._last_known_ns], t[rows[:-1]]])
+        gap = np.zeros(t.size, dtype=bool)
+        gap[rows] = t[rows] - prev > round(self.limits.window_s * 1e9)
+        if rows.size:
+            self._last_known_ns = int(t[rows[-1]])
+        return gap
+
+    def _ahead(self, t: IntArray, v: FloatArray, known: BoolArray, k: int) -> FloatArray:
+        """Mean velocity of the known pulses from row ``k`` over ``window_s`` (as far as the
+        block goes), NED, m/s (row ``k`` is known)."""
+        end = int(np.searchsorted(t, t[k] + round(self.limits.window_s * 1e9)))
+        ahead = v[k:end][known[k:end]]
+        return np.asarray(ahead.mean(axis=0), dtype=np.float64)

@@ -15,8 +15,13 @@ issue 12's longest dropout), 0.5 s before the targets come into the beam. Checke
   :data:`~sarmoco.daemon.runner.INS_STALE_S` and growing to about 10 s, during the silence,
   and healthy again (a fresh sample) after it; the daemon stays up and exits 0;
 - the targets, imaged after the silence, are focused: azimuth PSLR within 1 dB of the
-  sinc's; and (xfail, open) their azimuth IRW within 10 % of theory: 0.205-0.214 m = 1.16-1.21 x
-  (0.177 m) in the runs so far, 0.178 m in the same flight without the silence.
+  sinc's, and azimuth IRW within 10 % of theory (0.177 m). The daemon's segment after the
+  silence used to start inside it, its track along the placeholder velocity held from the
+  silence's start (-14.2 mrad heading); the pixels take the pulses within half the beam
+  plus 0.3° (5.2 mrad) of the track's broadside, and the simulator's beam stays on the
+  nominal heading (0 mrad): 9 of the 50 mrad aperture were cut, IRW 0.205-0.214 m =
+  1.16-1.21 x. Now a segment starts at the first pulse with navigation after the silence,
+  along the velocity flown after it (:mod:`sarmoco.processing.segments`): 0.179-0.180 m.
 
 Marked ``bench`` (``pytest -m bench tests/daemon/test_faults_ins_long.py``): the run takes
 59-65 s on the 2 shared cores at load 3.5-4.7 (14.1 s of flight, the rest starting the
@@ -148,14 +153,6 @@ def test_ten_second_ins_silence(silence_run: _Run) -> None:
     assert targets and all(p["pslr_az_db"] <= SINC_PSLR_DB + 1.0 for p in targets), points
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="open: after the 10 s silence the targets' azimuth IRW is 1.16-1.21 x theory "
-    "(0.205-0.214 m; 0.178 m in the same flight without the silence); the daemon starts a "
-    "new segment at the first NAV_GAP pulse, before the INS returns, whose reference track "
-    "heading (-14.5 mrad) was 8 mrad off the heading flown over the targets (-6.5 mrad); "
-    "after a 1 s silence the IRW was 0.178 m, and with SBG instead of MAVLink 0.217 m",
-)
 def test_focus_resolution_after_ten_second_ins_silence(silence_run: _Run) -> None:
     scn = json.loads((silence_run.out / "truth.json").read_text())["scenario"]
     lam = 299_792_458.0 / scn["radar"]["carrier_hz"]

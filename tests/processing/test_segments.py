@@ -104,3 +104,41 @@ def test_a_restart_takes_the_whole_segment_s_mean_heading() -> None:
     assert plan.starts.size == 1
     heading = np.arctan2(plan.tracks[0].x_hat[1], plan.tracks[0].x_hat[0])
     assert abs(np.degrees(heading) - 1.0) < 0.1
+
+
+def test_after_a_navigation_gap_the_track_follows_the_flight_after_it() -> None:
+    """A 10 s INS silence (issue 12's longest): before it the APC flies at -16 mrad,
+    sinking 0.16 m/s; during it the daemon holds that last velocity as a placeholder
+    (``known`` false); after it the APC flies level at -6.5 mrad. The placeholders drift
+    3 m off the first track (due north) 8.3 s into the silence: no segment starts there.
+    The segment that starts at the first pulse with navigation after the silence takes the
+    heading flown after it, whatever the block cut, not the heading of the placeholders or
+    of the flight before it (the daemon's track was -14.2 mrad, and the targets after the
+    silence focused at 1.2 x the azimuth IRW)."""
+    t = np.arange(0.0, 20.0, 1.0 / PRF_HZ)
+    before, after = -16e-3, -6.5e-3
+    v_before = [SPEED_MPS * np.cos(before), SPEED_MPS * np.sin(before), 0.16]
+    v_after = [SPEED_MPS * np.cos(after), SPEED_MPS * np.sin(after), 0.0]
+    vel = np.where((t < 11.0)[:, None], v_before, v_after)
+    known = (t < 1.0) | (t >= 11.0)
+    t_ns = (10**18 + np.round(t * 1e9)).astype(np.int64)
+    north = ReferenceTrack.from_velocity(np.zeros(3), np.array([SPEED_MPS, 0.0, 0.0]), t_ns[0])
+    for block in (t.size, 256, 97):
+        seg = Segmenter(LIMITS, north, "right")
+        starts: list[int] = []
+        tracks: list[ReferenceTrack] = []
+        for a in range(0, t.size, block):
+            p = seg.plan(t_ns[a : a + block], vel[a : a + block], known[a : a + block])
+            assert not p.turn.any()
+            starts += (p.starts + a).tolist()
+            tracks += p.tracks
+        assert starts == [int(np.flatnonzero(t >= 11.0)[0])], (block, t[starts])
+        heading = np.arctan2(tracks[0].x_hat[1], tracks[0].x_hat[0])
+        assert abs(heading - after) < 0.5e-3, (block, heading)
+
+
+def test_known_must_match_the_pulses() -> None:
+    north = ReferenceTrack.from_velocity(np.zeros(3), np.array([SPEED_MPS, 0.0, 0.0]), 10**18)
+    t_ns = 10**18 + np.arange(4, dtype=np.int64) * 10**7
+    with pytest.raises(ProcessingError, match="known"):
+        Segmenter(LIMITS, north, "right").plan(t_ns, np.ones((4, 3)), np.ones(3, dtype=bool))
