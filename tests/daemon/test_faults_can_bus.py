@@ -22,12 +22,8 @@ shorter than ``ins.bridge_gap_s``, 0.4 s, to be bridged) on the counter and the 
 from __future__ import annotations
 
 import json
-import socket
-import threading
-import time
 from datetime import datetime
 from itertools import pairwise
-from typing import Any
 
 import numpy as np
 import pytest
@@ -36,6 +32,7 @@ from sarmoco.app.demo import run_loopback
 from sarmoco.daemon.flags import NAV_UNUSABLE, PulseFlag
 from sarmoco.daemon.store import open_store
 from sarmoco.sim.player import Pacing
+from tests.daemon.statuswatch import watching_status
 from tests.daemon.test_faults_ins_link import SCALE, _free_tcp_port
 from tests.daemon.test_faults_wire import SINC_PSLR_DB
 
@@ -51,17 +48,6 @@ STATE_LAG_S = 0.3
 PASSIVE = "CAN bus passive (adapter status flags 0x24)"
 BUS_OFF = "CAN bus bus-off (adapter status flags 0xA4)"
 OK_AGAIN = "CAN bus ok (adapter status flags 0x00) again"
-
-
-def _status(port: int) -> dict[str, Any] | None:
-    try:
-        with socket.create_connection(("127.0.0.1", port), timeout=1.0) as s:
-            s.sendall(b"GET /status HTTP/1.0\r\nHost: x\r\n\r\n")
-            body = b"".join(iter(lambda: s.recv(65536), b"")).split(b"\r\n\r\n", 1)
-        doc: dict[str, Any] = json.loads(body[1])
-        return doc
-    except (OSError, ValueError, IndexError):
-        return None
 
 
 def _bus_log(logs: str) -> list[tuple[str, float]]:
@@ -81,23 +67,8 @@ def test_slcan_error_passive_and_bus_off(
 ) -> None:
     out = tmp_path_factory.mktemp("can_bus_off")
     port = _free_tcp_port()
-    seen: list[dict[str, Any]] = []
-    done = threading.Event()
-
-    def watch() -> None:
-        while not done.is_set():
-            doc = _status(port)
-            if doc is not None:
-                seen.append(doc)
-            time.sleep(0.05)
-
-    watcher = threading.Thread(target=watch, daemon=True)
-    watcher.start()
-    try:
+    with watching_status(port, 0.05) as seen:
         summary = run_loopback(out, SCALE, ins="sbg-can", faults=FAULTS, status={"http_port": port})
-    finally:
-        done.set()
-        watcher.join()
     logs = capfd.readouterr().err
     store = open_store(out / "run.zarr")
     assert store.attrs["complete"]

@@ -33,8 +33,6 @@ from __future__ import annotations
 import json
 import math
 import re
-import threading
-import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -46,7 +44,7 @@ from sarmoco.app.demo import run_loopback
 from sarmoco.daemon.flags import NAV_UNUSABLE
 from sarmoco.daemon.runner import INS_STALE_S
 from sarmoco.daemon.store import open_store
-from tests.daemon.test_faults_can_bus import _status
+from tests.daemon.statuswatch import watching_status
 from tests.daemon.test_faults_ins_link import _free_tcp_port
 from tests.daemon.test_faults_wire import SINC_PSLR_DB
 
@@ -75,26 +73,11 @@ def silence_run(tmp_path_factory: pytest.TempPathFactory) -> _Run:
     """The flight with the 10 s INS silence, played into the daemon once for the module."""
     out = tmp_path_factory.mktemp("ins_silence_10s")
     port = _free_tcp_port()
-    seen: list[dict[str, Any]] = []
-    done = threading.Event()
-
-    def watch() -> None:
-        while not done.is_set():
-            doc = _status(port)
-            if doc is not None:
-                seen.append(doc)
-            time.sleep(0.1)
-
-    watcher = threading.Thread(target=watch, daemon=True)
-    watcher.start()
-    try:
+    with watching_status(port, 0.1) as seen:
         summary = run_loopback(
             out, SCALE, platform=("--approach-s", str(APPROACH_S)),
             faults=(f"ins-dropout={SILENCE_S[0]}:{SILENCE_S[1]}",), status={"http_port": port},
         )  # fmt: skip
-    finally:
-        done.set()
-        watcher.join()
     return _Run(out, summary, seen)
 
 
