@@ -195,11 +195,12 @@ class MocompConfig:
         le=10,
     )
     along_track: bool = _key(
-        False,
+        True,
         "Place each pulse at its INS along-track position (slow time resampled to "
         "x / v0) for autofocus and image formation (INS-only focus: ku-vehicle x0.1 "
-        "-9.3 -> -12.9 dB PSLR); false: uniform speed v0 (the autofocus then absorbs the "
-        "speed error; with true it currently ends 0.3-0.8 dB worse, see README)",
+        "-9.6 -> -13.0 dB PSLR; with the autofocus on as good as or better than uniform "
+        "speed, see README); false: uniform speed v0, the autofocus then has to absorb "
+        "the speed error as a rate error",
     )
     segments: bool = _key(
         True,
