@@ -63,10 +63,6 @@ def config_table(scn: Scenario, **sections: dict[str, Any]) -> dict[str, Any]:
         The simulated scenario.
     **sections : dict
         Keys to set or override per section, e.g. ``ins={"protocol": "sbg"}``.
-
-    Notes
-    -----
-    A scene with distributed clutter (``scn.clutter``) gets ``mocomp.along_track = true``.
     """
     table: dict[str, dict[str, Any]] = {
         "radar": radar_table(scn.radar),
@@ -84,13 +80,6 @@ def config_table(scn: Scenario, **sections: dict[str, Any]) -> dict[str, Any]:
         },
         "autofocus": autofocus_table(scn),
     }
-    if scn.clutter is not None:
-        # Distributed clutter leaves the autofocus no line that one motion explains (on the
-        # demo's hillshade its estimates were +-50 m/s² and it was kept from applying them),
-        # so the along-track speed error must come from the INS: every pulse at its INS
-        # along-track place (the demo's central reflector: -5.0 dB azimuth PSLR with
-        # uniform speed, -12.7 dB with the INS's along-track position).
-        table["mocomp"] = {"along_track": True}
     for name, values in sections.items():
         table.setdefault(name, {}).update(values)
     return table
