@@ -462,9 +462,9 @@ class Pipeline:
 
     def _first_track_spanned(self) -> bool:
         """The pending pulses with navigation reach past the first track's window."""
-        usable = [(b.echoes.flags & UNFOCUSABLE) == 0 for b in self._pending]
-        t_ns = np.concatenate([b.echoes.t_ns[u] for b, u in zip(self._pending, usable)])
-        vel = np.concatenate([b.nav.vel_ned[u] for b, u in zip(self._pending, usable)])
+        usable = (np.concatenate([b.echoes.flags for b in self._pending]) & UNFOCUSABLE) == 0
+        t_ns = np.concatenate([b.echoes.t_ns for b in self._pending])[usable]
+        vel = np.concatenate([b.nav.vel_ned for b in self._pending])[usable]
         return t_ns.size > 0 and first_track_pulses(self.cfg, t_ns, vel) < t_ns.size
 
     def _focus_pending(self) -> None:
