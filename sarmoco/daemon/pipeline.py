@@ -33,7 +33,7 @@ from sarmoco.daemon.aligner import AlignedBlock, Aligner
 from sarmoco.daemon.config import Config
 from sarmoco.daemon.echoring import Block, EchoRing, SampleFormat, sample_dtype, sample_shape
 from sarmoco.daemon.flags import FLAG_DTYPE, NAV_UNUSABLE, UNFOCUSABLE, PulseFlag
-from sarmoco.daemon.focuser import Focuser, FocusOutput, SinkFactory, segment_limits
+from sarmoco.daemon.focuser import Focuser, FocusOutput, SinkFactory
 from sarmoco.daemon.navbuffer import NavBuffer
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.status import Counters
@@ -124,40 +124,6 @@ class RunSummary:
             "pulses_reordered": self.pulses_reordered,
             "pulses_late_dropped": self.pulses_late_dropped,
         }
-
-
-FIRST_TRACK_MAX_S = 10.0
-"""Longest flight the first reference track averages (and the focuser waits for), s."""
-
-
-def first_track_pulses(cfg: Config, t_ns: IntArray, vel_ned: FloatArray) -> int:
-    """How many of the first pulses the first reference track's velocity averages.
-
-    Those within one synthetic aperture (the segments' heading window,
-    :func:`~sarmoco.daemon.focuser.segment_limits` at the pulses' mean ground speed, at
-    most :data:`FIRST_TRACK_MAX_S`) of the first. The pixels take the pulses within half
-    the beam plus ``imaging.squint_tolerance_deg`` of the track's broadside, and without
-    crab the beam points along the mean course: a track along one processing block of
-    turbulent flight (256 pulses, 1.46 s on ku-vehicle x0.1, the simulator's turbulence)
-    was up to 22.7 mrad off the course (seed 3), and cut the aperture of the targets near
-    the start (azimuth IRW 1.55 / 1.18 / 1.27 / 1.32 x theory at seeds 3 / 4 / 9 / 10;
-    1.10 / 1.01 / 1.00 / 1.00 along one aperture). The course over one aperture can
-    still be off the beam by more than the tolerance: at seeds 7 and 8 the run's own
-    course is -22.6 and +14.5 mrad off the simulator's beam (1.52 and 1.23 x theory).
-
-    Parameters
-    ----------
-    cfg : Config
-        Daemon configuration (geometry, imaging, autofocus).
-    t_ns : ndarray of int64, shape (P,)
-        Times of the pulses with navigation, increasing, GPS ns.
-    vel_ned : ndarray, shape (P, 3)
-        APC velocity at those pulses, NED, m/s.
-    """
-    v0 = float(np.hypot(*vel_ned.mean(axis=0)[:2]))
-    window_s = segment_limits(cfg, v0).window_s if v0 > 0.0 else 0.0
-    end_ns = int(t_ns[0]) + round(min(window_s, FIRST_TRACK_MAX_S) * 1e9)
-    return max(1, int(np.searchsorted(t_ns, end_ns, side="right")))
 
 
 @dataclass(frozen=True)
@@ -455,17 +421,8 @@ class Pipeline:
         self.summary.pulses_received += len(block)
         self._pending.append(block)
         self._pending_n += len(block)
-        if self._pending_n >= self.cfg.imaging.block_pulses and (
-            self.focuser is not None or self._first_track_spanned()
-        ):
+        if self._pending_n >= self.cfg.imaging.block_pulses:
             self._focus_pending()
-
-    def _first_track_spanned(self) -> bool:
-        """The pending pulses with navigation reach past the first track's window."""
-        usable = (np.concatenate([b.echoes.flags for b in self._pending]) & UNFOCUSABLE) == 0
-        t_ns = np.concatenate([b.echoes.t_ns for b in self._pending])[usable]
-        vel = np.concatenate([b.nav.vel_ned for b in self._pending])[usable]
-        return t_ns.size > 0 and first_track_pulses(self.cfg, t_ns, vel) < t_ns.size
 
     def _focus_pending(self) -> None:
         """Focus the pulses accepted so far and record their motion and products."""
@@ -519,16 +476,14 @@ class Pipeline:
     def _start_focusing(self, p: _Pulses) -> _Pulses | None:
         """Start the focuser at the first pulse with navigation; the pulses from there on.
 
-        The reference track's velocity is the mean over the usable pulses of
-        :func:`first_track_pulses` (one synthetic aperture), however the blocks were cut
-        (live and replay cut them differently: the reference track must not depend on
-        it); the pulses wait for it in :meth:`_accept`. None while no pulse has navigation.
+        The reference track's velocity is the mean of the first ``imaging.block_pulses``
+        usable pulses, however the blocks were cut (live and replay cut them differently:
+        the reference track must not depend on it). None while no pulse has navigation.
         """
         if not p.usable.any():
             return None
         p = p.since(int(np.argmax(p.usable)))
-        t_ns, vel = p.t_ns[p.usable], p.vel_ned[p.usable]
-        start_vel = vel[: first_track_pulses(self.cfg, t_ns, vel)].mean(axis=0)
+        start_vel = p.vel_ned[p.usable][: self.cfg.imaging.block_pulses].mean(axis=0)
         self.focuser = Focuser(self.cfg, int(p.t_ns[0]), start_vel, self.sink)
         self.recorder.set_attribute(
             schema.REFERENCE_TRACK_ATTR, schema.encode_reference_track(self.focuser.track)
