@@ -563,9 +563,8 @@ class Focuser:
             return out
         plan = self.segmenter.plan(t_ns, vel_ned, known)
         out.turn = plan.turn
-        new = dict(
-            zip(plan.starts.tolist(), zip(plan.tracks, plan.cut_x_m, plan.offset_m), strict=True)
-        )
+        begun = zip(plan.tracks, plan.cut_x_m, plan.offset_m, strict=True)
+        new = dict(zip(plan.starts.tolist(), begun, strict=True))
         cuts = np.flatnonzero(np.diff(plan.turn)) + 1
         bounds = sorted({0, n, *cuts.tolist(), *new})
         motion: list[MocompSolution] = []

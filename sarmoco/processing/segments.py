@@ -31,10 +31,11 @@ and its own D_los starting at 0:
   the cut (D_los 0 there, as at any start; the deviation test runs from there), its
   origin moved back along it to that first pulse. :attr:`SegmentPlan.cut_x_m` says where
   along it the cut lies, :attr:`SegmentPlan.offset_m` where the APC at its first pulse is
-  off the line (the compensation starts from that, not from 0). The daemon (:mod:`sarmoco.daemon.focuser`) feeds it the pulses it kept since,
-  lets the old segment run on ``overlap_s`` past the cut, and each images only its side
-  of the cut line, so every target lies in one segment that holds its whole aperture.
-  Not after a turn or a navigation gap: no usable pulses precede those starts.
+  off the line (the compensation starts from that, not from 0). The daemon
+  (:mod:`sarmoco.daemon.focuser`) feeds it the pulses it kept since, lets the old segment
+  run on ``overlap_s`` past the cut, and each images only its side of the cut line, so
+  every target lies in one segment that holds its whole aperture. Not after a turn or a
+  navigation gap: no usable pulses precede those starts.
 - **After a navigation gap**: pulses without navigation (``known`` false: the daemon
   gives them placeholder velocities, held or interpolated across the hole) never start
   a segment and never enter a track's velocity. Where the known pulses are more than
