@@ -152,27 +152,26 @@ def measure(
                 pieces.setdefault((k, seg), []).append((a0[i], a1[jj], cut))
     results = []
     for k in range(len(targets)):
-        best: dict[str, float] | None = None
+        best: dict[str, float] = {"target": float(k), "peak": 0.0}
+        images = []
         for (kk, _seg), parts in pieces.items():
-            if kk != k:
-                continue
             parts.sort(key=lambda p: float(p[0][0]))
             a0 = np.concatenate([p[0] for p in parts])
-            data = np.concatenate([p[2] for p in parts])
-            if a0.size < 10 or parts[0][1].size < 10:
-                continue
-            m = point_target_metrics(Image(data, a0, parts[0][1], "ground"))
-            peak = float(np.abs(data).max())
-            if best is None or peak > best["peak"]:
-                best = {
-                    "target": float(k),
-                    "peak": peak,
-                    "pslr_az_db": m.axis0.pslr_db,
-                    "irw_az_m": m.axis0.irw_m,
-                    "pslr_rg_db": m.axis1.pslr_db,
-                    "irw_rg_m": m.axis1.irw_m,
-                }
-        results.append(best if best is not None else {"target": float(k), "peak": 0.0})
+            if kk == k and a0.size >= 10 and parts[0][1].size >= 10:
+                data = np.concatenate([p[2] for p in parts])
+                images.append(Image(data, a0, parts[0][1], "ground"))
+        if images:  # the segment that holds it (another's tiles past a cut: zeros)
+            image = max(images, key=lambda i: float(np.abs(i.data).max()))
+            m = point_target_metrics(image)
+            best = {
+                "target": float(k),
+                "peak": float(np.abs(image.data).max()),
+                "pslr_az_db": m.axis0.pslr_db,
+                "irw_az_m": m.axis0.irw_m,
+                "pslr_rg_db": m.axis1.pslr_db,
+                "irw_rg_m": m.axis1.irw_m,
+            }
+        results.append(best)
     return results, panels
 
 

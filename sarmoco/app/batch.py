@@ -146,6 +146,7 @@ def image_block(cfg: Config, block: ImageBlock) -> list[tuple[int, dict[str, flo
     """
     imager, tile_pga = tile_imaging(cfg, radar_params(cfg))
     stream = block.stream
+    imager.layout = stream.layout  # with the segment's share of the ground (keep)
     extra = 1 if tile_pga is not None else 0
     imager.only = range(block.first_tile - extra, block.last_tile + extra + 1)
     formed = []

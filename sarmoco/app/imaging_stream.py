@@ -65,12 +65,13 @@ class SegmentStream:
     @property
     def tiles(self) -> range:
         """Indices of the tiles the segment's imager forms (contiguous: the APC only
-        advances along track)."""
+        advances along track; those wholly outside the layout's ``keep`` are not formed)."""
         if self.x_m.shape[0] == 0:
             return range(0)
         half, length = self.layout.half_footprint_m, self.layout.tile_length_m
         first = math.floor((float(self.x_m[0, 0]) - half) / length)
-        return range(first, math.floor((float(self.x_m[-1, 1]) + half) / length) + 1)
+        last = math.floor((float(self.x_m[-1, 1]) + half) / length)
+        return self.layout.formed(range(first, last + 1))
 
     def calls_within(self, x_lo_m: float, x_hi_m: float) -> range:
         """The imager calls with a pulse at along-track ``x_lo_m <= x <= x_hi_m`` (m), and

@@ -14,6 +14,18 @@ reference track is the straight line at the mean INS velocity of the first block
 closed, and a new segment starts with a new track, a new D_los (from 0), a new
 autofocus and a new tile imager. Pulses in turns are not imaged (the pipeline flags
 them ``TURN``).
+
+At a deviation cut (not after a turn or a navigation gap) the two segments overlap, so
+that a target whose aperture straddles the cut is still imaged from one track with its
+whole aperture: the new segment's track begins up to ``overlap_s`` (the imaged beam's
+half footprint at far range over v0, plus 10 %) before the cut, and it is first fed the
+pulses of that stretch again (the focuser keeps the last ``overlap_s`` of pulses it
+pushed); the old segment takes the pulses up to ``overlap_s`` past the cut, then ends.
+The cut line on the ground (normal to the new track through the APC at the cut) splits
+their tiles (:attr:`TileLayout.keep`): the old segment keeps the pixels before it, the new
+one those after it, so no target is imaged twice and none falls between. The new
+segment's tiles are handed out after the old segment's last (tiles come out segment by
+segment, as a batch stores them).
 """
 
 from __future__ import annotations
@@ -21,7 +33,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Protocol
 
 import numpy as np
@@ -117,20 +129,26 @@ SinkFactory = Callable[[TileImager, ReferenceTrack], TileSink]
 """Makes a segment's sink from the imager it would use and its reference track."""
 
 
+def tile_layout(cfg: Config) -> TileLayout:
+    """Where a segment's tiles lie (the whole strip: no ``keep``)."""
+    geo, im = cfg.geometry, cfg.imaging
+    ground_range = math.sqrt(max(geo.center_slant_range_m**2 - geo.height_m**2, 0.0))
+    return TileLayout(
+        height_m=geo.height_m,
+        ground_range_m=ground_range,
+        swath_m=im.swath_m,
+        tile_length_m=im.tile_length_m,
+        pixel_m=im.pixel_m,
+        beamwidth_rad=imaged_beam_rad(cfg),
+    )
+
+
 def tile_imaging(cfg: Config, radar: RadarParams) -> tuple[TileImager, TilePga | None]:
     """A segment's tile imager and tile PGA (None when ``autofocus.pga`` is off)."""
     geo, im, af = cfg.geometry, cfg.imaging, cfg.autofocus
-    ground_range = math.sqrt(max(geo.center_slant_range_m**2 - geo.height_m**2, 0.0))
     beam_rad = imaged_beam_rad(cfg)
     imager = TileImager(
-        TileLayout(
-            height_m=geo.height_m,
-            ground_range_m=ground_range,
-            swath_m=im.swath_m,
-            tile_length_m=im.tile_length_m,
-            pixel_m=im.pixel_m,
-            beamwidth_rad=beam_rad,
-        ),
+        tile_layout(cfg),
         rangecomp.range_axis_m(radar),
         radar.wavelength_m,
         ffbp_budget_rad=im.ffbp_max_phase_error_rad if im.method == "ffbp" else None,
@@ -165,8 +183,10 @@ class _Segment:
         radar: RadarParams,
         track: ReferenceTrack,
         sink: SinkFactory | None = None,
+        offset_m: FloatArray | None = None,
     ) -> None:
         self.track = track
+        start = np.zeros(3) if offset_m is None else np.asarray(offset_m, dtype=np.float64)
         geo, im, af = cfg.geometry, cfg.imaging, cfg.autofocus
         range_m = rangecomp.range_axis_m(radar)
         los = LosGeometry.build(
@@ -177,9 +197,9 @@ class _Segment:
             order=cfg.mocomp.order,
             envelope_fraction=cfg.mocomp.envelope_fraction,
         )
-        self.mocomp = InsMotionCompensator(track, los)
+        self.mocomp = InsMotionCompensator(track, los, LosState(disp_yz_m=start[1:].copy()))
         self._along: LosState | None = (
-            LosState(last_vel_yz=np.zeros(1), disp_yz_m=np.zeros(1))
+            LosState(last_vel_yz=np.zeros(1), disp_yz_m=start[:1].copy())
             if cfg.mocomp.along_track
             else None
         )
@@ -213,6 +233,11 @@ class _Segment:
         beam_rad = imaged_beam_rad(cfg)
         imager, self.tile_pga = tile_imaging(cfg, radar)
         self.imager: TileSink = imager
+        self._tiles = imager
+        """The tile imager whose layout says which tiles and pixels the segment forms (its
+        sink's too)."""
+        self.held: list[Tile] = []
+        """Finished tiles waiting for the segments before this one to end."""
         if sink is not None:
             self.imager, self.tile_pga = sink(imager, track), None
         doppler_hz = 2.0 * track.v0_mps * math.sin(beam_rad / 2.0) / radar.wavelength_m
@@ -234,6 +259,11 @@ class _Segment:
         self._disp_t_ns = np.zeros(0, np.int64)
         self._disp_m = np.zeros((0, 2))
         """Imaging time (GPS ns) and (ΔY, ΔZ) (m) of raw pulses not yet range-compressed."""
+
+    def keep(self, a: float, b: float, c: float) -> None:
+        """Image only the ground where ``a x + b y < c`` (imaging x, y, m) from now on."""
+        layout = self._tiles.layout
+        self._tiles.layout = replace(layout, keep=(*layout.keep, (a, b, c)))
 
     def push(
         self, pulses: ComplexArray, t_ns: IntArray, vel_ned: FloatArray
@@ -402,7 +432,8 @@ def segment_limits(cfg: Config, v0_mps: float) -> SegmentLimits:
 
     A turn is a change of the aperture-averaged heading by more than half the azimuth
     beamwidth over one synthetic aperture (``center_slant_range_m`` × beamwidth / v0,
-    never shorter than an autofocus subaperture).
+    never shorter than an autofocus subaperture). Segments overlap at a deviation cut by
+    the imaged beam's half footprint at far range over v0, plus 10 % (speed wander).
     """
     beam = math.radians(cfg.imaging.azimuth_beamwidth_deg)
     aperture_s = cfg.geometry.center_slant_range_m * beam / v0_mps
@@ -410,6 +441,7 @@ def segment_limits(cfg: Config, v0_mps: float) -> SegmentLimits:
         deviation_m=cfg.mocomp.segment_tolerance_m,
         turn_rad=beam / 2.0,
         window_s=max(aperture_s, cfg.autofocus.subaperture_s),
+        overlap_s=1.1 * tile_layout(cfg).half_footprint_m / v0_mps,
     )
 
 
@@ -476,6 +508,12 @@ class Focuser:
         """The segment closed last (what :attr:`track` and :attr:`autofocus` show after it)."""
         self.segments = 1
         """Segments started so far."""
+        self._tails: list[tuple[_Segment, int]] = []
+        """Segments before a deviation cut still taking pulses, oldest first, each with the
+        time from which it takes none (GPS ns)."""
+        self._recent: list[tuple[ComplexArray, IntArray, FloatArray]] = []
+        """Pulses (as pushed), times (GPS ns) and velocities (NED, m/s) the current segment
+        took within the overlap (what a segment starting at a deviation cut takes first)."""
 
     @property
     def track(self) -> ReferenceTrack:
@@ -525,14 +563,19 @@ class Focuser:
             return out
         plan = self.segmenter.plan(t_ns, vel_ned, known)
         out.turn = plan.turn
-        new = dict(zip(plan.starts.tolist(), plan.tracks, strict=True))
+        begun = zip(plan.tracks, plan.cut_x_m, plan.offset_m, strict=True)
+        new = dict(zip(plan.starts.tolist(), begun, strict=True))
         cuts = np.flatnonzero(np.diff(plan.turn)) + 1
         bounds = sorted({0, n, *cuts.tolist(), *new})
         motion: list[MocompSolution] = []
         for a, b in itertools.pairwise(bounds):
             if a in new:
-                self._close(out)
-                self.segment = _Segment(self.cfg, self.radar, new[a], self._sink)
+                track, cut_x, offset = new[a]
+                if math.isnan(cut_x):
+                    self._close(out)
+                    self.segment = _Segment(self.cfg, self.radar, track, self._sink)
+                else:
+                    self._hand_over(out, track, float(cut_x), offset, int(t_ns[a]))
                 self.segments += 1
             if plan.turn[a]:
                 self._close(out)
@@ -541,9 +584,71 @@ class Focuser:
             assert self.segment is not None
             m, tiles = self.segment.push(rc[a:b], t_ns[a:b], vel_ned[a:b])
             motion.append(m)
-            out.add_tiles(tiles, self.segment.track)
+            self._emit(out, self.segment, tiles)
+            self._run_on(out, rc[a:b], t_ns[a:b], vel_ned[a:b])
         out.motion = _join(motion) if motion else _nan_motion(t_ns)
         return out
+
+    def _hand_over(
+        self,
+        out: FocusOutput,
+        track: ReferenceTrack,
+        cut_x: float,
+        offset: FloatArray,
+        t_cut: int,
+    ) -> None:
+        """Start the segment of a deviation cut at ``t_cut`` (GPS ns) that overlaps the
+        current one (see the module docstring); ``cut_x``: the cut's x on ``track``, m;
+        ``offset``: the APC's offset from it at its first pulse, imaging frame, m."""
+        old = self.segment
+        assert old is not None and self.segmenter is not None
+        # the old frame's pixels p before the cut line: x_hat · (p_ned - origin) < cut_x
+        x_hat, before = track.x_hat, old.track
+        shift = float(x_hat @ (before.origin_ned - track.origin_ned))
+        old.keep(float(before.x_hat @ x_hat), float(before.y_hat @ x_hat), cut_x - shift)
+        overlap_ns = round(self.segmenter.limits.overlap_s * 1e9)
+        self._tails.append((old, t_cut + overlap_ns))
+        self.segment = _Segment(self.cfg, self.radar, track, self._sink, offset)
+        self.segment.keep(-1.0, 0.0, -cut_x)
+        recent, self._recent = self._recent, []
+        for pulses, t, vel in recent:
+            rows = t >= track.t0_ns
+            if rows.any():
+                _, tiles = self.segment.push(pulses[rows], t[rows], vel[rows])
+                self._emit(out, self.segment, tiles)
+                self._recent.append((pulses[rows], t[rows], vel[rows]))
+
+    def _run_on(self, out: FocusOutput, pulses: ComplexArray, t: IntArray, vel: FloatArray) -> None:
+        """Give pulses the current segment took to the segments before deviation cuts that
+        still take them (ending those past their time), and keep them for the next cut."""
+        for old, until_ns in self._tails:
+            rows = t < until_ns
+            if rows.any():
+                self._emit(out, old, old.push(pulses[rows], t[rows], vel[rows])[1])
+        while self._tails and t[-1] >= self._tails[0][1]:
+            self._end_tail(out)
+        assert self.segmenter is not None
+        overlap_ns = round(self.segmenter.limits.overlap_s * 1e9)
+        self._recent = [p for p in self._recent if p[1][-1] >= t[-1] - overlap_ns]
+        if overlap_ns > 0:
+            self._recent.append((pulses, t, vel))
+
+    def _emit(self, out: FocusOutput, segment: _Segment, tiles: list[Tile]) -> None:
+        """Hand out a segment's finished tiles, or hold them while an older one runs on."""
+        oldest = self._tails[0][0] if self._tails else segment
+        if segment is oldest:
+            out.add_tiles(tiles, segment.track)
+        else:
+            segment.held += tiles
+
+    def _end_tail(self, out: FocusOutput) -> None:
+        """End the oldest segment still running past its cut; release the next one's tiles."""
+        old, _ = self._tails.pop(0)
+        out.add_tiles(old.finish(), old.track)
+        after = self._tails[0][0] if self._tails else self.segment
+        if after is not None:
+            out.add_tiles(after.held, after.track)
+            after.held = []
 
     def finish(self) -> FocusOutput:
         """Release what autofocus and the pre-filter still hold; close every tile (end of run)."""
@@ -552,7 +657,11 @@ class Focuser:
         return out
 
     def _close(self, out: FocusOutput) -> None:
-        """End the current segment (if one is open): its last tiles go into ``out``."""
+        """End the segments still running past a cut, then the current one (if one is
+        open): their last tiles go into ``out``; forget the pulses kept for a cut."""
+        while self._tails:
+            self._end_tail(out)
+        self._recent = []
         if self.segment is not None:
             out.add_tiles(self.segment.finish(), self.segment.track)
             self._done = self.segment

@@ -28,6 +28,19 @@ and its own D_los starting at 0:
   longer than the window): after a turn the first track's heading rests on one window
   of turbulent flight (about 0.3° off in the survey simulation), the next one on the
   whole leg so far, so a leg is rarely cut twice.
+- **Overlap at a deviation cut** (``overlap_s`` > 0): a point target's aperture that
+  straddles such a cut would be split between two tracks (1.8-2 x the azimuth IRW on the
+  10-min survey). The segment started there begins ``overlap_s`` (half an aperture: the
+  imaged beam's half footprint at far range over v0) *before* the cut, at the first pulse
+  of the current segment no earlier than that: its track is the line through the APC at
+  the cut (D_los 0 there, as at any start; the deviation test runs from there), its
+  origin moved back along it to that first pulse. :attr:`SegmentPlan.cut_x_m` says where
+  along it the cut lies, :attr:`SegmentPlan.offset_m` where the APC at its first pulse is
+  off the line (the compensation starts from that, not from 0). The daemon
+  (:mod:`sarmoco.daemon.focuser`) feeds it the pulses it kept since, lets the old segment
+  run on ``overlap_s`` past the cut, and each images only its side of the cut line, so
+  every target lies in one segment that holds its whole aperture. Not after a turn or a
+  navigation gap: no usable pulses precede those starts.
 - **After a navigation gap**: pulses without navigation (``known`` false: the daemon
   gives them placeholder velocities, held or interpolated across the hole) never start
   a segment and never enter a track's velocity. Where the known pulses are more than
@@ -47,12 +60,17 @@ block by block gives the same plan as one call.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from sarmoco.errors import ProcessingError
-from sarmoco.processing.geometry import LookSide, ReferenceTrack, vector_to_imaging
+from sarmoco.processing.geometry import (
+    LookSide,
+    ReferenceTrack,
+    ned_to_imaging,
+    vector_to_imaging,
+)
 from sarmoco.processing.mocomp import LosState, integrate_los
 from sarmoco.processing.types import BoolArray, FloatArray, IntArray
 
@@ -70,17 +88,23 @@ class SegmentLimits:
         a turn, rad.
     window_s : float
         Averaging window of the heading (one synthetic aperture), s.
+    overlap_s : float
+        How far a segment started at a deviation cut reaches back before it (and the old
+        one runs on past it), s; 0: segments meet at the cut without overlap.
     """
 
     deviation_m: float
     turn_rad: float
     window_s: float
+    overlap_s: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("deviation_m", "turn_rad", "window_s"):
             value = getattr(self, name)
             if not value > 0.0:
                 raise ProcessingError(f"SegmentLimits: {name} {value!r} is not > 0")
+        if not self.overlap_s >= 0.0:
+            raise ProcessingError(f"SegmentLimits: overlap_s {self.overlap_s!r} is not >= 0")
 
 
 @dataclass(frozen=True)
@@ -95,12 +119,22 @@ class SegmentPlan:
         Rows where a new segment starts (increasing, never a turn row).
     tracks : tuple of ReferenceTrack
         The reference track of each new segment (origin: the APC at its first pulse,
-        NED relative to the APC at the Segmenter's first pulse, m).
+        NED relative to the APC at the Segmenter's first pulse, m; for a segment that
+        overlaps the one before, its first pulse is up to ``overlap_s`` before its row in
+        ``starts``, at ``t0_ns``).
+    cut_x_m : ndarray of float64, shape (N,)
+        For a segment that overlaps the one before (a deviation cut): imaging-frame x of
+        the APC at its row in ``starts`` (the cut), m; NaN for one that does not.
+    offset_m : ndarray of float64, shape (N, 3)
+        APC at the segment's first pulse (``t0_ns``) minus the reference APC there,
+        imaging frame (Δx, ΔY, ΔZ), m; zero for one that does not overlap.
     """
 
     turn: BoolArray
     starts: IntArray
     tracks: tuple[ReferenceTrack, ...]
+    cut_x_m: FloatArray
+    offset_m: FloatArray
 
 
 def _heading(vel_ned: FloatArray) -> FloatArray:
@@ -145,6 +179,11 @@ class Segmenter:
         """Time of the last pulse with navigation so far, GPS ns."""
         self._first_ns = track.t0_ns
         """Time of the first pulse, GPS ns: windows reaching before it are partial."""
+        self._since_ns = track.t0_ns
+        """Time of the current segment's start (its cut, before any reach back), GPS ns."""
+        self._lead = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
+        """Times (GPS ns), APCs (NED, m) and velocities (NED, m/s) of the current segment's
+        pulses within ``overlap_s`` of the last one (where an overlapping segment may start)."""
 
     def plan(
         self, t_ns: IntArray, vel_ned: FloatArray, known: BoolArray | None = None
@@ -169,22 +208,29 @@ class Segmenter:
                 f"Segmenter: t_ns {t.shape}, vel_ned {v.shape} and known {ok.shape} disagree"
             )
         if t.size == 0:
-            return SegmentPlan(np.zeros(0, bool), np.zeros(0, np.int64), ())
+            return SegmentPlan(
+                np.zeros(0, bool), np.zeros(0, np.int64), (), np.zeros(0), np.zeros((0, 3))
+            )
         pos, self._pos = integrate_los(t, v, self._pos)
         mean_v, turn = self._windowed(t, v, ok)
         gap = self._after_gap(t, ok)
         starts: list[int] = []
         tracks: list[ReferenceTrack] = []
+        cut_x: list[float] = []
+        offsets: list[FloatArray] = []
         k, n = 0, t.size
         while k < n:
             if turn[k]:
                 self._restart = True
+                self._keep_lead(t[:0], pos[:0], v[:0], fresh=True)
                 k += int(np.argmin(turn[k:])) if not turn[k:].all() else n - k
                 continue
-            if gap[k]:
-                self._start(k, t, self._ahead(t, v, ok, k), pos, starts, tracks)
-            elif self._restart:
-                self._start(k, t, mean_v[k], pos, starts, tracks)
+            if gap[k] or self._restart:  # no overlap: nothing usable before
+                velocity = self._ahead(t, v, ok, k) if gap[k] else mean_v[k]
+                self._start(k, t, velocity, pos, starts, tracks)
+                cut_x.append(np.nan)
+                offsets.append(np.zeros(3))
+                self._keep_lead(t[:0], pos[:0], v[:0], fresh=True)
             cut = turn[k:] | gap[k:]
             cut[0] = False
             end = k + (int(np.argmax(cut)) if cut.any() else n - k)
@@ -197,15 +243,63 @@ class Segmenter:
                 m = k + int(over[0])
                 seg_n = self._seg_n + int(ok[k:m].sum())
                 long_v = (self._seg_sum + v[k:m][ok[k:m]].sum(axis=0)) / max(seg_n, 1)
-                use_long = seg_n > 0 and (t[m] - self.track.t0_ns) * 1e-9 > self.limits.window_s
-                self._start(m, t, long_v if use_long else mean_v[m], pos, starts, tracks)
+                use_long = seg_n > 0 and (t[m] - self._since_ns) * 1e-9 > self.limits.window_s
+                self._keep_lead(t[k:m], pos[k:m], v[k:m])
+                velocity = long_v if use_long else mean_v[m]
+                self._start(m, t, velocity, pos, starts, tracks)
+                x, offset = self._reach_back(m, t, pos, tracks)
+                cut_x.append(x)
+                offsets.append(offset)
                 k = m
                 continue
             self._disp = state
             self._seg_sum += v[k:end][ok[k:end]].sum(axis=0)
             self._seg_n += int(ok[k:end].sum())
+            self._keep_lead(t[k:end], pos[k:end], v[k:end])
             k = end
-        return SegmentPlan(turn, np.asarray(starts, dtype=np.int64), tuple(tracks))
+        return SegmentPlan(
+            turn,
+            np.asarray(starts, dtype=np.int64),
+            tuple(tracks),
+            np.asarray(cut_x, dtype=np.float64),
+            np.asarray(offsets, dtype=np.float64).reshape(-1, 3),
+        )
+
+    def _keep_lead(self, t: IntArray, pos: FloatArray, v: FloatArray, fresh: bool = False) -> None:
+        """Add the current segment's pulses (``fresh``: after a new start or a turn, forget
+        the ones before) and keep those within ``overlap_s`` of the last."""
+        if self.limits.overlap_s <= 0.0:
+            return
+        old = (t[:0], pos[:0], v[:0]) if fresh else self._lead
+        lead_t, lead_pos, lead_v = (
+            np.concatenate([a, b]) for a, b in zip(old, (t, pos, v), strict=True)
+        )
+        if lead_t.size:
+            keep = lead_t >= lead_t[-1] - round(self.limits.overlap_s * 1e9)
+            lead_t, lead_pos, lead_v = lead_t[keep], lead_pos[keep], lead_v[keep]
+        self._lead = (lead_t, lead_pos, lead_v)
+
+    def _reach_back(
+        self, m: int, t: IntArray, pos: FloatArray, tracks: list[ReferenceTrack]
+    ) -> tuple[float, FloatArray]:
+        """Move the origin of the segment just started at the deviation cut at row ``m``
+        back along its track to the first pulse kept within ``overlap_s`` before it (none
+        kept: it stays at the cut). Returns the cut's imaging-frame x on it (NaN: it does
+        not overlap), m, and the APC's offset from it at its first pulse, m."""
+        lead_t, lead_pos, lead_v = self._lead
+        rows = lead_t >= t[m] - round(self.limits.overlap_s * 1e9)
+        first = int(np.argmax(rows)) if rows.any() else lead_t.size
+        self._lead = (lead_t[first:], lead_pos[first:], lead_v[first:])
+        if first == lead_t.size:
+            return float("nan"), np.zeros(3)
+        back_m = self.track.v0_mps * (t[m] - lead_t[first]) * 1e-9
+        self.track = replace(
+            self.track,
+            origin_ned=self.track.origin_ned - back_m * self.track.x_hat,
+            t0_ns=int(lead_t[first]),
+        )
+        tracks[-1] = self.track
+        return back_m, ned_to_imaging(lead_pos[first], self.track)
 
     def _start(
         self,
@@ -222,6 +316,7 @@ class Segmenter:
         self._seg_sum = np.zeros(3)
         self._seg_n = 0
         self._restart = False
+        self._since_ns = int(t[k])
         starts.append(k)
         tracks.append(self.track)
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -31,12 +33,22 @@ def _plan(t: np.ndarray, vel: np.ndarray, block: int) -> tuple[SegmentPlan, list
     turns: list[np.ndarray] = []
     starts: list[int] = []
     tracks: list[ReferenceTrack] = []
+    cut_x: list[np.ndarray] = []
+    offsets: list[np.ndarray] = []
     for a in range(0, t.size, block):
         p = seg.plan(t_ns[a : a + block], vel[a : a + block])
         turns.append(p.turn)
         starts += (p.starts + a).tolist()
         tracks += p.tracks
-    plan = SegmentPlan(np.concatenate(turns), np.asarray(starts), tuple(tracks))
+        cut_x.append(p.cut_x_m)
+        offsets.append(p.offset_m)
+    plan = SegmentPlan(
+        np.concatenate(turns),
+        np.asarray(starts),
+        tuple(tracks),
+        np.concatenate(cut_x),
+        np.concatenate(offsets),
+    )
     return plan, tracks
 
 
@@ -142,3 +154,33 @@ def test_known_must_match_the_pulses() -> None:
     t_ns = 10**18 + np.arange(4, dtype=np.int64) * 10**7
     with pytest.raises(ProcessingError, match="known"):
         Segmenter(LIMITS, north, "right").plan(t_ns, np.ones((4, 3)), np.ones(3, dtype=bool))
+
+
+def test_a_deviation_cut_reaches_back_by_the_overlap_and_not_after_a_turn() -> None:
+    """With ``overlap_s``, the segment of a drift cut starts 1.5 s before it, on the line
+    through the APC at the cut (its deviation 0 there), whatever the blocks; the one
+    after a turn does not reach back."""
+    t = np.arange(0.0, 20.0, 1.0 / PRF_HZ)
+    psi = np.radians(1.0)
+    vel = SPEED_MPS * np.tile([np.cos(psi), np.sin(psi), 0.0], (t.size, 1))
+    t_ns = (10**18 + np.round(t * 1e9)).astype(np.int64)
+    north = ReferenceTrack.from_velocity(np.zeros(3), np.array([SPEED_MPS, 0.0, 0.0]), t_ns[0])
+    limits = replace(LIMITS, overlap_s=1.5)
+    for block in (t.size, 256, 97):
+        seg = Segmenter(limits, north, "right")
+        plans = [seg.plan(t_ns[a : a + block], vel[a : a + block]) for a in range(0, t.size, block)]
+        plan = next(p for p in plans if p.starts.size)
+        track = plan.tracks[0]
+        t_cut = 3.0 / (SPEED_MPS * np.sin(psi))
+        assert (track.t0_ns - t_ns[0]) * 1e-9 == pytest.approx(t_cut - 1.5, abs=0.02)
+        assert plan.cut_x_m[0] == pytest.approx(1.5 * track.v0_mps, abs=0.5)
+        cut = int(np.argmin(np.abs(t - t_cut)))
+        dev = track.deviation(t_ns[cut : cut + 1], (vel[0] * t[cut])[None, :])[0]
+        assert abs(dev[1]) < 1e-6 and abs(dev[0]) < 0.05
+        np.testing.assert_allclose(plan.offset_m[0, 1:], 0.0, atol=1e-6)
+    t, vel, _, _ = _racetrack(8.0)
+    t_ns = (10**18 + np.round(t * 1e9)).astype(np.int64)
+    first = ReferenceTrack.from_velocity(np.zeros(3), vel[0], int(t_ns[0]))
+    plan = Segmenter(limits, first, "right").plan(t_ns, vel)
+    assert plan.starts.size == 1 and np.isnan(plan.cut_x_m).all()
+    assert plan.tracks[0].t0_ns == t_ns[plan.starts[0]]

@@ -12,6 +12,11 @@ at along-track position ``x_p`` reaches the tiles that meet its footprint
 platform is a half footprint past its end, so memory stays bounded however
 long the run. Each block of pulses is upsampled in range once (in chunks of
 ``CHUNK_PULSES``) and accumulated in place into every tile it reaches.
+
+Segments that overlap at a cut (:mod:`sarmoco.processing.segments`) each image only
+their side of the cut line: :attr:`TileLayout.keep` holds half-planes of the ground;
+pixels outside stay zero (set when the tile is handed out) and a tile wholly outside
+is neither formed nor handed out.
 """
 
 from __future__ import annotations
@@ -25,7 +30,7 @@ from sarmoco.errors import ProcessingError
 from sarmoco.processing.imaging.backprojection import RangeLines, backproject_into
 from sarmoco.processing.imaging.ffbp import ffbp_into
 from sarmoco.processing.imaging.grid import PlaneGrid
-from sarmoco.processing.types import ComplexArray, FloatArray, Image, IntArray
+from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, Image, IntArray
 
 CHUNK_PULSES = 128
 """Pulses upsampled in range at a time (bounds the memory of a large block)."""
@@ -49,6 +54,9 @@ class TileLayout:
         Pixel spacing on both axes, m.
     beamwidth_rad : float
         Azimuth beamwidth θ: a pixel takes the pulses within θ/2 of its broadside, rad.
+    keep : tuple of (a, b, c)
+        Half-planes ``a x + b y < c`` (imaging-frame x, y of the pixels, m; c in m) of the
+        ground this segment images; pixels outside any stay zero. Default: all.
     """
 
     height_m: float
@@ -57,6 +65,7 @@ class TileLayout:
     tile_length_m: float
     pixel_m: float
     beamwidth_rad: float
+    keep: tuple[tuple[float, float, float], ...] = ()
 
     def __post_init__(self) -> None:
         for name in ("swath_m", "tile_length_m", "pixel_m", "beamwidth_rad"):
@@ -78,6 +87,19 @@ class TileLayout:
             np.float64
         )
         return PlaneGrid(ax0, ax1, (0.0, 0.0, self.height_m), 0.0, "ground")
+
+    def kept(self, grid: PlaneGrid) -> BoolArray:
+        """Pixels (axis 0 × axis 1) of ``grid`` inside every :attr:`keep` half-plane."""
+        inside = np.ones((grid.axis0_m.size, grid.axis1_m.size), dtype=bool)
+        for a, b, c in self.keep:
+            inside &= a * grid.axis0_m[:, None] + b * grid.axis1_m[None, :] < c
+        return inside
+
+    def formed(self, tiles: range) -> range:
+        """The tiles of ``tiles`` (contiguous) with a pixel inside :attr:`keep` (contiguous:
+        each half-plane's boundary crosses the strip of tiles once)."""
+        inside = [k for k in tiles if self.kept(self.grid(k)).any()] if self.keep else tiles
+        return range(inside[0], inside[-1] + 1) if len(inside) else range(0)
 
 
 @dataclass
@@ -196,7 +218,8 @@ class TileImager:
         half = self.layout.half_footprint_m
         length = self.layout.tile_length_m
         first = max(math.floor((float(x.min()) - half) / length), self._first_open)
-        for k in range(first, math.floor((float(x.max()) + half) / length) + 1):
+        last = math.floor((float(x.max()) + half) / length)
+        for k in self.layout.formed(range(first, last + 1)):
             if k not in self._open and (self.only is None or k in self.only):
                 grid = self.layout.grid(k)
                 shape = (grid.axis0_m.size, grid.axis1_m.size)
@@ -261,4 +284,13 @@ class TileImager:
     def _pop_below(self, index: int) -> list[Tile]:
         keys = sorted(k for k in self._open if k < index)
         self._first_open = max(self._first_open, index)
-        return [self._open.pop(k) for k in keys]
+        tiles = [self._open.pop(k) for k in keys]
+        if not self.layout.keep:
+            return tiles
+        out = []
+        for tile in tiles:  # keep may have changed since the tile opened (a cut)
+            inside = self.layout.kept(tile.grid)
+            tile.data[~inside] = 0.0
+            if inside.any():
+                out.append(tile)
+        return out
