@@ -181,9 +181,9 @@ class Segmenter:
         """Time of the first pulse, GPS ns: windows reaching before it are partial."""
         self._since_ns = track.t0_ns
         """Time of the current segment's start (its cut, before any reach back), GPS ns."""
-        self._lead = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)), np.zeros((0, 3)))
-        """Times (GPS ns), APCs (NED, m) and velocities (NED, m/s) of the current segment's
-        pulses within ``overlap_s`` of the last one (where an overlapping segment may start)."""
+        self._lead = (np.zeros(0, dtype=np.int64), np.zeros((0, 3)))
+        """Times (GPS ns) and APCs (NED, m) of the current segment's pulses within
+        ``overlap_s`` of the last one (where an overlapping segment may start)."""
 
     def plan(
         self, t_ns: IntArray, vel_ned: FloatArray, known: BoolArray | None = None
@@ -222,7 +222,7 @@ class Segmenter:
         while k < n:
             if turn[k]:
                 self._restart = True
-                self._keep_lead(t[:0], pos[:0], v[:0], fresh=True)
+                self._keep_lead(t[:0], pos[:0], fresh=True)
                 k += int(np.argmin(turn[k:])) if not turn[k:].all() else n - k
                 continue
             if gap[k] or self._restart:  # no overlap: nothing usable before
@@ -230,7 +230,7 @@ class Segmenter:
                 self._start(k, t, velocity, pos, starts, tracks)
                 cut_x.append(np.nan)
                 offsets.append(np.zeros(3))
-                self._keep_lead(t[:0], pos[:0], v[:0], fresh=True)
+                self._keep_lead(t[:0], pos[:0], fresh=True)
             cut = turn[k:] | gap[k:]
             cut[0] = False
             end = k + (int(np.argmax(cut)) if cut.any() else n - k)
@@ -244,7 +244,7 @@ class Segmenter:
                 seg_n = self._seg_n + int(ok[k:m].sum())
                 long_v = (self._seg_sum + v[k:m][ok[k:m]].sum(axis=0)) / max(seg_n, 1)
                 use_long = seg_n > 0 and (t[m] - self._since_ns) * 1e-9 > self.limits.window_s
-                self._keep_lead(t[k:m], pos[k:m], v[k:m])
+                self._keep_lead(t[k:m], pos[k:m])
                 velocity = long_v if use_long else mean_v[m]
                 self._start(m, t, velocity, pos, starts, tracks)
                 x, offset = self._reach_back(m, t, pos, tracks)
@@ -255,7 +255,7 @@ class Segmenter:
             self._disp = state
             self._seg_sum += v[k:end][ok[k:end]].sum(axis=0)
             self._seg_n += int(ok[k:end].sum())
-            self._keep_lead(t[k:end], pos[k:end], v[k:end])
+            self._keep_lead(t[k:end], pos[k:end])
             k = end
         return SegmentPlan(
             turn,
@@ -265,19 +265,17 @@ class Segmenter:
             np.asarray(offsets, dtype=np.float64).reshape(-1, 3),
         )
 
-    def _keep_lead(self, t: IntArray, pos: FloatArray, v: FloatArray, fresh: bool = False) -> None:
+    def _keep_lead(self, t: IntArray, pos: FloatArray, fresh: bool = False) -> None:
         """Add the current segment's pulses (``fresh``: after a new start or a turn, forget
         the ones before) and keep those within ``overlap_s`` of the last."""
         if self.limits.overlap_s <= 0.0:
             return
-        old = (t[:0], pos[:0], v[:0]) if fresh else self._lead
-        lead_t, lead_pos, lead_v = (
-            np.concatenate([a, b]) for a, b in zip(old, (t, pos, v), strict=True)
-        )
+        old_t, old_pos = (t[:0], pos[:0]) if fresh else self._lead
+        lead_t, lead_pos = np.concatenate([old_t, t]), np.concatenate([old_pos, pos])
         if lead_t.size:
             keep = lead_t >= lead_t[-1] - round(self.limits.overlap_s * 1e9)
-            lead_t, lead_pos, lead_v = lead_t[keep], lead_pos[keep], lead_v[keep]
-        self._lead = (lead_t, lead_pos, lead_v)
+            lead_t, lead_pos = lead_t[keep], lead_pos[keep]
+        self._lead = (lead_t, lead_pos)
 
     def _reach_back(
         self, m: int, t: IntArray, pos: FloatArray, tracks: list[ReferenceTrack]
@@ -286,10 +284,10 @@ class Segmenter:
         back along its track to the first pulse kept within ``overlap_s`` before it (none
         kept: it stays at the cut). Returns the cut's imaging-frame x on it (NaN: it does
         not overlap), m, and the APC's offset from it at its first pulse, m."""
-        lead_t, lead_pos, lead_v = self._lead
+        lead_t, lead_pos = self._lead
         rows = lead_t >= t[m] - round(self.limits.overlap_s * 1e9)
         first = int(np.argmax(rows)) if rows.any() else lead_t.size
-        self._lead = (lead_t[first:], lead_pos[first:], lead_v[first:])
+        self._lead = (lead_t[first:], lead_pos[first:])
         if first == lead_t.size:
             return float("nan"), np.zeros(3)
         back_m = self.track.v0_mps * (t[m] - lead_t[first]) * 1e-9
