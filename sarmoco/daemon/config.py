@@ -24,6 +24,7 @@ from sarmoco.daemon.links import INS_OPENERS
 from sarmoco.errors import ConfigError, ProcessingError
 from sarmoco.keys import key as _key
 from sarmoco.processing.autofocus.settings import AutofocusConfig
+from sarmoco.processing.mocomp import DEFAULT_ENVELOPE_FRACTION
 from sarmoco.processing.types import C_MPS
 
 
@@ -189,8 +190,10 @@ class MocompConfig:
         "autofocus off the image former removes the eq. 29 squint residual per pixel",
     )
     envelope_fraction: float = _key(
-        0.25,
-        "Shift pulses in range when |d_los| exceeds this fraction of a range cell",
+        DEFAULT_ENVELOPE_FRACTION,
+        "Shift pulses in range when |d_los| exceeds this fraction of a range cell (the "
+        "envelope error left is at most that: 0.05 keeps 99.6 % of the peak, 0.25 only 90 %, "
+        "which in turbulence ripples the aperture's amplitude and costs azimuth PSLR)",
         ge=0,
         le=10,
     )

@@ -44,6 +44,14 @@ from sarmoco.processing.geometry import (
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray, RadarParams
 
 
+DEFAULT_ENVELOPE_FRACTION = 0.05
+"""Default envelope threshold, in range cells: a pulse whose scene-centre |d_los| is below it
+is left unshifted. The compressed peak read that far off keeps sinc(0.05) = 99.6 % of its
+amplitude; at 0.25 cell it keeps 90 %, and in 0.3 m rms turbulence that 10 % amplitude
+ripple over the aperture cost 0.1-0.3 dB of azimuth PSLR and widened the range IRW by 0.6 %
+(ku-vehicle ×0.1, tests/daemon/test_envelope.py)."""
+
+
 @dataclass(frozen=True)
 class LosGeometry:
     """Radar and scene constants of the line-of-sight correction.
@@ -89,7 +97,7 @@ class LosGeometry:
         scene_range_m: float,
         *,
         order: Literal[1, 2] = 1,
-        envelope_fraction: float | None = 0.25,
+        envelope_fraction: float | None = DEFAULT_ENVELOPE_FRACTION,
     ) -> LosGeometry:
         """Derive the look angles from flat ground at ``ground_depth_m`` below the track.
 
