@@ -606,8 +606,7 @@ class Focuser:
         x_hat, before = track.x_hat, old.track
         shift = float(x_hat @ (before.origin_ned - track.origin_ned))
         old.keep(float(before.x_hat @ x_hat), float(before.y_hat @ x_hat), cut_x - shift)
-        overlap_ns = round(self.segmenter.limits.overlap_s * 1e9)
-        self._tails.append((old, t_cut + overlap_ns))
+        self._tails.append((old, t_cut + self.segmenter.limits.overlap_ns))
         self.segment = _Segment(self.cfg, self.radar, track, self._sink, offset)
         self.segment.keep(-1.0, 0.0, -cut_x)
         recent, self._recent = self._recent, []
@@ -628,7 +627,7 @@ class Focuser:
         while self._tails and t[-1] >= self._tails[0][1]:
             self._end_tail(out)
         assert self.segmenter is not None
-        overlap_ns = round(self.segmenter.limits.overlap_s * 1e9)
+        overlap_ns = self.segmenter.limits.overlap_ns
         self._recent = [p for p in self._recent if p[1][-1] >= t[-1] - overlap_ns]
         if overlap_ns > 0:
             self._recent.append((pulses, t, vel))

@@ -106,6 +106,11 @@ class SegmentLimits:
         if not self.overlap_s >= 0.0:
             raise ProcessingError(f"SegmentLimits: overlap_s {self.overlap_s!r} is not >= 0")
 
+    @property
+    def overlap_ns(self) -> int:
+        """``overlap_s`` in ns (the pulses' time unit)."""
+        return round(self.overlap_s * 1e9)
+
 
 @dataclass(frozen=True)
 class SegmentPlan:
@@ -273,7 +278,7 @@ class Segmenter:
         old_t, old_pos = (t[:0], pos[:0]) if fresh else self._lead
         lead_t, lead_pos = np.concatenate([old_t, t]), np.concatenate([old_pos, pos])
         if lead_t.size:
-            keep = lead_t >= lead_t[-1] - round(self.limits.overlap_s * 1e9)
+            keep = lead_t >= lead_t[-1] - self.limits.overlap_ns
             lead_t, lead_pos = lead_t[keep], lead_pos[keep]
         self._lead = (lead_t, lead_pos)
 
@@ -285,7 +290,7 @@ class Segmenter:
         kept: it stays at the cut). Returns the cut's imaging-frame x on it (NaN: it does
         not overlap), m, and the APC's offset from it at its first pulse, m."""
         lead_t, lead_pos = self._lead
-        rows = lead_t >= t[m] - round(self.limits.overlap_s * 1e9)
+        rows = lead_t >= t[m] - self.limits.overlap_ns
         first = int(np.argmax(rows)) if rows.any() else lead_t.size
         self._lead = (lead_t[first:], lead_pos[first:])
         if first == lead_t.size:
