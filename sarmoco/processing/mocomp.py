@@ -43,7 +43,6 @@ from sarmoco.processing.geometry import (
 )
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray, RadarParams
 
-
 DEFAULT_ENVELOPE_FRACTION = 0.05
 """Default envelope threshold, in range cells: a pulse whose scene-centre |d_los| is below it
 is left unshifted. The compressed peak read that far off keeps sinc(0.05) = 99.6 % of its
