@@ -41,13 +41,18 @@ def runs(tmp_path_factory: pytest.TempPathFactory) -> dict[int, Groups]:
 
 
 def _like_the_middle(groups: Groups, judged: list[float]) -> None:
-    """``judged`` within 0.3 dB of the middle targets' mean or better, and every one of
-    them and of the middle at most -12.5 dB."""
+    """``judged`` within 0.3 dB of the middle targets' mean or better."""
     bar = float(np.mean(groups[1])) + 0.3
     for pslr in judged:
         assert pslr <= bar, groups
-    for pslr in [*judged, *groups[1]]:
-        assert pslr <= -12.5, groups
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_every_target_meets_the_bar(seed: int, runs: dict[int, Groups]) -> None:
+    """Start, middle and end targets all at most -12.5 dB azimuth PSLR (seed 0's start
+    targets too, whose comparison with the middle is the open xfail below)."""
+    for pslr in [p for group in runs[seed] for p in group]:
+        assert pslr <= -12.5, runs[seed]
 
 
 @pytest.mark.parametrize("seed", SEEDS)
