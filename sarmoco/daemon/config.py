@@ -186,8 +186,9 @@ class MocompConfig:
 
     order: Literal[1, 2] = _key(
         2,
-        "1: scene-centre look angle for every bin; 2: look angle per range bin, and with the "
-        "autofocus off the image former removes the eq. 29 squint residual per pixel",
+        "1: scene-centre look angle for every bin; 2: look angle per range bin and the "
+        "deviation across the line of sight to second order, and with the autofocus off "
+        "the image former removes the eq. 29 squint residual per pixel",
     )
     envelope_fraction: float = _key(
         DEFAULT_ENVELOPE_FRACTION,
