@@ -203,13 +203,12 @@ def reference_pslr(scn: Scenario, spec: MotionSpec, pattern: SurveyPattern) -> l
         start = pattern.leg_start_s(k // per_leg)
         leg = np.flatnonzero((t_s >= start) & (t_s <= start + pattern.leg_s))
         apc = apc_trajectory(scn, t_s[leg], spec).pos_ned
-        lit = np.flatnonzero(scn.illumination(apc, target[None])[:, 0] > 0)
-        near = int(np.argmin(np.linalg.norm(apc - target, axis=1)))
-        lit = lit[np.abs(lit - near) < 2 * len(leg)]
-        sel = np.arange(max(lit.min() - 50, 0), min(lit.max() + 51, leg.size))
+        lit = scn.illumination(apc, target[None])
+        on = np.flatnonzero(lit[:, 0] > 0)
+        sel = np.arange(max(on.min() - 50, 0), min(on.max() + 51, leg.size))
         echo = synthesize(
             scn.radar, t_all[leg][sel], apc[sel], target[None], amps[k : k + 1], None,
-            np.random.default_rng(0), illumination=scn.illumination(apc[sel], target[None]),
+            np.random.default_rng(0), illumination=lit[sel],
         )  # fmt: skip
         way = apc[sel[-1]] - apc[sel[0]]
         grid = PlaneGrid.centred(

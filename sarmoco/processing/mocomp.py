@@ -277,9 +277,9 @@ def _bin_rotation(geom: LosGeometry, dy: FloatArray, dz: FloatArray) -> ComplexA
     k = 4.0 * np.pi / geom.wavelength_m
     sin_b, cos_b = np.sin(geom.beta_bins_rad), np.cos(geom.beta_bins_rad)
     f32 = np.float32
-    dphi = dy.astype(f32)[:, None] * (k * (sin_b - np.sin(geom.beta_c_rad))).astype(f32)
-    dphi += dz.astype(f32)[:, None] * (k * (cos_b - np.cos(geom.beta_c_rad))).astype(f32)
     dy32, dz32 = dy.astype(f32)[:, None], dz.astype(f32)[:, None]
+    dphi = dy32 * (k * (sin_b - np.sin(geom.beta_c_rad))).astype(f32)
+    dphi += dz32 * (k * (cos_b - np.cos(geom.beta_c_rad))).astype(f32)
     across = dy32 * cos_b.astype(f32) - dz32 * sin_b.astype(f32)
     dphi -= (k / (2.0 * geom.range_axis_m)).astype(f32) * across * across
     rot = np.empty(dphi.shape, dtype=np.complex64)
