@@ -10,12 +10,12 @@ time it was due on the wire.
 What is measured (one JSON line with ``--json``):
 
 ``realtime_ratio``
-    Seconds of data processed per wall second of the daemon's processing loop, over the
-    whole stream: pulses the pipeline took in (recorded and passed on to focusing;
-    ``pipeline_pulses_received``) / PRF over ``processing_busy_seconds`` (the wall time
-    the loop spent in processing passes), both from the daemon's ``/status`` at the end
-    of the stream. Above 1 the daemon keeps up with that margin; below 1 it falls
-    behind and loses pulses.
+    Seconds of data focused per wall second of the daemon's focusing loop, over the
+    whole stream: pulses focused (``pipeline_pulses_processed``) / PRF over
+    ``processing_busy_seconds`` (the wall time the loop spent in focusing passes), both
+    from the daemon's ``/status`` at the end of the stream. Above 1 focusing keeps up
+    with that margin; below 1 it falls behind and skips ahead (``pulses_focus_skipped``;
+    recording goes on: every pulse is stored all the same).
 ``fft_floor_ratio``
     CPU seconds per pulse taken in of the whole daemon (every thread: decode, ring,
     alignment, focusing, recording; from ``/proc/PID/stat`` between the daemon's ready
@@ -39,6 +39,14 @@ What is measured (one JSON line with ``--json``):
     poll's host GPS time as their record time (an upper bound, resolution ``POLL_S``).
 ``lost_pulses``
     Pulses sent that the store does not hold (radar link drops and ring overflows).
+``stage_cpu_us_per_pulse``, ``stage_load``, ``bounding_stage``
+    CPU of each stage of the daemon (:mod:`sarmoco.daemon.threadcpu`: ``receive`` socket,
+    decode and echo ring; ``record`` ring to store; ``write`` the store's writes;
+    ``focus``; ``other``) between the daemon's ready line and the end of the stream, per
+    pulse taken in (``focus``: per pulse focused), µs; the load is that times the PRF,
+    the cores the stage needs at the radar's rate; the bounding stage is the one with
+    the highest load (above 1 it cannot keep up on any number of cores; the ingest
+    stages together must also fit beside it).
 ``peak_rss_mb``, ``rss_growth_mb_per_min``
     The daemon's peak VmHWM, and the slope of a line fitted to its VmRSS (sampled every
     second) after a warm-up of a third of the stream (30 s at most).
@@ -72,6 +80,7 @@ import scipy.fft
 from sarmoco.app.demo import free_udp_port, read_json_line
 from sarmoco.app.simconfig import config_table, write_config
 from sarmoco.daemon.store import open_store
+from sarmoco.daemon.threadcpu import STAGES
 from sarmoco.drivers.clock import GPS_LEAP_SECONDS_DEFAULT
 from sarmoco.errors import ConfigError, SarmocoError
 from sarmoco.sim.pacing import host_gps_ns
@@ -233,6 +242,8 @@ class BenchRun:
     watch: Watch
     status: dict[str, Any]
     """The daemon's ``/status`` document at the end of the stream (before SIGTERM)."""
+    status_ready: dict[str, Any]
+    """The daemon's ``/status`` document at its ready line."""
     cpu_s: float
     """Daemon CPU seconds from its ready line to the end of the stream."""
     peak_rss_kb: int
@@ -327,6 +338,7 @@ def live_run(
             )  # fmt: skip
         read_json_line(daemon, "the daemon", START_TIMEOUT_S)
         cpu0 = proc_cpu_s(daemon.pid)
+        status_ready = _fetch_status(http_port)
         watcher = threading.Thread(target=watch, args=(daemon.pid, store, seen, stop))
         watcher.start()
         viewer = threading.Thread(target=watch_live_page, args=(http_port, stop))
@@ -365,6 +377,7 @@ def live_run(
         pulses_sent=n_pulses,
         watch=seen,
         status=status,
+        status_ready=status_ready,
         cpu_s=cpu_s,
         peak_rss_kb=peak_kb,
         exit_status=exit_status,
@@ -374,16 +387,38 @@ def live_run(
     )
 
 
+def stage_figures(run: BenchRun) -> dict[str, Any]:
+    """Each stage's CPU per pulse (µs) and load (cores at the PRF), and the bounding
+    stage (see the module)."""
+    c, c0 = run.counters, run.status_ready.get("counters", {})
+    taken = c.get("pipeline_pulses_received", 0.0)
+    focused = c.get("pipeline_pulses_processed", 0.0)
+    per_pulse = {}
+    for stage in STAGES:
+        key = f"cpu_seconds_{stage}"
+        pulses = focused if stage == "focus" else taken
+        cpu = c.get(key, 0.0) - c0.get(key, 0.0)
+        per_pulse[stage] = cpu / pulses * 1e6 if pulses else float("nan")
+    load = {k: v * 1e-6 * run.prf_hz for k, v in per_pulse.items()}
+    chain = {k: v for k, v in load.items() if k != "other" and not np.isnan(v)}
+    return {
+        "stage_cpu_us_per_pulse": per_pulse,
+        "stage_load": load,
+        "bounding_stage": max(chain, key=chain.__getitem__) if chain else None,
+    }
+
+
 def figures(run: BenchRun, fft_s_per_pulse: float) -> dict[str, float]:
     """The :data:`KEYS` figures of a run (see the module)."""
     c = run.counters
     taken = c.get("pipeline_pulses_received", 0.0)
+    focused = c.get("pipeline_pulses_processed", 0.0)
     busy = c.get("processing_busy_seconds", 0.0)
     lat = latencies_s(run.watch.commits, run.t_ns)
     p50, p99 = np.percentile(lat, [50, 99]) if lat.size else (float("nan"), float("nan"))
     warmup = min(RSS_WARMUP_MAX_S, run.duration_s / 3.0)
     return {
-        "realtime_ratio": taken / run.prf_hz / busy if busy > 0 else float("nan"),
+        "realtime_ratio": focused / run.prf_hz / busy if busy > 0 else float("nan"),
         "fft_floor_ratio": run.cpu_s / taken / fft_s_per_pulse if taken else float("nan"),
         "latency_p50_s": float(p50),
         "latency_p99_s": float(p99),
@@ -458,7 +493,7 @@ def bench(
         if not keep:
             shutil.rmtree(out, ignore_errors=True)
     c = run.counters
-    return figures(run, fft_s) | {
+    return figures(run, fft_s) | stage_figures(run) | {
         "preset": preset,
         "scale": scale,
         "duration_s": run.duration_s,
@@ -466,6 +501,8 @@ def bench(
         "pulses_recorded": int(run.t_ns.size),
         "pulses_taken": int(c.get("pipeline_pulses_received", 0)),
         "pulses_focused": int(c.get("pipeline_pulses_processed", 0)),
+        "pulses_focus_skipped": int(c.get("pipeline_pulses_focus_skipped", 0)),
+        "pulses_nav_flagged": int(c.get("pipeline_pulses_nav_flagged", 0)),
         "pulses_dropped_ring": int(c.get("pipeline_pulses_dropped_ring", 0)),
         "radar_link_drops": int(c.get("radar_drops", 0)),
         "tiles": int(c.get("pipeline_tiles", 0)),
@@ -506,6 +543,15 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--work", type=Path, help="folder for the temporary run folder")
 
 
+def _text(value: Any) -> str:
+    """A figure as printed: floats to 4 digits, a dict as ``key value, ...``."""
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    if isinstance(value, dict):
+        return ", ".join(f"{k} {_text(v)}" for k, v in value.items())
+    return str(value)
+
+
 def run_command(args: argparse.Namespace) -> int:
     """Handler of ``sarmoco bench``; returns the exit status."""
     result = bench(
@@ -523,7 +569,7 @@ def run_command(args: argparse.Namespace) -> int:
         return 0
     width = max(map(len, result))
     for key, value in result.items():
-        text = f"{value:.4g}" if isinstance(value, float) else str(value)
+        text = _text(value)
         print(f"{key:<{width}}  {text}")
     where = f"kept in {result['kept']}" if result["kept"] else "removed"
     print(f"{result['bytes_written']} bytes written ({where})")

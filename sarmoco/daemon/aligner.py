@@ -33,16 +33,33 @@ live, the virtual clock of a replay (e.g. the time of the newest item fed).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
-from sarmoco.daemon.echoring import EchoBatch, EchoRing
+from sarmoco.daemon.echoring import EchoBatch
 from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.navbuffer import NO_TIME, NavBuffer, NavStream
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.geometry import lever_arm_ned
 from sarmoco.processing.navinterp import PulseNav, bridge_gap, interpolate_nav
 from sarmoco.processing.types import BoolArray, FloatArray, IntArray, NavSamples
+
+
+class PulseQueue(Protocol):
+    """Where the aligner takes pulses from, oldest first: an
+    :class:`~sarmoco.daemon.echoring.EchoRing`, or the recorded pulses waiting to be
+    focused (:class:`~sarmoco.daemon.backlog.FocusBacklog`). A :meth:`pop` takes the
+    pulses the last look (``len``, :meth:`peek_times`) saw first."""
+
+    def __len__(self) -> int:
+        """Pulses ready to be taken."""
+
+    def peek_times(self, max_n: int | None = None) -> IntArray:
+        """Times of the oldest ready pulses, GPS ns."""
+
+    def pop(self, n: int) -> EchoBatch:
+        """Take the ``n`` oldest ready pulses out."""
 
 
 @dataclass(frozen=True)
@@ -89,12 +106,13 @@ def _bracket_span(stream: NavStream, t_ns: IntArray) -> tuple[IntArray, BoolArra
 
 
 class Aligner:
-    """Takes pulses out of an :class:`EchoRing` with navigation from a :class:`NavBuffer`.
+    """Takes pulses out of a :class:`PulseQueue` with navigation from a :class:`NavBuffer`.
 
     Parameters
     ----------
-    ring : EchoRing
-        Where the radar reader commits pulses.
+    ring : PulseQueue
+        Where the pulses wait (the echo ring, or the recorded pulses waiting to be
+        focused); ``echoes`` of the blocks released are what its ``pop`` gives.
     nav : NavBuffer
         Where the INS reader pushes samples.
     max_gap_ns : int
@@ -119,7 +137,7 @@ class Aligner:
 
     def __init__(
         self,
-        ring: EchoRing,
+        ring: PulseQueue,
         nav: NavBuffer,
         max_gap_ns: int,
         latency_budget_ns: int,
@@ -145,6 +163,13 @@ class Aligner:
         self.nav_gap = 0
         self.nav_timeout = 0
         self.nav_bridged = 0
+
+    @property
+    def reach_ns(self) -> int:
+        """How far before a pulse the kinematics samples its navigation is made from may
+        lie (the longest silence bridged and the span its end accelerations are fitted
+        over), ns."""
+        return self.bridge_gap_ns + BRIDGE_FIT_NS
 
     def poll(self, now_ns: int) -> AlignedBlock | None:
         """Release the oldest pulses that are bracketed or out of time, if any.
@@ -225,7 +250,7 @@ class Aligner:
         valid = ok.copy()
         if ok.any():
             tq = t[ok]
-            reach = self.bridge_gap_ns + BRIDGE_FIT_NS
+            reach = self.reach_ns
             tk, vk = self.nav.kinematics.window(int(tq.min()) - reach, int(tq.max()) + reach)
             ta, qa = self.nav.attitude.window(int(tq.min()), int(tq.max()), extra=2)
             has_pos = not np.isnan(vk[:, 3:]).any()

@@ -83,5 +83,7 @@ class PulseFlag(enum.IntFlag):
 
 NAV_UNUSABLE = PulseFlag.NAV_GAP | PulseFlag.NAV_TIMEOUT
 """Flags under which a pulse has no navigation solution (NaN motion)."""
+NAV_FLAGS = NAV_UNUSABLE | PulseFlag.NAV_BRIDGED
+"""Flags the aligner sets (after the pulse was first recorded)."""
 UNFOCUSABLE = NAV_UNUSABLE | PulseFlag.CONTEXT_MISMATCH
 """Flags under which a pulse is recorded but not focused (its echo blanked)."""

@@ -8,6 +8,10 @@ one) and attitude (quaternion). Each :class:`NavStream`
   in its place, a second sample at the same time is refused (``DUPLICATE``);
 - keeps ``history_ns`` of history behind its newest sample and refuses older
   samples (``STALE``): stale data are dropped, never buffered forever;
+- keeps, beyond that, the samples from a time it is told to hold
+  (:meth:`NavStream.hold`: the oldest pulse the focuser has not reached yet), so a
+  focuser that lags never finds the navigation of its pulses gone; ``capacity`` bounds
+  the memory this takes (the oldest are then evicted and counted);
 - checks every sample's GPS stamp against the host clock it was received on,
   when the caller gives that receive time: the latency ``rx - t`` of a healthy
   source varies by the link jitter only, so a sample whose latency departs from
@@ -42,6 +46,10 @@ NO_TIME = np.iinfo(np.int64).min
 """Marker for "no sample" in :meth:`NavStream.bracket` results."""
 
 _LATENCY_MEDIAN_OF = 32
+
+HOLD_EXTRA = 2
+"""Samples kept before a held time (:meth:`NavStream.hold`): the aligner's attitude
+window reaches two samples beyond the pulses it interpolates."""
 
 
 class PushResult(enum.IntEnum):
@@ -92,6 +100,7 @@ class NavStream:
         self._lo = 0
         self._hi = 0
         self._refuse_until_ns = NO_TIME  # samples at or before this time are refused
+        self._hold_ns: int | None = None  # samples from here on are kept (hold)
         self._latency: deque[int] = deque(maxlen=_LATENCY_MEDIAN_OF)
         self._candidates: list[tuple[int, int]] = []  # (rx_ns, latency) of refused samples
         self._lock = threading.Lock()
@@ -136,6 +145,13 @@ class NavStream:
             if result is PushResult.ACCEPTED:
                 self._insert(t_ns, values)
         return result
+
+    def hold(self, t_ns: int | None) -> None:
+        """Keep the samples at or after ``t_ns`` (GPS ns) and the :data:`HOLD_EXTRA`
+        before it however old they grow (until ``capacity`` evicts them); None: keep
+        ``history_ns`` only. Takes effect at the next sample."""
+        with self._lock:
+            self._hold_ns = t_ns
 
     def _classify(self, t_ns: int, rx_ns: int | None) -> PushResult:
         newest = self._t[self._hi - 1] if len(self) else NO_TIME
@@ -189,7 +205,11 @@ class NavStream:
         self._v[i] = values
         self._hi += 1
         horizon = self._t[self._hi - 1] - self.history_ns
-        self._lo += int(np.searchsorted(self.t_ns, horizon))
+        drop = int(np.searchsorted(self.t_ns, horizon))
+        if self._hold_ns is not None:
+            held = int(np.searchsorted(self.t_ns, self._hold_ns)) - HOLD_EXTRA
+            drop = min(drop, max(held, 0))
+        self._lo += drop
 
     def span_ns(self) -> tuple[int, int] | None:
         """Times of the oldest and the newest held sample, GPS ns; None when empty."""
@@ -296,6 +316,12 @@ class NavBuffer:
             r_att = self.push_attitude(t, nav.quat[k], rx)
             out[k] = max(r_kin, r_att)
         return out
+
+    def hold(self, t_ns: int | None) -> None:
+        """Keep both streams' samples from ``t_ns`` on (GPS ns; None: history only), see
+        :meth:`NavStream.hold`."""
+        self.kinematics.hold(t_ns)
+        self.attitude.hold(t_ns)
 
     def span_ns(self) -> tuple[int, int] | None:
         """Times that both streams hold samples over, GPS ns: from the later of their

@@ -1,11 +1,26 @@
-"""The daemon's data path: readers → echo ring / nav buffer → aligner → focuser → recorder.
+"""The daemon's data path, in two parts that do not wait for each other.
 
-Readers (threads in a live run, a loop in a replay) call :meth:`Pipeline.read_radar`
-and :meth:`Pipeline.add_nav`; the processing loop calls :meth:`Pipeline.process`
-with the current GPS time, and :meth:`Pipeline.finish` at the end. Only the
-processing loop touches the focuser and the recorder, so neither needs locks;
-the ring and the nav buffer are the thread-safe hand-over points, and both
-drop (with a counter) rather than block a reader.
+Recording (ingest): readers → echo ring → store, and the INS log. Readers (threads in
+a live run, a loop in a replay) call :meth:`Pipeline.read_radar` and
+:meth:`Pipeline.add_nav`; :meth:`Pipeline.record` takes the pulses out of the ring as
+they come, stores them (raw echoes, time, flags), and puts them in the focus backlog
+(:class:`~sarmoco.daemon.backlog.FocusBacklog`); it also stores the INS samples and
+bytes received. Nothing on this path waits for focusing: a pulse that arrives is
+stored.
+
+Focusing: focus backlog → aligner (with the nav buffer) → focuser → recorder (motion,
+autofocus estimates, tiles, the navigation flags of the pulses). :meth:`Pipeline.focus`
+runs it with the current GPS time. It may lag; when it falls
+:data:`FOCUS_BACKLOG_S` behind, it skips ahead to the newest pulses (counted in
+``pulses_focus_skipped``). The nav buffer holds the navigation of every pulse the
+focuser has not reached (:meth:`~sarmoco.daemon.navbuffer.NavBuffer.hold`), so a lag
+never leaves a pulse without navigation.
+
+A live run calls the two from threads of their own (and the readers from theirs);
+:meth:`Pipeline.process` runs one after the other (a replay, tests), and
+:meth:`Pipeline.finish` records and focuses what is left at the end. The ring, the
+nav buffer and the backlog are the thread-safe hand-over points, and none of them
+blocks a reader; the recorder takes calls from both parts.
 
 The "current time" of the aligner is the radar's own clock: the newest pulse
 time stamp plus the host's monotonic time elapsed since it arrived (live), or
@@ -29,10 +44,11 @@ import numpy as np
 import numpy.typing as npt
 
 from sarmoco.daemon import schema
-from sarmoco.daemon.aligner import AlignedBlock, Aligner
+from sarmoco.daemon.aligner import AlignedBlock, Aligner, PulseQueue
+from sarmoco.daemon.backlog import FocusBacklog, RecordedBatch
 from sarmoco.daemon.config import Config
 from sarmoco.daemon.echoring import Block, EchoRing, SampleFormat, sample_dtype, sample_shape
-from sarmoco.daemon.flags import FLAG_DTYPE, NAV_UNUSABLE, UNFOCUSABLE, PulseFlag
+from sarmoco.daemon.flags import FLAG_DTYPE, NAV_FLAGS, NAV_UNUSABLE, UNFOCUSABLE, PulseFlag
 from sarmoco.daemon.focuser import Focuser, FocusOutput, SinkFactory
 from sarmoco.daemon.navbuffer import NavBuffer
 from sarmoco.daemon.recorder import Recorder
@@ -47,9 +63,17 @@ log = logging.getLogger(__name__)
 
 RING_SECONDS = 4.0
 """Echo ring capacity in seconds of pulses at the nominal PRF."""
+FOCUS_BACKLOG_S = 2.0
+"""Most the focusing path lags behind the recording, in seconds of pulses at the nominal
+PRF (at least two processing blocks): further behind, it skips ahead to the newest."""
+REORDER_HOLD_S = 0.1
+"""A live pulse is recorded once the radar clock is this far past it, s: a datagram
+late by less still finds its place among the pulses waiting in the echo ring."""
+RECORD_BLOCK_PULSES = 1024
+"""Most pulses stored by one write of :meth:`Pipeline.record`."""
 INS_RECORD_S = 0.25
 """Queued INS samples and raw INS bytes go to the store at most this often (host clock):
-each write costs milliseconds, the processing loop passes every 50 ms, s."""
+each write costs milliseconds, s."""
 READ_BLOCK_PULSES = UDP_BATCH_PACKETS
 """Ring slots reserved per radar read: room for one batch of the UDP driver (batched
 receive and decode, and its short gathering pause, need at least
@@ -74,7 +98,7 @@ def ring_format(cfg: Config) -> SampleFormat:
     return "int16" if cfg.radar.sample_format == "int16" else "complex64"
 
 
-def nav_alignment(cfg: Config, ring: EchoRing, max_block: int) -> tuple[NavBuffer, Aligner]:
+def nav_alignment(cfg: Config, ring: PulseQueue, max_block: int) -> tuple[NavBuffer, Aligner]:
     """A run's navigation buffer and the aligner that joins it to the pulses of ``ring``,
     both configured from ``ins.*`` (clock-step tolerance, gap, bridged silence, latency
     budget, lever arm), releasing at most ``max_block`` pulses at a time. One place for
@@ -108,6 +132,8 @@ class RunSummary:
     pulses_duplicate: int = 0
     pulses_reordered: int = 0
     pulses_late_dropped: int = 0
+    pulses_focus_skipped: int = 0
+    """Pulses recorded but skipped by live focusing, fallen behind (a replay focuses them)."""
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-able form."""
@@ -123,6 +149,7 @@ class RunSummary:
             "pulses_duplicate": self.pulses_duplicate,
             "pulses_reordered": self.pulses_reordered,
             "pulses_late_dropped": self.pulses_late_dropped,
+            "pulses_focus_skipped": self.pulses_focus_skipped,
         }
 
 
@@ -160,8 +187,8 @@ class _Pulses:
     row: IntArray
 
     @classmethod
-    def join(cls, blocks: list[AlignedBlock], first_row: int) -> _Pulses:
-        """The pulses of ``blocks``, one after the other, stored from row ``first_row`` on."""
+    def join(cls, blocks: list[AlignedBlock]) -> _Pulses:
+        """The pulses of ``blocks`` (recorded ones), one after the other."""
         flags = np.concatenate([b.echoes.flags for b in blocks])
         t_ns = np.concatenate([b.echoes.t_ns for b in blocks])
         return cls(
@@ -173,7 +200,7 @@ class _Pulses:
             pos_ned=np.concatenate([b.nav.pos_ned for b in blocks]),
             vel_ned=np.concatenate([b.nav.vel_ned for b in blocks]),
             quat=np.concatenate([b.nav.quat for b in blocks]),
-            row=np.arange(first_row, first_row + t_ns.size, dtype=np.int64),
+            row=np.concatenate([_recorded(b).row for b in blocks]),
         )
 
     def since(self, first: int) -> _Pulses:
@@ -186,14 +213,14 @@ class _Pulses:
 
 
 class Pipeline:
-    """One run's buffers, alignment, focusing and recording.
+    """One run's buffers, recording, alignment and focusing (see the module doc).
 
     Parameters
     ----------
     cfg : Config
         Daemon configuration.
     recorder : Recorder
-        The run's store (written from the processing loop only).
+        The run's store (written by both the recording and the focusing part).
     counters : Counters
         Status counters (updated here, served by the status endpoint).
     sink : SinkFactory, optional
@@ -204,6 +231,11 @@ class Pipeline:
         radar clock (:meth:`read_radar`): a live network link, where the host clock runs
         with the radar's. Not for files and replays, read faster than real time (a pause
         of the radar would look like a jump).
+    focus_skips : bool
+        Focusing that falls :data:`FOCUS_BACKLOG_S` behind skips ahead (a live network
+        link: the radar does not wait). Otherwise :meth:`record` takes no more pulses
+        from the ring than the focus backlog has room for (a file or a replay, read at
+        the pace of focusing).
     """
 
     def __init__(
@@ -213,6 +245,7 @@ class Pipeline:
         counters: Counters,
         sink: SinkFactory | None = None,
         refuse_jumps: bool = False,
+        focus_skips: bool = False,
     ) -> None:
         self.cfg = cfg
         self.sink = sink
@@ -220,7 +253,10 @@ class Pipeline:
         self.counters = counters
         capacity = max(1024, math.ceil(RING_SECONDS * cfg.radar.prf_hz))
         self.ring = EchoRing(capacity, cfg.radar.n_samples, ring_format(cfg))
-        self.nav, self.aligner = nav_alignment(cfg, self.ring, cfg.imaging.block_pulses)
+        block = cfg.imaging.block_pulses
+        self.backlog = FocusBacklog(max(math.ceil(FOCUS_BACKLOG_S * cfg.radar.prf_hz), 2 * block))
+        self._focus_skips = focus_skips
+        self.nav, self.aligner = nav_alignment(cfg, self.backlog, block)
         self.focuser: Focuser | None = None
         self.summary = RunSummary()
         counters.add_source("pipeline", self.totals)
@@ -234,8 +270,10 @@ class Pipeline:
         self._latest_pulse_mono_ns = 0
         self._pending: list[AlignedBlock] = []
         self._pending_n = 0
-        self._pending_row = 0
-        """Store row of the first pending pulse."""
+        self._recorded_ns: int | None = None
+        """Time of the newest pulse recorded, GPS ns."""
+        self._taken_ns: int | None = None
+        """Time of the newest pulse the aligner took from the backlog, GPS ns."""
         self._focused_ns: int | None = None
         """Time of the newest pulse given to the focuser, GPS ns."""
         self.out_of_order = 0
@@ -374,34 +412,80 @@ class Pipeline:
             return self._latest_pulse_ns + elapsed
 
     def process(self, now_ns: int | None, on_block: Callable[[], None] | None = None) -> int:
-        """Record queued INS samples (every :data:`INS_RECORD_S`), release aligned pulses,
-        focus and record them.
+        """:meth:`record` then :meth:`focus` (one thread does both: a replay, tests);
+        returns the pulses released by the aligner."""
+        self.record(now_ns)
+        return self.focus(now_ns, on_block)
 
-        ``on_block`` is called after each released block is recorded (and focused, when it
-        completes a processing block): a backlog takes many blocks in one call, and the
-        caller's watchdog must hear that the loop is progressing.
+    def record(self, now_ns: int | None = None) -> int:
+        """Store the pulses waiting in the echo ring and hand them to focusing; store the
+        INS samples and bytes queued (every :data:`INS_RECORD_S`). Returns the pulses stored.
 
-        Returns the number of pulses released by the aligner.
+        Parameters
+        ----------
+        now_ns : int, optional
+            The radar clock, GPS ns: pulses within :data:`REORDER_HOLD_S` of it wait (a
+            late datagram may still go before them). None: every pulse is taken.
         """
         if time.monotonic() - self._ins_recorded_mono >= INS_RECORD_S:
             self._record_nav()
-        if now_ns is None:
-            return 0
-        released = 0
-        while (block := self.aligner.poll(now_ns)) is not None:
+        hold_ns = None if now_ns is None else now_ns - round(REORDER_HOLD_S * 1e9)
+        stored = 0
+        while True:
+            t = self.ring.peek_times(RECORD_BLOCK_PULSES)
+            k = t.size if hold_ns is None else int(np.searchsorted(t, hold_ns, side="right"))
+            if not self._focus_skips:
+                k = min(k, self.backlog.free)
+            if k == 0:
+                break
+            e = self.ring.pop(k)
+            first = self.recorder.pulses.rows
+            self.recorder.append_pulses(e.t_ns, e.pulse_id, e.channel, e.flags, e.samples)
+            row = np.arange(first, first + k, dtype=np.int64)
+            self.backlog.put(RecordedBatch(e.samples, e.t_ns, e.pulse_id, e.channel, e.flags, row))
+            self.summary.pulses_received += k
+            self._recorded_ns = int(e.t_ns[-1])
+            stored += k
+            if k < RECORD_BLOCK_PULSES:
+                break
+        self.counters.set("echo_backlog_pulses", len(self.ring))
+        return stored
+
+    def focus(self, now_ns: int | None, on_block: Callable[[], None] | None = None) -> int:
+        """Release aligned pulses from the focus backlog, focus them and record their
+        products; returns the number of pulses released.
+
+        A pass goes through the pulses waiting when it began (those recorded meanwhile
+        wait for the next), so that it ends while recording goes on. ``on_block`` is
+        called after each released block (focused, when it completes a processing
+        block): a pass takes many blocks, and the caller's watchdog must hear that the
+        loop is progressing.
+        """
+        released, waiting = 0, len(self.backlog)
+        while now_ns is not None and released < waiting:
+            block = self.aligner.poll(now_ns)
+            if block is None:
+                break
             released += len(block)
             self._accept(block)
+            self._hold_nav()
+            self._update_counters()
             if on_block is not None:
                 on_block()
+        self._hold_nav()
         self._update_counters()
         return released
 
     def finish(self) -> RunSummary:
-        """Release every remaining pulse, close all tiles, write the run metrics."""
+        """Record every remaining pulse, focus it, close all tiles, write the run metrics."""
         self._record_nav()
-        block = self.aligner.flush()
-        if block is not None:
-            self._accept(block)
+        while True:
+            self.record()
+            block = self.aligner.flush()
+            if block is not None:
+                self._accept(block)
+            if len(self.ring) == 0:
+                break
         self._focus_pending()
         if self.focuser is not None:
             self._record(self.focuser.finish())
@@ -409,16 +493,24 @@ class Pipeline:
         summary.pulses_dropped_ring, summary.pulses_duplicate = r.dropped, r.duplicates
         summary.pulses_nav_bridged = self.aligner.nav_bridged
         summary.pulses_reordered, summary.pulses_late_dropped = r.reordered, r.late_dropped
+        summary.pulses_focus_skipped = self.backlog.skipped
         self.recorder.set_metrics(self.summary.as_dict())
         self._update_counters()
         return self.summary
 
+    def _hold_nav(self) -> None:
+        """Keep the navigation of the pulses not focused yet: from the oldest waiting in the
+        backlog (or, with none waiting, the last one taken) less the aligner's reach."""
+        waiting = self.backlog.oldest_ns()
+        oldest = waiting if waiting is not None else self._taken_ns
+        self.nav.hold(None if oldest is None else oldest - self.aligner.reach_ns)
+
     def _accept(self, block: AlignedBlock) -> None:
-        e = block.echoes
-        if not self._pending:
-            self._pending_row = self.recorder.pulses.rows
-        self.recorder.append_pulses(e.t_ns, e.pulse_id, e.channel, e.flags, e.samples)
-        self.summary.pulses_received += len(block)
+        e = _recorded(block)
+        self._taken_ns = int(e.t_ns[-1])
+        nav_flags = e.flags & np.uint32(NAV_FLAGS)
+        for flag in np.unique(nav_flags[nav_flags != 0]).tolist():
+            self.recorder.flag_pulses(e.row[nav_flags == flag], flag)
         self._pending.append(block)
         self._pending_n += len(block)
         if self._pending_n >= self.cfg.imaging.block_pulses:
@@ -429,7 +521,7 @@ class Pipeline:
         if not self._pending:
             return
         blocks, self._pending, self._pending_n = self._pending, [], 0
-        in_order = self._in_time_order(_Pulses.join(blocks, self._pending_row))
+        in_order = self._in_time_order(_Pulses.join(blocks))
         if in_order is None:
             return
         self.summary.pulses_nav_flagged += int(np.count_nonzero(in_order.flags & NAV_UNUSABLE))
@@ -574,12 +666,19 @@ class Pipeline:
             "pulses_late_dropped": self.ring.late_dropped,
             "pulses_out_of_order": self.out_of_order,
             "pulses_time_jump": self.time_jumps,
+            "pulses_focus_skipped": self.backlog.skipped,
             "nav_samples": self.summary.nav_samples,
             "tiles": self.summary.tiles,
         }
 
     def _update_counters(self) -> None:
-        self.counters.set("echo_backlog_pulses", len(self.ring))
+        """The gauges of the focusing part: ``focus_backlog_pulses`` (recorded pulses
+        waiting to be focused) and ``focus_lag_seconds`` (the newest pulse recorded less
+        the newest taken by focusing, s)."""
+        self.counters.set("focus_backlog_pulses", len(self.backlog))
+        recorded, taken = self._recorded_ns, self._taken_ns
+        lag = 0.0 if recorded is None or taken is None else max(recorded - taken, 0) * 1e-9
+        self.counters.set("focus_lag_seconds", lag)
 
 
 def tile_metrics(data: ComplexArray) -> dict[str, float]:
@@ -597,6 +696,12 @@ def recorded_tile_metrics(tile: Tile) -> dict[str, float]:
     """The ``metrics`` a tile is recorded with: :func:`tile_metrics`, the pulses
     backprojected into it and its index in its segment's layout."""
     return tile_metrics(tile.data) | {"pulses": float(tile.n_pulses), "index": float(tile.index)}
+
+
+def _recorded(block: AlignedBlock) -> RecordedBatch:
+    """The recorded pulses of a block the aligner took from the focus backlog."""
+    assert isinstance(block.echoes, RecordedBatch)
+    return block.echoes
 
 
 def _strictly_increasing(t_ns: IntArray, after_ns: int | None) -> BoolArray:

@@ -12,9 +12,10 @@ fsynced (with their directories) every ``fsync_interval_s``, and at close.
 :meth:`Recorder.close` trims every array to its committed length and marks the
 store ``complete``.
 
-One thread calls a recorder; it is not safe for concurrent use. With a
-``writer_queue`` the writes themselves run, in call order, on the recorder's writer
-thread (:mod:`sarmoco.daemon.writer`), off the caller's.
+Several threads may call a recorder (a live run's recording and focusing parts): its
+calls run one at a time, each whole. With a ``writer_queue`` the writes themselves run,
+in call order, on the recorder's writer thread (:mod:`sarmoco.daemon.writer`), off the
+callers'.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import datetime
+import functools
 import importlib.metadata
 import json
 import os
@@ -30,7 +32,7 @@ import threading
 import time
 from collections.abc import Awaitable, Callable, Coroutine, Iterator, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, Concatenate, ParamSpec, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -47,6 +49,23 @@ from sarmoco.daemon.schema import COMMITTED_ATTR, TableSpec
 from sarmoco.daemon.writer import OrderedWriter
 from sarmoco.errors import RecorderError
 from sarmoco.processing.types import Image
+
+_P = ParamSpec("_P")
+_R = TypeVar("_R")
+
+
+def _one_at_a_time(
+    method: Callable[Concatenate[Recorder, _P], _R],
+) -> Callable[Concatenate[Recorder, _P], _R]:
+    """A :class:`Recorder` method that runs whole before another thread's call begins."""
+
+    @functools.wraps(method)
+    def call(self: Recorder, *args: _P.args, **kwargs: _P.kwargs) -> _R:
+        with self._calls:
+            return method(self, *args, **kwargs)
+
+    return call
+
 
 _VERSION_PACKAGES = ("sarmoco", "numpy", "scipy", "zarr", "xarray", "pymavlink", "python-can")
 
@@ -404,6 +423,8 @@ class Recorder(Closing):
     ) -> None:
         self.path = Path(path)
         self.live = live
+        self._calls = threading.RLock()
+        """Held by each call that places rows or hands a write over (:func:`_one_at_a_time`)."""
         if self.path.exists():
             raise RecorderError(f"recorder: {self.path} exists; a run never overwrites a store")
         try:
@@ -450,6 +471,7 @@ class Recorder(Closing):
         self.tables[spec.name] = table
         return table
 
+    @_one_at_a_time
     def _append(self, table: Table, **columns: npt.ArrayLike) -> None:
         """Place rows in ``table`` now, write them on the writer thread (or now)."""
         self._writer.raise_error()
@@ -517,6 +539,7 @@ class Recorder(Closing):
             lla=np.asarray(lla, dtype=np.float64).reshape(-1, 3),
         )
 
+    @_one_at_a_time
     def append_ins_bytes(self, data: bytes, rx_ns: int = -1) -> None:
         """Record raw bytes read from the INS link (bytes first, then their index row)."""
         offset = self.ins_bytes.rows
@@ -547,6 +570,7 @@ class Recorder(Closing):
             range_shift_m=range_shift_m,
         )
 
+    @_one_at_a_time
     def append_rows(self, spec: TableSpec, columns: Mapping[str, npt.ArrayLike]) -> None:
         """Record rows of a table that appears with its first row (``autofocus``).
 
@@ -569,6 +593,7 @@ class Recorder(Closing):
         if self.live is not None and spec.name == schema.AUTOFOCUS.name:
             self.live.add_autofocus(columns)
 
+    @_one_at_a_time
     def add_image(
         self,
         image: Image,
@@ -614,6 +639,7 @@ class Recorder(Closing):
         self._images.update_attributes({COMMITTED_ATTR: index + 1})
         self._maybe_sync()
 
+    @_one_at_a_time
     def flag_pulses(self, rows: npt.ArrayLike, flags: int) -> None:
         """Set ``flags`` (:class:`~sarmoco.daemon.flags.PulseFlag` bits) on recorded pulses.
 
@@ -639,6 +665,7 @@ class Recorder(Closing):
         column[lo:hi] = span
         self._maybe_sync()
 
+    @_one_at_a_time
     def add_dem(
         self,
         name: str,
@@ -681,6 +708,7 @@ class Recorder(Closing):
         """Store run-level metrics (JSON-able) in the root ``metrics`` attribute."""
         self.set_attribute("metrics", metrics)
 
+    @_one_at_a_time
     def set_attribute(self, name: str, value: Mapping[str, Any]) -> None:
         """Store a JSON-able mapping in the root attribute ``name``."""
         attrs = {name: json.loads(json.dumps(dict(value), default=str))}

@@ -24,6 +24,7 @@ from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.sdnotify import Notifier
 from sarmoco.daemon.status import Counters, Health, LiveView, StatusServer
 from sarmoco.daemon.store import StoreNav, StorePulses, open_store
+from sarmoco.daemon.threadcpu import stage_cpu_seconds
 from sarmoco.daemon.warmup import warm_up_kernels
 from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource
 from sarmoco.drivers.samples import Sample
@@ -36,7 +37,10 @@ _Link = RadarSource | Source
 """A radar or navigation link."""
 
 POLL_S = 0.05
-"""Reader poll timeout and idle sleep of the processing loop, s."""
+"""Reader poll timeout and idle sleep of the focusing loop, s."""
+
+RECORD_POLL_S = 0.01
+"""Idle sleep of the recording loop, s (its ring holds :data:`RING_SECONDS`)."""
 
 INS_ENDED_NOW_NS = 2**62
 """The aligner's "now" once an INS log file has ended, GPS ns (year 2116: after every pulse)."""
@@ -205,7 +209,12 @@ def _stop_on_signals(stop: threading.Event) -> None:
 
 
 class _LiveRun:
-    """A live run: status endpoint, store, links, reader threads, and the processing loop.
+    """A live run: status endpoint, store, links, reader threads, the recording thread,
+    and the focusing loop (see :mod:`sarmoco.daemon.pipeline`).
+
+    The recording thread stores every pulse and the INS log as they come, whatever
+    focusing does; the focusing loop (the calling thread) may lag, and skips ahead when
+    it falls behind (not with a radar file link: a file waits for focusing).
 
     The processing's numba kernels are compiled (or loaded from numba's cache) first,
     before the links open and READY=1 (:func:`~sarmoco.daemon.warmup.warm_up_kernels`).
@@ -232,8 +241,9 @@ class _LiveRun:
         self.recorder = open_recorder(cfg, path, live)
         radar = open_radar(cfg)
         ins = open_ins(cfg, keep_raw=cfg.recorder.raw_ins)
+        network = not isinstance(radar, RadarFileSource)
         self.pipe = Pipeline(
-            cfg, self.recorder, self.counters, refuse_jumps=not isinstance(radar, RadarFileSource)
+            cfg, self.recorder, self.counters, refuse_jumps=network, focus_skips=network
         )
         self._ins_file = Path(cfg.ins.link).is_file()
         """The INS link is a log file, read at its own pace (see :meth:`_now_ns`)."""
@@ -241,9 +251,12 @@ class _LiveRun:
         """Samples read from an INS log and not yet offered (:meth:`_read_ins_file`)."""
         self._write_failure_reported = False
         """The recorder's writer thread failed and that was counted and logged."""
+        self._recording_failure: SarmocoError | None = None
+        """The last pass of the recording thread failed (None: it succeeded)."""
         record_ins_format(self.recorder, ins)
         self.counters.add_source("radar", radar.decoder.counters.snapshot)
         self.counters.add_source("ins", ins.counters.snapshot)
+        self.counters.add_source("cpu_seconds", stage_cpu_seconds)
         self.threads = [
             self._reader(
                 "radar", lambda: open_radar(cfg, decoder=radar.decoder), radar, self._read_radar
@@ -252,6 +265,9 @@ class _LiveRun:
                 "ins", lambda: open_ins(cfg, keep_raw=cfg.recorder.raw_ins), ins, self._read_ins
             ),
         ]
+        self.recording = threading.Thread(target=self._keep_recording, name="recording",
+                                          daemon=True)  # fmt: skip
+        self.recording.start()
         self._links_ok = False
         """Every link up at the last look of :meth:`_watch_links` (WATCHDOG=1 needs it)."""
         self.monitor = threading.Thread(target=self._watch_links, name="health", daemon=True)
@@ -341,15 +357,15 @@ class _LiveRun:
     def _ins_horizon_ns(self) -> int | None:
         """Newest INS time an INS log may be offered up to, GPS ns (None: no limit).
 
-        Half the nav buffer's history past the oldest pulse waiting in the ring (where
+        Half the nav buffer's history past the oldest pulse waiting to be focused (where
         the aligner stands), else past the newest pulse read, else (before the first
         pulse) past the oldest sample held or waiting. A finished radar link sets no limit.
         """
         if "radar" in self.st.finished:
             return None
-        waiting = self.pipe.ring.peek_times(1)
-        if waiting.shape[0]:
-            reference = int(waiting[0])
+        waiting = self.pipe.backlog.oldest_ns()
+        if waiting is not None:
+            reference = waiting
         else:
             newest_pulse = self.pipe.now_ns(live=False)
             span = self.pipe.nav.span_ns()
@@ -363,7 +379,28 @@ class _LiveRun:
                 return None
         return reference + self.pipe.nav.kinematics.history_ns // 2
 
-    # -- processing loop ----------------------------------------------------------------------
+    # -- recording thread ---------------------------------------------------------------------
+
+    def _keep_recording(self) -> None:
+        """Store the pulses and INS samples as they come, until stop (the pulses still in
+        the ring then are stored by :meth:`Pipeline.finish`).
+
+        A failed pass (a store write refused) is counted, logged and reported unhealthy
+        (``processing``) until a pass succeeds; its pulses stay in the ring for the next.
+        """
+        while not self.st.stop.is_set():
+            try:
+                stored = self.pipe.record(self.pipe.now_ns(live=True))
+            except SarmocoError as exc:
+                self._recording_failure = exc
+                self._processing_failed(exc)
+                self.st.stop.wait(POLL_S)
+                continue
+            self._recording_failure = None
+            if not stored:
+                self.st.stop.wait(RECORD_POLL_S)
+
+    # -- focusing loop ------------------------------------------------------------------------
 
     def _now_ns(self) -> int | None:
         """The aligner's "now": the radar clock, held back to the INS log's progress.
@@ -385,11 +422,11 @@ class _LiveRun:
         return None if span is None else min(now, span[1])
 
     def supervise(self, idle_exit_s: float | None) -> None:
-        """Process, report health and status, until stopped (or idle for ``idle_exit_s``).
+        """Focus, report health and status, until stopped (or idle for ``idle_exit_s``).
 
-        The wall time spent in processing passes is counted (``processing_busy_seconds``):
-        data seconds processed over it is how many times faster than real time the loop
-        runs (``sarmoco bench``'s ``realtime_ratio``).
+        The wall time spent in focusing passes is counted (``processing_busy_seconds``):
+        data seconds taken in over it is how many times faster than real time the loop
+        could run (``sarmoco bench``'s ``realtime_ratio``).
         """
         while not self.st.stop.is_set():
             start = time.monotonic()
@@ -404,24 +441,26 @@ class _LiveRun:
                 time.sleep(POLL_S)
 
     def _process(self) -> int:
-        """One pass of the pipeline; returns the pulses released.
+        """One focusing pass of the pipeline; returns the pulses released.
 
         A processing error loses only this block's focus (its pulses are recorded): it
-        is counted and reported unhealthy until a pass succeeds; a store write failure
-        until a write succeeds (:attr:`Recorder.write_failure`; a pass with nothing to
-        write does not clear it). A write that failed on the recorder's writer thread
-        (``recorder.writer_queue``) is raised by the next call to the recorder; if the
-        pass made no call after it, it is counted and reported here, once, and
-        processing stays unhealthy (the thread writes nothing after it).
+        is counted and reported unhealthy until a pass succeeds (and the recording
+        thread's last pass did); a store write failure until a write succeeds
+        (:attr:`Recorder.write_failure`; a pass with nothing to write does not clear
+        it). A write that failed on the recorder's writer thread
+        (``recorder.writer_queue``) is raised by the next call to the recorder; if no
+        call was made after it, it is counted and reported here, once, and processing
+        stays unhealthy (the thread writes nothing after it).
         """
         try:
-            released = self.pipe.process(self._now_ns(), on_block=self._block_done)
+            released = self.pipe.focus(self._now_ns(), on_block=self._block_done)
         except SarmocoError as exc:
             self._processing_failed(exc)
             return 0
         failure = self.recorder.write_failure
         if failure is None:
-            self.health.set("processing", True)
+            if self._recording_failure is None:
+                self.health.set("processing", True)
         elif not self._write_failure_reported:
             self._processing_failed(failure)
         return released
@@ -502,10 +541,10 @@ class _LiveRun:
         )
 
     def shut_down(self) -> None:
-        """Stop the readers, release and focus what is left, close the store and endpoints."""
+        """Stop the readers, record and focus what is left, close the store and endpoints."""
         self.notifier.stopping()
         self.st.stop.set()
-        for t in [*self.threads, self.monitor]:
+        for t in [*self.threads, self.recording, self.monitor]:
             t.join(timeout=5.0)
         try:
             summary = self.pipe.finish()
