@@ -369,8 +369,8 @@ class RecorderConfig:
     writer_queue: int = _key(
         0,
         "Writes (blocks of pulses, tiles, table rows) that may wait for the recorder's writer "
-        "thread while processing goes on; when it is full, processing waits. 0: the "
-        "processing loop writes itself",
+        "thread while recording and focusing go on; when it is full, they wait. 0: the "
+        "recording thread and the focusing loop write themselves",
         ge=0,
     )
 

@@ -16,6 +16,7 @@ import pytest
 
 from sarmoco.app.benchcmd import KEYS
 from sarmoco.app.cli import main
+from sarmoco.daemon.threadcpu import STAGES
 from sarmoco.sim.scenario import load_preset
 
 PRESET, SCALE, DURATION_S = "thz-spotlight", 0.1, 2.0
@@ -43,6 +44,14 @@ def test_bench_prints_sane_figures_and_removes_its_folder(tmp_path: Path) -> Non
     assert 1.0 < r["fft_floor_ratio"] < 1e5
     assert 0.0 < r["latency_p50_s"] <= r["latency_p99_s"] < 60.0
     assert 50.0 < r["peak_rss_mb"] < 4096.0
+    # every stage took CPU for the pulses it saw, and one of the chain's bounds it
+    assert set(r["stage_cpu_us_per_pulse"]) == set(STAGES)
+    for stage in ("receive", "record", "write", "focus"):
+        assert 0.0 < r["stage_cpu_us_per_pulse"][stage] < 1e6, stage
+    assert r["bounding_stage"] in ("receive", "record", "write", "focus")
+    load = r["stage_load"]
+    assert load[r["bounding_stage"]] == max(load[k] for k in ("receive", "record", "write", "focus"))
+    assert r["pulses_focused"] + r["pulses_focus_skipped"] + r["pulses_nav_flagged"] <= r["pulses_taken"]
     assert math.isfinite(r["rss_growth_mb_per_min"])
     raw_bytes = r["pulses_recorded"] * radar.n_samples * 4  # int16 I and Q
     assert r["bytes_written"] > 0.5 * raw_bytes  # raw echoes recorded (zstd: noise stays)

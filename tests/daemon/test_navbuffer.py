@@ -41,6 +41,19 @@ def test_history_is_bounded_and_stale_samples_dropped() -> None:
     assert s.counts["stale"] == 1
 
 
+def test_a_hold_keeps_the_samples_from_its_time_beyond_the_history() -> None:
+    """What a lagging focuser has not reached stays (two samples before it too); once the
+    hold moves on or is lifted, the history alone decides again."""
+    s = _stream(history_ns=100 * MS)
+    s.hold(120 * MS)
+    for t in range(0, 300, 10):
+        s.push(t * MS, [t])
+    assert s.t_ns[0] == 100 * MS and s.t_ns[-1] == 290 * MS
+    s.hold(None)
+    s.push(300 * MS, [300])
+    assert s.t_ns[0] == 200 * MS
+
+
 def test_capacity_evicts_the_oldest() -> None:
     s = _stream(capacity=8)
     for t in range(20):
