@@ -493,35 +493,39 @@ def bench(
         if not keep:
             shutil.rmtree(out, ignore_errors=True)
     c = run.counters
-    return figures(run, fft_s) | stage_figures(run) | {
-        "preset": preset,
-        "scale": scale,
-        "duration_s": run.duration_s,
-        "pulses_sent": run.pulses_sent,
-        "pulses_recorded": int(run.t_ns.size),
-        "pulses_taken": int(c.get("pipeline_pulses_received", 0)),
-        "pulses_focused": int(c.get("pipeline_pulses_processed", 0)),
-        "pulses_focus_skipped": int(c.get("pipeline_pulses_focus_skipped", 0)),
-        "pulses_nav_flagged": int(c.get("pipeline_pulses_nav_flagged", 0)),
-        "pulses_dropped_ring": int(c.get("pipeline_pulses_dropped_ring", 0)),
-        "radar_link_drops": int(c.get("radar_drops", 0)),
-        "tiles": int(c.get("pipeline_tiles", 0)),
-        "processing_busy_s": c.get("processing_busy_seconds", 0.0),
-        "daemon_cpu_s": run.cpu_s,
-        "live_page_renders": int(run.live.get("png_renders", 0)),
-        "live_page_cpu_s": run.live.get("png_render_cpu_s", 0.0),
-        "cpu_realtime_ratio": c.get("pipeline_pulses_received", 0.0) / run.prf_hz / run.cpu_s
-        if run.cpu_s > 0
-        else float("nan"),
-        "fft_cpu_s_per_pulse": fft_s,
-        "record_raw_echoes": record,
-        "presum_first": presum_first,
-        "bytes_written": written,
-        "exit_status": run.exit_status,
-        "load_average": [load_start, os.getloadavg()[0]],
-        "cores": os.cpu_count(),
-        "kept": str(out) if keep else None,
-    }
+    return (
+        figures(run, fft_s)
+        | stage_figures(run)
+        | {
+            "preset": preset,
+            "scale": scale,
+            "duration_s": run.duration_s,
+            "pulses_sent": run.pulses_sent,
+            "pulses_recorded": int(run.t_ns.size),
+            "pulses_taken": int(c.get("pipeline_pulses_received", 0)),
+            "pulses_focused": int(c.get("pipeline_pulses_processed", 0)),
+            "pulses_focus_skipped": int(c.get("pipeline_pulses_focus_skipped", 0)),
+            "pulses_nav_flagged": int(c.get("pipeline_pulses_nav_flagged", 0)),
+            "pulses_dropped_ring": int(c.get("pipeline_pulses_dropped_ring", 0)),
+            "radar_link_drops": int(c.get("radar_drops", 0)),
+            "tiles": int(c.get("pipeline_tiles", 0)),
+            "processing_busy_s": c.get("processing_busy_seconds", 0.0),
+            "daemon_cpu_s": run.cpu_s,
+            "live_page_renders": int(run.live.get("png_renders", 0)),
+            "live_page_cpu_s": run.live.get("png_render_cpu_s", 0.0),
+            "cpu_realtime_ratio": c.get("pipeline_pulses_received", 0.0) / run.prf_hz / run.cpu_s
+            if run.cpu_s > 0
+            else float("nan"),
+            "fft_cpu_s_per_pulse": fft_s,
+            "record_raw_echoes": record,
+            "presum_first": presum_first,
+            "bytes_written": written,
+            "exit_status": run.exit_status,
+            "load_average": [load_start, os.getloadavg()[0]],
+            "cores": os.cpu_count(),
+            "kept": str(out) if keep else None,
+        }
+    )
 
 
 # -- the command -------------------------------------------------------------------------------

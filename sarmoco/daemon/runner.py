@@ -40,7 +40,10 @@ POLL_S = 0.05
 """Reader poll timeout and idle sleep of the focusing loop, s."""
 
 RECORD_POLL_S = 0.01
-"""Idle sleep of the recording loop, s (its ring holds :data:`RING_SECONDS`)."""
+"""Idle sleep of the recording loop, s."""
+
+RECORDING_STALL_S = 0.5
+"""WATCHDOG=1 waits while the recording thread has not ended a pass for this long, s."""
 
 INS_ENDED_NOW_NS = 2**62
 """The aligner's "now" once an INS log file has ended, GPS ns (year 2116: after every pulse)."""
@@ -98,6 +101,8 @@ class _LiveState:
     stop: threading.Event
     last_nav_mono: float = 0.0
     last_pulse_mono: float = 0.0
+    recorded_mono: float = 0.0
+    """When the recording thread last ended a pass (host monotonic clock), s."""
     first_pulse_mono: float = 0.0
     link_down: str = ""
     ins_bus_fault: str = ""
@@ -261,6 +266,7 @@ class _LiveRun:
         self.counters.add_source("radar", radar.decoder.counters.snapshot)
         self.counters.add_source("ins", ins.counters.snapshot)
         self.counters.add_source("cpu_seconds", stage_cpu_seconds)
+        self.counters.inc("processing_busy_seconds", 0.0)
         self.threads = [
             self._reader(
                 "radar", lambda: open_radar(cfg, decoder=radar.decoder), radar, self._read_radar
@@ -401,6 +407,7 @@ class _LiveRun:
                 self.st.stop.wait(POLL_S)
                 continue
             self._recording_failure = None
+            self.st.recorded_mono = time.monotonic()
             if not stored:
                 self.st.stop.wait(RECORD_POLL_S)
 
@@ -428,17 +435,17 @@ class _LiveRun:
     def supervise(self, idle_exit_s: float | None) -> None:
         """Focus, report health and status, until stopped (or idle for ``idle_exit_s``).
 
-        The wall time spent in focusing passes is counted (``processing_busy_seconds``):
-        data seconds taken in over it is how many times faster than real time the loop
-        could run (``sarmoco bench``'s ``realtime_ratio``).
+        The wall time spent in focusing passes that released pulses is counted
+        (``processing_busy_seconds``): data seconds focused over it is how many times
+        faster than real time focusing could run (``sarmoco bench``'s ``realtime_ratio``).
         """
         while not self.st.stop.is_set():
             start = time.monotonic()
             released = self._process()
             now = time.monotonic()
-            self.counters.inc("processing_busy_seconds", now - start)
-            if self._links_ok:
-                self.notifier.keepalive()
+            if released:
+                self.counters.inc("processing_busy_seconds", now - start)
+            self._keepalive()
             if self._idle(now, idle_exit_s):
                 break
             if released == 0:
@@ -477,10 +484,17 @@ class _LiveRun:
         self._write_failure_reported = self.recorder.write_failure is not None
 
     def _block_done(self) -> None:
-        """A block was recorded within a pass: WATCHDOG=1 (at most every half period) if
-        the links were up at the last check. A pass through a backlog under load can take
-        longer than ``WatchdogSec``; a stalled one makes no block and sends nothing."""
-        if self._links_ok:
+        """A block was focused within a pass: :meth:`_keepalive`. A pass through a backlog
+        under load can take longer than ``WatchdogSec``; a stalled one makes no block and
+        sends nothing."""
+        self._keepalive()
+
+    def _keepalive(self) -> None:
+        """WATCHDOG=1 (at most every half period) if the links were up at the last check
+        and the recording thread ended a pass within :data:`RECORDING_STALL_S`: a store
+        that does not answer stalls recording, and systemd is to hear it."""
+        recorded = self.st.recorded_mono
+        if self._links_ok and time.monotonic() - recorded < RECORDING_STALL_S:
             self.notifier.keepalive()
 
     def _watch_links(self) -> None:

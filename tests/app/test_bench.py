@@ -48,10 +48,11 @@ def test_bench_prints_sane_figures_and_removes_its_folder(tmp_path: Path) -> Non
     assert set(r["stage_cpu_us_per_pulse"]) == set(STAGES)
     for stage in ("receive", "record", "write", "focus"):
         assert 0.0 < r["stage_cpu_us_per_pulse"][stage] < 1e6, stage
-    assert r["bounding_stage"] in ("receive", "record", "write", "focus")
-    load = r["stage_load"]
-    assert load[r["bounding_stage"]] == max(load[k] for k in ("receive", "record", "write", "focus"))
-    assert r["pulses_focused"] + r["pulses_focus_skipped"] + r["pulses_nav_flagged"] <= r["pulses_taken"]
+    chain = {k: v for k, v in r["stage_load"].items() if k != "other"}
+    assert r["bounding_stage"] in chain
+    assert chain[r["bounding_stage"]] == max(chain.values())
+    focus_fate = r["pulses_focused"] + r["pulses_focus_skipped"] + r["pulses_nav_flagged"]
+    assert focus_fate <= r["pulses_taken"]
     assert math.isfinite(r["rss_growth_mb_per_min"])
     raw_bytes = r["pulses_recorded"] * radar.n_samples * 4  # int16 I and Q
     assert r["bytes_written"] > 0.5 * raw_bytes  # raw echoes recorded (zstd: noise stays)

@@ -247,6 +247,17 @@ def wait_received(port: int, n_pulses: int) -> None:
         time.sleep(0.1)
 
 
+def wait_focused(port: int) -> None:
+    """Poll /status until no recorded pulse waits to be focused."""
+    deadline = time.monotonic() + START_TIMEOUT_S
+    while True:
+        status = json.loads(http_get(port, "/status")[1])
+        if status["gauges"].get("focus_backlog_pulses", 1) == 0:
+            return
+        assert time.monotonic() < deadline, status
+        time.sleep(0.1)
+
+
 def run_files_to_end(config: Path, store: Path, port: int) -> tuple[RunStore, dict[str, Any]]:
     """Run the daemon on file links until both are read to their end, stop it (exit 0);
     returns its store and the last /status document."""
@@ -606,10 +617,11 @@ def test_file_links_that_end_are_finished_not_failed(sim: SimFiles, tmp_path: Pa
     their end the daemon stays healthy (the links and the INS are "finished"), says so
     in /status and STATUS=, keeps sending WATCHDOG=1 (no restart loop) and exits 0.
 
-    The readers finish long before the pipeline has taken the file's pulses; the passes
+    The readers finish long before the pipeline has focused the file's pulses; the passes
     through that backlog may each take longer than half the watchdog period on a loaded
     machine (a fresh-clone CI run saw 2 pings in 2.5 s). The pings are counted from the
-    first one after every pulse was taken, when the daemon has nothing left to do."""
+    first one after every pulse was recorded and none waits to be focused, when the
+    daemon has nothing left to do."""
     port = free_port(socket.SOCK_STREAM)
     config = daemon_config(sim, tmp_path / "files.toml", status={"http_port": port})
     notify = NotifyListener(tmp_path / "notify.sock")
@@ -618,6 +630,7 @@ def test_file_links_that_end_are_finished_not_failed(sim: SimFiles, tmp_path: Pa
         d.started()
         wait_finished(port)
         wait_received(port, N_PULSES)
+        wait_focused(port)
         t_finished = notify.next_ping(after=notify.now())
         time.sleep(2.5)  # past the INS staleness limit (2 s) and several watchdog periods
         health = http_get(port, "/health")

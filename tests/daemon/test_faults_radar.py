@@ -194,7 +194,7 @@ def test_context_change_and_sender_restart(sim_files: SimFiles, tmp_path: Path) 
     log_text = run.daemon.log.read_text()
     store = open_store(tmp_path / "context.zarr")
     assert store.attrs["complete"] is True
-    got = store.read("pulses", ["t_ns", "flags"])
+    got = store.read("pulses", ["t_ns", "pulse_id", "flags"])
     sent = np.concatenate([sim_files.t_ns[:restart], sim_files.t_ns[restart + RESTART_SKIP :]])
     np.testing.assert_array_equal(got["t_ns"], sent)  # every pulse sent recorded, once
     mismatch = (got["flags"] & np.uint32(PulseFlag.CONTEXT_MISMATCH)) != 0
@@ -204,9 +204,14 @@ def test_context_change_and_sender_restart(sim_files: SimFiles, tmp_path: Path) 
     assert counts["radar_context_changes"] == 1
     assert counts["radar_context_mismatch"] == restart - third
     assert counts["radar_gaps"] >= 1 and counts["pipeline_pulses_time_jump"] == 0
-    focused = store.attrs["metrics"]["pulses_processed"]
-    # none of the mismatched pulses is focused, every other one with navigation is
-    assert focused == np.count_nonzero((got["flags"] & np.uint32(UNFOCUSABLE)) == 0)
+    metrics = store.attrs["metrics"]
+    focused = metrics["pulses_processed"]
+    # the burst outruns focusing: the pulses it skipped ahead over never reach the motion
+    # table; of the others none of the mismatched is focused, every other one is
+    pushed = np.isin(got["pulse_id"], store.read("motion", ["pulse_id"])["pulse_id"])
+    assert np.count_nonzero(~pushed) == metrics["pulses_focus_skipped"]
+    usable = (got["flags"] & np.uint32(UNFOCUSABLE)) == 0
+    assert focused == np.count_nonzero(usable & pushed)
     assert (
         "radar.sample_rate_hz: configured" in log_text
         and "agrees with the configuration again" in log_text

@@ -106,7 +106,8 @@ def test_a_radar_gap_longer_than_a_subaperture_is_focused_around() -> None:
 
 
 def wait_idle(port: int, timeout_s: float = 60.0) -> dict[str, Any]:
-    """Poll /status until no pulse is waiting and none was received for 1 s; that document."""
+    """Poll /status until no pulse is waiting (to be recorded or focused) and none was
+    received for 1 s; that document."""
     deadline, last, since = time.monotonic() + timeout_s, -1.0, time.monotonic()
     while True:
         status: dict[str, Any] = json.loads(http_get(port, "/status")[1])
@@ -114,7 +115,8 @@ def wait_idle(port: int, timeout_s: float = 60.0) -> dict[str, Any]:
         if received != last:
             last, since = received, time.monotonic()
         elif received > 0 and time.monotonic() - since > 1.0:
-            if status["gauges"].get("echo_backlog_pulses", 0) == 0:
+            gauges = status["gauges"]
+            if gauges.get("echo_backlog_pulses", 0) == gauges.get("focus_backlog_pulses", 0) == 0:
                 return status
         assert time.monotonic() < deadline, status
         time.sleep(0.1)
