@@ -89,9 +89,6 @@ def record_ins_format(recorder: Recorder, ins: Source) -> None:
         recorder.set_attribute("ins_raw", {"format": ins.raw_format})
 
 
-GIL_SWITCH_S = 0.0005
-"""Python's thread switch interval in a live run, s (Python's default is 0.005)."""
-
 REOPEN_S = 1.0
 """Pause between attempts to reopen a failed live link, s."""
 
@@ -240,7 +237,6 @@ class _LiveRun:
     def __init__(self, cfg: Config, path: Path, stop: threading.Event) -> None:
         self.cfg = cfg
         self.path = path
-        sys.setswitchinterval(GIL_SWITCH_S)
         self.notifier = Notifier()
         warm_up_kernels(cfg, self.notifier)  # before the links: nothing waits for a compile
         self.counters, self.health = Counters(), Health()
