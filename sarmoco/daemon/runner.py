@@ -392,7 +392,8 @@ class _LiveRun:
         the ring then are stored by :meth:`Pipeline.finish`).
 
         A failed pass (a store write refused) is counted, logged and reported unhealthy
-        (``processing``) until a pass succeeds; its pulses stay in the ring for the next.
+        (``processing``) until a pass succeeds; the pulses of the refused write are not
+        stored (nor focused), those after it wait in the ring for the next pass.
         """
         while not self.st.stop.is_set():
             try:
