@@ -203,9 +203,20 @@ class _Pulses:
             row=np.concatenate([_recorded(b).row for b in blocks]),
         )
 
+    @classmethod
+    def cat(cls, parts: list[_Pulses]) -> _Pulses:
+        """``parts`` one after the other (one part: itself)."""
+        if len(parts) == 1:
+            return parts[0]
+        return cls(*(np.concatenate([getattr(p, f.name) for p in parts]) for f in fields(cls)))
+
     def since(self, first: int) -> _Pulses:
         """The pulses from row ``first`` on."""
         return _Pulses(*(getattr(self, f.name)[first:] for f in fields(self)))
+
+    def upto(self, stop: int) -> _Pulses:
+        """The pulses before row ``stop``."""
+        return _Pulses(*(getattr(self, f.name)[:stop] for f in fields(self)))
 
     def rows(self, keep: BoolArray) -> _Pulses:
         """The pulses where ``keep`` is True."""
@@ -268,7 +279,8 @@ class Pipeline:
         self._next_pulse_id = 0
         self._latest_pulse_ns: int | None = None
         self._latest_pulse_mono_ns = 0
-        self._pending: list[AlignedBlock] = []
+        self._pending: list[_Pulses] = []
+        """Aligned pulses not focused yet, oldest first."""
         self._pending_n = 0
         self._recorded_ns: int | None = None
         """Time of the newest pulse recorded, GPS ns."""
@@ -511,17 +523,26 @@ class Pipeline:
         nav_flags = e.flags & np.uint32(NAV_FLAGS)
         for flag in np.unique(nav_flags[nav_flags != 0]).tolist():
             self.recorder.flag_pulses(e.row[nav_flags == flag], flag)
-        self._pending.append(block)
+        self._pending.append(_Pulses.join([block]))
         self._pending_n += len(block)
-        if self._pending_n >= self.cfg.imaging.block_pulses:
-            self._focus_pending()
+        while self._pending_n >= self.cfg.imaging.block_pulses:
+            self._focus_pending(self.cfg.imaging.block_pulses)
 
-    def _focus_pending(self) -> None:
-        """Focus the pulses accepted so far and record their motion and products."""
+    def _focus_pending(self, n: int | None = None) -> None:
+        """Focus the first ``n`` pulses accepted and not focused yet (None: all of them),
+        and record their motion and products.
+
+        The focuser takes ``imaging.block_pulses`` at a time however the aligner released
+        them, so that a live run and a replay of its store cut the stream alike (the
+        autofocus estimates depend on the cuts at the level of rounding).
+        """
         if not self._pending:
             return
-        blocks, self._pending, self._pending_n = self._pending, [], 0
-        in_order = self._in_time_order(_Pulses.join(blocks))
+        pending = _Pulses.cat(self._pending)
+        n = pending.t_ns.size if n is None else n
+        self._pending = [pending.since(n)] if n < pending.t_ns.size else []
+        self._pending_n = pending.t_ns.size - n
+        in_order = self._in_time_order(pending.upto(n))
         if in_order is None:
             return
         self.summary.pulses_nav_flagged += int(np.count_nonzero(in_order.flags & NAV_UNUSABLE))
