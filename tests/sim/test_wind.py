@@ -22,6 +22,7 @@ from sarmoco.drivers.samples import AttitudeSample, Sample, VelocitySample
 from sarmoco.drivers.sbg import SbgFileSource
 from sarmoco.drivers.source import Source
 from sarmoco.errors import ConfigError
+from sarmoco.processing.rangecomp import compress
 from sarmoco.sim.emit_can import SbgCanEmitter
 from sarmoco.sim.emit_sbg import SbgEmitter
 from sarmoco.sim.emitter import Emitter
@@ -159,17 +160,32 @@ def test_ins_yaw_leads_the_course_by_the_crab_on_every_wire(
         assert np.degrees(np.abs(course_error)).max() < 0.1  # the track keeps its heading
 
 
-def test_crab_sets_the_beam_squint_and_doppler_centroid() -> None:
-    """Looking right a positive crab squints the beam aft, looking left forward; the truth's
-    Doppler centroid is ``2 v sin(squint) cos(depression) / lambda`` of the scene centre."""
-    for side, sign in (("right", -1.0), ("left", 1.0)):
-        scn = load_preset("ku-vehicle", scale=0.1, look_side=side, crab_rad=math.radians(8.0))
-        assert scn.beam_squint_rad == pytest.approx(sign * math.radians(8.0))
-        cos_dep = math.sqrt(1.0 - (scn.altitude_m / scn.center_slant_range_m) ** 2)
-        psi = scn.beam_squint_rad
-        sin_off = math.sin(psi) * cos_dep / math.sqrt(1.0 - (math.sin(psi) ** 2) * (1 - cos_dep**2))
-        assert scn.doppler_centroid_hz == pytest.approx(
-            2.0 * scn.speed_mps * sin_off / scn.radar.wavelength_m, rel=1e-9
-        )
+@pytest.mark.parametrize("side", SIDES)
+@pytest.mark.parametrize("crab_deg", (-8.0, 8.0))
+def test_truth_doppler_centroid_is_the_echoes(crab_deg: float, side: str) -> None:
+    """The truth's Doppler centroid (the scene centre's, at the beam centre) is what the
+    standard correlation estimator measures on the range-compressed echoes of a target there,
+    modulo the PRF (8 deg of crab alias it); looking right a positive crab squints the beam
+    aft, looking left forward."""
+    base = load_preset("ku-vehicle", scale=0.1)
+    ground = math.sqrt(base.center_slant_range_m**2 - base.altitude_m**2)
+    scn = load_preset(
+        "ku-vehicle", scale=0.1, heading_rad=math.radians(HEADING_DEG), look_side=side,
+        crab_rad=math.radians(crab_deg), snr_db=None, targets=(Target((0.0, ground, 0.0)),),
+    )  # fmt: skip
+    toward = -math.copysign(1.0, crab_deg) * (1.0 if side == "right" else -1.0)
+    assert scn.beam_squint_rad == pytest.approx(toward * math.radians(abs(crab_deg)))
+    prf = scn.radar.prf_hz
+    assert abs(scn.doppler_centroid_hz) > prf / 2.0  # aliased
+    run = simulate(scn, MotionSpec("ideal"), "ideal")
+    rc = compress(scn.radar, np.asarray(run.echo))
+    lit = np.flatnonzero(np.abs(rc).max(axis=1) > 0.5 * np.abs(rc).max())
+    peaks = rc[lit, np.argmax(np.abs(rc[lit]), axis=1)]
+    measured = np.angle(np.sum(peaks[1:] * np.conj(peaks[:-1]))) * prf / (2.0 * np.pi)
+    expected = (scn.doppler_centroid_hz + prf / 2.0) % prf - prf / 2.0
+    assert measured == pytest.approx(expected, abs=0.5)
+
+
+def test_a_squint_past_the_horizon_is_refused() -> None:
     with pytest.raises(ConfigError):
         load_preset("ku-vehicle", scale=0.1, crab_rad=math.radians(89.5))
