@@ -527,7 +527,8 @@ def load_preset(
     **overrides
         Any :class:`RadarParams` field (e.g. ``prf_hz``, ``receive``, ``n_samples``,
         ``chirp_direction``, ``iq_conjugate``) or
-        :class:`Scenario` field (e.g. ``snr_db``, ``targets``, ``aperture_s``, ``mode``),
+        :class:`Scenario` field (e.g. ``snr_db``, ``targets``, ``aperture_s``, ``mode``,
+        ``crab_rad``, ``antenna_squint_rad``),
         applied after scaling; derived values (range gate, samples, aperture) follow them
         unless given themselves.
 
@@ -672,8 +673,8 @@ def _orientation(
     """Look side, heading (rad from north) and lever arm (body frame, m) of the overrides.
 
     Also sets ``p["look_side"]``, ``p["crab_rad"]`` and ``p["antenna_squint_rad"]``
-    (default 0), the latter two checked so that
-    the beam's squint plus half the integration angle stays below 90 degrees.
+    (default 0), the latter two checked so that the beam's squint plus half the integration
+    angle stays below 90 degrees.
     """
     look_side = p.get("look_side", "right")
     if look_side not in ("right", "left"):
