@@ -191,11 +191,20 @@ class GeometryConfig:
 class MocompConfig:
     """INS-only per-pulse motion compensation (docs/methods.md §2)."""
 
-    order: Literal[1, 2] = _key(
+    order: Literal[2] = _key(
         2,
-        "1: scene-centre look angle for every bin; 2: look angle per range bin and the "
-        "deviation across the line of sight to second order, and with the autofocus off "
-        "the image former removes the eq. 29 squint residual per pixel",
+        "2: look angle per range bin and the deviation across the line of sight to second "
+        "order, and with the autofocus off the image former removes the eq. 29 squint "
+        "residual per pixel. 1 (the scene-centre look angle for every bin) is refused: it "
+        "defocuses a real flight",
+        refused=(
+            (
+                1,
+                "the scene-centre look angle for every bin leaves a look-angle error across "
+                "the swath that the autofocus does not remove (acceptance reference case: "
+                "worst azimuth PSLR -10.6 dB against -12.5 dB with 2); use 2",
+            ),
+        ),
     )
     envelope_fraction: float = _key(
         DEFAULT_ENVELOPE_FRACTION,
@@ -599,6 +608,9 @@ def _build(cls: type, table: Any, prefix: str) -> Any:
 def _coerce(tp: Any, value: Any, path: str, meta: Mapping[str, Any]) -> Any:
     if dataclasses.is_dataclass(tp):
         return _build(typing.cast(type, tp), value, path)
+    for bad, reason in meta.get("refused", {}).items():
+        if value == bad and type(value) is type(bad):
+            raise ConfigError(f"{path}: {value!r} is refused: {reason}")
     origin = typing.get_origin(tp)
     if origin is Literal:
         allowed = typing.get_args(tp)

@@ -71,7 +71,12 @@ def test_int_accepted_for_float_key() -> None:
             {"radar": {"receive": "fmcw"}},
             "radar.receive: 'fmcw' is not one of 'matched', 'dechirp'",
         ),
-        ({"mocomp": {"order": 3}}, "mocomp.order: 3 is not one of 1, 2"),
+        ({"mocomp": {"order": 3}}, "mocomp.order: 3 is not one of 2"),
+        (
+            {"mocomp": {"order": 1}},
+            "mocomp.order: 1 is refused: the scene-centre look angle for every bin leaves a "
+            "look-angle error across the swath",
+        ),
         ({"ins": {"lever_arm_m": [1, 2]}}, "ins.lever_arm_m: [1, 2] is not a list of 3 numbers"),
         ({"ins": {"lever_arm_m": [1, 2, "x"]}}, "ins.lever_arm_m[2]: 'x' is not a number"),
         ({"autofocus": {"enabled": 1}}, "autofocus.enabled: 1 is not true or false"),
