@@ -6,8 +6,8 @@ transmit time. :class:`ChannelGrouper` collects
 them and hands out a pulse once every channel has arrived. A pulse still missing
 channels when :data:`MAX_OPEN_PULSES` newer pulses have started is dropped and counted
 (``incomplete``); a packet whose stream ID is not a channel of the array is counted
-(``foreign``, its ID kept in ``foreign_ids``) and skipped, a second packet of a channel already held counted
-(``duplicates``) and skipped.
+(``foreign``, its ID kept in ``foreign_ids``) and skipped, a second packet of a channel
+already held counted (``duplicates``) and skipped.
 """
 
 from __future__ import annotations

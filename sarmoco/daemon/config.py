@@ -659,10 +659,10 @@ def _coerce(tp: Any, value: Any, path: str, meta: Mapping[str, Any]) -> Any:
             for i, (a, v) in enumerate(zip(args, value, strict=True))
         )
     if origin in (typing.Union, types.UnionType):
-        args = [a for a in typing.get_args(tp) if a is not type(None)]
-        if len(args) != 1 or len(typing.get_args(tp)) != 2:
+        members = [a for a in typing.get_args(tp) if a is not type(None)]
+        if len(members) != 1 or len(typing.get_args(tp)) != 2:
             raise TypeError(f"{path}: only `T | None` unions are supported in config sections")
-        return None if value is None else _coerce(args[0], value, path, meta)
+        return None if value is None else _coerce(members[0], value, path, meta)
     return _scalar(tp, value, path, meta)
 
 

@@ -706,7 +706,8 @@ class VitaDecoder:
         wrong = []
         low, high = self.expect.bandwidth_hz
         band = ctx.bandwidth_hz
-        if band is not None and not (band > 0.0 and low * (1.0 - tol) <= band <= high * (1.0 + tol)):
+        inside = band is not None and band > 0.0 and low * (1 - tol) <= band <= high * (1 + tol)
+        if band is not None and not inside:
             wrong.append(
                 f"radar.bandwidth_hz: the radar says its digitised band is {band!r} Hz, "
                 f"outside {low!r} .. {high!r} Hz that radar.receive, radar.bandwidth_hz and "

@@ -176,9 +176,9 @@ def test_readme_table_is_generated_from_the_code(repo_root: Path) -> None:
         (
             {"radar": {"channels": 2}},
             "radar.channels: 2: single mode focuses one channel (each channel would need its "
-            "own aperture and image set); set radar.channels = 1: the daemon focuses VITA stream "
-            "ID 0 and counts and skips the packets of other stream IDs; or radar.mode = "
-            '"array" for a MIMO array (channels = array.n_tx * array.n_rx)',
+            "own aperture and image set); set radar.channels = 1: the daemon focuses the VITA "
+            "stream radar.stream_id and counts and skips the packets of other stream IDs; or "
+            'radar.mode = "array" for a MIMO array (channels = array.n_tx * array.n_rx)',
         ),
     ],
     ids=[
