@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import re
+import shlex
 import shutil
 import subprocess
 import sys
@@ -90,7 +91,7 @@ def harness(workdir: Path, options: list[str]) -> str:
     """Run the harness on a scenario; return its output."""
     done = subprocess.run(
         [sys.executable, str(HARNESS), "--workdir", str(workdir), "--repo", str(REPO),
-         "--sarmoco", f"{sys.executable} -m sarmoco", *options],
+         "--sarmoco", f"{shlex.quote(sys.executable)} -m sarmoco", *options],
         capture_output=True, text=True, cwd=REPO,
     )  # fmt: skip
     return done.stdout + done.stderr

@@ -16,6 +16,7 @@ goes.
 
 from __future__ import annotations
 
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -42,8 +43,8 @@ def run_case(workdir: Path, *options: str) -> None:
         pytest.fail(f"the acceptance harness is not at {HARNESS}")
     cmd = [
         sys.executable, str(HARNESS), "--workdir", str(workdir), "--repo", str(REPO),
-        "--sarmoco", f"{sys.executable} -m sarmoco", "--timeout", str(REPLAY_TIMEOUT_S),
-        *options,
+        "--sarmoco", f"{shlex.quote(sys.executable)} -m sarmoco",
+        "--timeout", str(REPLAY_TIMEOUT_S), *options,
     ]  # fmt: skip
     done = subprocess.run(
         cmd, capture_output=True, text=True, cwd=REPO, timeout=REPLAY_TIMEOUT_S + 120
