@@ -11,8 +11,8 @@ the harness writes the scenario and its configuration once, each value is the ha
 configuration with that one key changed, replayed by ``sarmoco replay`` and scored by the
 harness's ``score.py``. Values that describe the data rather than choose a method
 (sample type, INS protocol, look side) are run on the harness's scenario of that kind;
-those the harness cannot make (a dechirp receiver, a down-chirp, an array, SBG over CAN)
-are listed as not run, with the reason. Prints one line per value: the harness's verdict
+those the harness cannot make (a dechirp receiver, a down-chirp, conjugated I/Q, an
+array, SBG over CAN) are listed as not run, with the reason. Prints one line per value: the harness's verdict
 (PASS: every target at PSLR <= -12.5 dB and IRW <= 1.1 x the unweighted theory, so a
 window, which widens the main lobe by design, shows as an IRW failure with its PSLR),
 the worst PSLR and the worst IRW ratio.
@@ -54,6 +54,9 @@ NOT_RUN: dict[tuple[str, object], str] = {
     ("radar.chirp_direction", "down"): "the harness's chirp sweeps up",
     ("radar.mode", "array"): "the harness flies one side-looking channel",
     ("ins.protocol", "sbg-can"): "the harness writes no CAN log",
+    ("radar.iq_conjugate", True): "the harness's I/Q is not conjugated",
+    ("array.roll_compensation", False): "array mode only",
+    ("array.record_uncompensated", False): "array mode only",
 }
 """Values the harness's scenario cannot exercise, with the reason."""
 
