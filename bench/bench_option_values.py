@@ -13,9 +13,9 @@ harness's ``score.py``. Values that describe the data rather than choose a metho
 (sample type, INS protocol, look side) are run on the harness's scenario of that kind;
 those the harness cannot make (a dechirp receiver, a down-chirp, conjugated I/Q, an
 array, SBG over CAN) are listed as not run, with the reason. Prints one line per value:
-the harness's verdict (PASS: every target at PSLR <= -12.5 dB and IRW <= 1.1 x the unweighted theory, so a
-window, which widens the main lobe by design, shows as an IRW failure with its PSLR),
-the worst PSLR and the worst IRW ratio.
+the harness's verdict (PASS: every target at PSLR <= -12.5 dB and IRW <= 1.1 x the
+unweighted theory, so a window, which widens the main lobe by design, shows as an IRW
+failure with its PSLR), the worst PSLR and the worst IRW ratio.
 """
 
 from __future__ import annotations
