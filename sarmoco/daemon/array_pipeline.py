@@ -34,7 +34,7 @@ import numpy as np
 from sarmoco.daemon import schema
 from sarmoco.daemon.aligner import AlignedBlock
 from sarmoco.daemon.channelgroup import ChannelGrouper
-from sarmoco.daemon.config import Config
+from sarmoco.daemon.config import Config, array_stream_ids
 from sarmoco.daemon.echoring import EchoRing, sample_dtype, sample_shape, to_complex64
 from sarmoco.daemon.flags import FLAG_DTYPE
 from sarmoco.daemon.focuser import radar_params
@@ -127,7 +127,7 @@ class ArrayPipeline:
         fmt = ring_format(cfg)
         n_c, n_s = cfg.radar.channels, cfg.radar.n_samples
         row = sample_shape(n_s, fmt)
-        self.grouper = ChannelGrouper(n_c, row, sample_dtype(fmt))
+        self.grouper = ChannelGrouper(array_stream_ids(cfg), row, sample_dtype(fmt))
         self.ring = EchoRing(RING_PULSES, n_c * n_s, fmt)
         self.nav, self.aligner = nav_alignment(cfg, self.ring, RING_PULSES)
         self._scratch = np.empty((READ_PACKETS, *row), sample_dtype(fmt))
@@ -278,13 +278,21 @@ def replay_array_files(
         _feed_ins(pipe, ins, ahead, None, lead_ns, recorder)
         summary = pipe.finish()
     if summary.pulses_imaged == 0:
+        foreign = sorted(pipe.grouper.foreign_ids)
         raise DataFileError(
             f"array replay imaged no pulse: {summary.pulses} whole pulses "
             f"({summary.incomplete} dropped for missing channels, {summary.foreign} packets of "
-            f"stream IDs beyond radar.channels {cfg.radar.channels}), {summary.nav_flagged} "
-            f"without navigation; radar {radar_file}, INS {nav_file}; store {out}"
+            f"VITA streams {_id_list(foreign)} that are no Tx/Rx pair of array.stream_ids "
+            f"{_id_list(list(pipe.grouper.channel_of))}), {summary.nav_flagged} without "
+            f"navigation; radar {radar_file}, INS {nav_file}; store {out}"
         )
     return summary
+
+
+def _id_list(ids: list[int], most: int = 8) -> str:
+    """``ids`` in a message: the first ``most`` and how many more."""
+    text = ", ".join(map(str, ids[:most]))
+    return f"[{text}{f', ... {len(ids) - most} more' if len(ids) > most else ''}]"
 
 
 def _feed_ins(

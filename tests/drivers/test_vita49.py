@@ -106,7 +106,7 @@ def test_context_change_flags_the_pulses_after_it_until_it_agrees_again(
     """A context packet that changes the sample rate mid-stream marks the stream: the pulses
     after it come back ``context_mismatch`` (counted, the change logged naming the key), in
     packet-by-packet and batched decoding alike, until a context packet agrees again."""
-    want = ContextExpectation(bandwidth_hz=1.5e8, rf_reference_hz=9.6e9, sample_rate_hz=1.8e8)
+    want = ContextExpectation.for_receiver("matched", 1.5e8, 9.6e9, 1.8e8)
     iq = pulses(3 * BATCH)
 
     def context(rate_hz: float, count: int) -> bytes:
@@ -134,6 +134,42 @@ def test_context_change_flags_the_pulses_after_it_until_it_agrees_again(
     assert "radar.sample_rate_hz: configured 180000000.0 Hz, the radar says 200000000.0 Hz" in (
         caplog.text
     )
+
+
+@pytest.mark.parametrize(
+    ("receive", "chirp_hz", "rate_hz", "reported_hz", "agrees"),
+    [
+        # pulsed LFM, complex sampling at 720 MHz of a 600 MHz chirp: any band that holds
+        # the chirp and fits in the sample rate (the chirp's, the anti-alias filter's)
+        ("matched", 600e6, 720e6, 600e6, True),
+        ("matched", 600e6, 720e6, 700e6, True),
+        ("matched", 600e6, 720e6, 720e6, True),
+        ("matched", 600e6, 720e6, 500e6, False),  # the receiver cuts the chirp
+        ("matched", 600e6, 720e6, 800e6, False),  # more than I/Q at 720 MHz can hold
+        # dechirp of a 1.1 GHz chirp digitised at 40 MHz: the IF (beat) band, not the chirp's
+        ("dechirp", 1.1e9, 40e6, 32e6, True),
+        ("dechirp", 1.1e9, 40e6, 40e6, True),
+        ("dechirp", 1.1e9, 40e6, 1.1e9, False),
+        ("dechirp", 1.1e9, 40e6, 0.0, False),
+    ],
+)
+def test_context_bandwidth_is_the_digitised_band(
+    receive: str, chirp_hz: float, rate_hz: float, reported_hz: float, agrees: bool
+) -> None:
+    """VITA 49.2's context Bandwidth is the usable band of the signal digitised in the
+    stream: a matched receiver's holds the chirp and fits in the sample rate, a dechirp
+    receiver's is its beat band, up to the sample rate. The pulses after a context in those
+    bounds are focused, the others flagged ``context_mismatch`` naming radar.bandwidth_hz."""
+    want = ContextExpectation.for_receiver(receive, chirp_hz, 9.6e9, rate_hz)  # type: ignore[arg-type]
+    dec = VitaDecoder(N, expect=want)
+    context = encode_context_packet(
+        3, T0, 0, bandwidth_hz=reported_hz, rf_reference_hz=9.6e9, sample_rate_hz=rate_hz
+    )
+    row = np.zeros(N, np.complex64)
+    assert dec.decode_into(context, row) is None and dec.last_ok
+    pulse = dec.decode_into(packets(pulses(1))[0], row)
+    assert pulse is not None and pulse.context_mismatch is not agrees
+    assert ("radar.bandwidth_hz" in dec.mismatch.get(3, "")) is not agrees
 
 
 def test_context_longer_than_its_fields_is_damage() -> None:
