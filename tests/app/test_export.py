@@ -23,7 +23,7 @@ import sarkit.verification as skver
 import tifffile
 
 from sarmoco.app.cli import main
-from sarmoco.app.cphd import focus, read_cphd
+from sarmoco.app.cphd import read_cphd
 from sarmoco.app.export import failures
 from sarmoco.app.sicd import sicd_product, write_sicd
 from sarmoco.daemon import schema
@@ -33,9 +33,15 @@ from sarmoco.daemon.geotiff import write_geotiffs
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.runner import replay_files
 from sarmoco.daemon.store import RunStore, open_store
-from sarmoco.geodesy import geodetic_to_ecef, geodetic_to_ned
-from sarmoco.processing.imaging import PlaneGrid, facing_heading
-from sarmoco.sim.insfeed import GEODETIC_ORIGIN, ned_to_geodetic
+from sarmoco.geodesy import geodetic_to_ned, ned_to_ecef
+from sarmoco.processing.imaging import (
+    PlaneGrid,
+    backproject,
+    compressed_from_phase_history,
+    facing_heading,
+)
+from sarmoco.processing.types import C_MPS
+from sarmoco.sim.insfeed import GEODETIC_ORIGIN
 
 PIXEL_M = 0.1
 """Grid spacing of the scene's tiles (``imaging.pixel_m``), m."""
@@ -167,31 +173,52 @@ def test_sicd_export_passes_the_consistency_check_and_holds_our_pixels(
     assert graze == pytest.approx(np.degrees(np.arctan2(100.0, 894.43)), abs=0.1)
 
 
-def test_cphd_of_the_recorded_echoes_passes_its_check_and_refocuses_the_targets(
+def _peak_m(mag: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """Position (3,) of the brightest pixel of ``mag`` (pixel positions ``pos``, (n0, n1, 3)),
+    refined by a parabola through it and its neighbours along each axis, m."""
+    k = np.unravel_index(np.argmax(mag), mag.shape)
+    out = pos[k].astype(np.float64)
+    for axis in (0, 1):
+        step = np.zeros(2, dtype=int)
+        step[axis] = 1
+        lo, hi = tuple(np.subtract(k, step)), tuple(np.add(k, step))
+        a, b, c = mag[lo], mag[k], mag[hi]
+        out += 0.5 * (a - c) / (a - 2 * b + c) * (pos[hi] - pos[k])
+    return out
+
+
+def test_cphd_of_the_recorded_echoes_passes_its_check_and_keeps_the_geometry(
     scene: Scene, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """``export --cphd``: the echoes compensated to the scene centre by the INS pass
-    ``CphdConsistency``; read back and backprojected on a 0.1 m ground grid about the SRP,
-    each target peaks within 0.15 m of where the simulator put it (half the 0.2 m
-    resolution cell plus half a pixel; measured 0.02 .. 0.11 m)."""
+    ``CphdConsistency``; read back and backprojected on a 1 cm ground grid about each
+    target, every target peaks within 1 cm of where the simulator put it and of where the
+    store's own image has it (through its georeference): the export moves no target."""
     out = scene.out / "scene.cphd"
     assert main(["export", str(scene.store.path), "--cphd", str(out)]) == 0, capsys.readouterr()
     assert failures(skver.CphdConsistency.from_file, out, warnings=True) == []
     ph = read_cphd(out)
-    image = focus(ph, 200, 0.1)
-    grid = PlaneGrid.centred(
-        (0.0, 0.0, 0.0), 200, 200, 0.1, 0.1, facing_heading(ph.scene(ph.apc_ecef_m), (0, 0, 0))
-    )
-    pix, mag = grid.positions(), np.abs(image.data)
-    misses = []
+    rc, r_axis, fc = compressed_from_phase_history(ph.signal, ph.freq_hz)
+    apc = ph.scene(ph.apc_ecef_m)
+    heading = facing_heading(apc, (0, 0, 0))
+    geo = georeference(scene.store)
+    cfg = load_config(scene.out / "sbg.toml")
+    seg = segment_images(scene.store)[0]
+    own = ph.scene(geo.ecef(grid_points(seg.image, seg.track, cfg.geometry.height_m)))
+    own_mag = np.abs(seg.image.data)
+    to_truth, to_own = [], []
     for target in scene.truth["targets"]:
-        lla = ned_to_geodetic(np.asarray([target["pos_ned"]]))[0]
-        at = ph.scene(geodetic_to_ecef(lla))
-        near = np.linalg.norm(pix[..., :2] - at[:2], axis=-1) < 1.0
-        k = np.unravel_index(np.argmax(np.where(near, mag, 0.0)), mag.shape)
-        misses.append(float(np.linalg.norm(pix[k][:2] - at[:2])))
-    print(f"CPHD refocused targets: {np.round(misses, 3).tolist()} m off")
-    assert max(misses) < 0.15
+        at = ph.scene(ned_to_ecef(np.asarray(target["pos_ned"]), GEODETIC_ORIGIN))
+        grid = PlaneGrid.centred(tuple(at), 41, 41, 0.01, 0.01, heading)
+        image = backproject(rc, r_axis, apc, C_MPS / fc, grid, ref_range_m=ph.ref_range_m)
+        peak = _peak_m(np.abs(image.data), grid.positions())
+        near = np.linalg.norm(own[..., :2] - at[:2], axis=-1) < 1.0
+        own_peak = _peak_m(np.where(near, own_mag, 0.0), own)
+        to_truth.append(float(np.linalg.norm(peak[:2] - at[:2])))
+        to_own.append(float(np.linalg.norm(peak[:2] - own_peak[:2])))
+    print(f"CPHD refocused targets: {np.round(to_truth, 4).tolist()} m from the simulator's, "
+          f"{np.round(to_own, 4).tolist()} m from the store's image")
+    assert max(to_truth) < 0.01 and max(to_own) < 0.01
 
 
 def test_the_checker_fails_a_sicd_whose_geometry_is_wrong(scene: Scene) -> None:

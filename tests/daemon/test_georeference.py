@@ -19,7 +19,7 @@ from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.store import open_store
 from sarmoco.drivers import sbg_codec as codec
-from sarmoco.drivers.samples import AttitudeSample, Validity, VelocitySample
+from sarmoco.drivers.samples import AttitudeSample, TangentFrame, Validity, VelocitySample
 from sarmoco.drivers.sbg import SbgDecoder
 from sarmoco.errors import RecorderError
 from sarmoco.geodesy import (
@@ -28,6 +28,7 @@ from sarmoco.geodesy import (
     geodetic_to_ned,
     ned_rotation,
     ned_to_ecef,
+    ned_to_geodetic,
 )
 from tests.drivers.test_sbg import LEAP, OK_STATUS, utc_msg
 
@@ -56,6 +57,18 @@ def test_ned_axes_and_round_trip() -> None:
     north = ecef_to_geodetic(ned_to_ecef(np.array([1000.0, 0.0, 0.0]), origin))
     assert north[0] - origin[0] == pytest.approx(1000.0 / 111_190.0, rel=2e-3)
     assert north[1] == pytest.approx(origin[1], abs=1e-9)
+
+
+def test_ned_to_geodetic_is_exact_far_from_the_tangent_point() -> None:
+    """900 m east of a point at 47° N (a scene's range from the track): back through
+    geodetic_to_ned to 1 µm; the point lies 6.4 cm above the ellipsoid, and a flat-Earth
+    mapping (latitude from north only) would put it 6.8 cm north of where it is."""
+    origin = (47.3769, 8.5417, 408.0)
+    ned = np.array([[0.0, 900.0, 0.0], [-1500.0, 2500.0, 120.0]])
+    lla = ned_to_geodetic(ned, origin)
+    assert np.allclose(geodetic_to_ned(lla, origin), ned, atol=1e-6)
+    assert lla[0, 2] - origin[2] == pytest.approx(900.0**2 / (2 * 6_378_000.0), rel=0.01)
+    assert lla[0, 0] < origin[0] - 0.06 / 111_190.0
 
 
 def _rows() -> list[schema.NavRow]:
@@ -135,4 +148,5 @@ def test_sbg_positions_are_ned_about_the_first_valid_fix() -> None:
     assert vel[0].pos_ned is None and vel[0].lat_lon_alt is None  # position not valid
     assert vel[1].pos_ned == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
     assert vel[2].pos_ned == pytest.approx((12.0, -3.0, -5.0), abs=1e-6)
-    assert dec.geodetic_origin == origin
+    assert dec.positions.frame == TangentFrame(origin, "sbg.EKF_NAV")
+    assert vel[1].pos_frame == vel[2].pos_frame == dec.positions.frame
