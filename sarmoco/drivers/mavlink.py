@@ -291,7 +291,7 @@ class MavlinkDecoder:
         as an autopilot without a fix sends) or out of range (counted as a parse error)."""
         if lat_e7 == 0 and lon_e7 == 0:
             return None
-        lla = (lat_e7 * 1e-7, lon_e7 * 1e-7, alt_mm / 1000.0)
+        lla = (lat_e7 / 1e7, lon_e7 / 1e7, alt_mm / 1000.0)
         if not (-90.0 <= lla[0] <= 90.0 and -180.0 <= lla[1] <= 180.0):
             self.counters.parse_errors += 1
             return None

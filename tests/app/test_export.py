@@ -216,9 +216,47 @@ def test_cphd_of_the_recorded_echoes_passes_its_check_and_keeps_the_geometry(
         own_peak = _peak_m(np.where(near, own_mag, 0.0), own)
         to_truth.append(float(np.linalg.norm(peak[:2] - at[:2])))
         to_own.append(float(np.linalg.norm(peak[:2] - own_peak[:2])))
-    print(f"CPHD refocused targets: {np.round(to_truth, 4).tolist()} m from the simulator's, "
-          f"{np.round(to_own, 4).tolist()} m from the store's image")
+    print(
+        f"CPHD refocused targets: {np.round(to_truth, 4).tolist()} m from the simulator's, "
+        f"{np.round(to_own, 4).tolist()} m from the store's image"
+    )
     assert max(to_truth) < 0.01 and max(to_own) < 0.01
+
+
+def test_a_mavlink_run_states_the_ekf_origin_and_exports_to_sicd(
+    scene: Scene, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The simulated autopilot's log (``nav.tlog``: ArduPilot's default streams, with
+    GPS_GLOBAL_ORIGIN) replayed: the store's frame is the EKF origin, its positions are
+    NED about it (the INS positions of the scenario frame, to the float32 of the wire),
+    the targets are georeferenced within half a pixel and the SICD passes its check."""
+    cfg = load_config(scene.out / "sim" / "sarmoco.toml")
+    path = scene.out / "mavlink.zarr"
+    replay_files(cfg, scene.out / "sim" / "radar.vrt", scene.out / "sim" / "nav.tlog", path, False)
+    store = open_store(path)
+    origin = schema.decode_geodetic_origin(store.attrs, "run")
+    assert origin.source == "mavlink.GPS_GLOBAL_ORIGIN"
+    assert geodetic_to_ned(np.asarray(origin.lla), GEODETIC_ORIGIN) == pytest.approx(
+        np.zeros(3), abs=0.01
+    )
+    nav = store.read("nav")
+    vel = (nav["kind"] == schema.NAV_KIND_VELOCITY) & (nav["result"] == 0)
+    apc = np.asarray(scene.truth["pulses"]["apc_ned"])
+    ins = np.asarray(scene.truth["pulses"]["apc_ned"]) - scene.truth["scenario"]["lever_arm_m"]
+    assert np.isfinite(nav["pos_ned"][vel]).all()
+    span = np.ptp(apc, axis=0)
+    assert np.all(np.ptp(nav["pos_ned"][vel], axis=0) >= 0.9 * span)  # the flown track
+    assert np.linalg.norm(nav["pos_ned"][vel][0] - ins[0]) < 20.0  # scenario frame, not the run's
+    motion = store.read("motion", ["t_ns", "pos_ned"])
+    rows = np.searchsorted(np.asarray(scene.truth["pulses"]["t_ns"]), motion["t_ns"])
+    ok = np.isfinite(motion["pos_ned"]).all(axis=1)
+    assert ok.mean() > 0.9
+    assert np.abs(motion["pos_ned"][ok] - apc[rows[ok]]).max() < 1e-3  # ideal INS: the true APC
+    errors = _target_errors_m(Scene(store, scene.truth, scene.out))
+    assert max(errors) < PIXEL_M / 2
+    out = scene.out / "mavlink.nitf"
+    assert main(["export", str(path), "--sicd", str(out)]) == 0, capsys.readouterr().err
+    assert failures(skver.SicdConsistency.from_file, out, warnings=True) == []
 
 
 def test_the_checker_fails_a_sicd_whose_geometry_is_wrong(scene: Scene) -> None:

@@ -10,9 +10,9 @@ import numpy as np
 from sarmoco.drivers.samples import AttitudeSample, EventSample, Sample, VelocitySample
 from sarmoco.drivers.sbg import SbgFileSource, SbgSerialSource
 from sarmoco.drivers.source import Source
+from sarmoco.geodesy import ned_to_geodetic
 from sarmoco.sim.emit_sbg import SbgEmitter
 from sarmoco.sim.faults import Faults, PacketFaults
-from sarmoco.geodesy import ned_to_geodetic
 from sarmoco.sim.insfeed import GEODETIC_ORIGIN, InsFeed
 from sarmoco.sim.links import FileLink, Link, PtyLink
 from tests.sim.emit_common import play_fast, tiny_run
