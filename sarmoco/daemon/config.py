@@ -64,10 +64,17 @@ class RadarConfig:
     sample_format: Literal["int16", "float32"] = _key("int16", "I/Q sample type on the wire")
     channels: int = _key(
         1,
-        "Receive channels (VITA stream IDs 0..channels-1): 1 in single mode (packets of other "
-        "stream IDs are counted (radar driver's rejected) and skipped); array.n_tx * array.n_rx "
-        "in array mode",
+        "Receive channels: 1 in single mode; array.n_tx * array.n_rx in array mode (VITA "
+        "stream IDs 0..channels-1)",
         gt=0,
+    )
+    stream_id: int | None = _key(
+        None,
+        "VITA stream identifier (the digitiser's own 32-bit value) focused in single mode; "
+        "signal packets of other streams are counted (radar driver's rejected) and skipped. "
+        "Unset: the first signal stream that arrives (its ID is logged)",
+        ge=0,
+        le=0xFFFFFFFF,
     )
     mode: Literal["single", "array"] = _key(
         "single",
@@ -607,7 +614,10 @@ def _coerce(tp: Any, value: Any, path: str, meta: Mapping[str, Any]) -> Any:
             for i, (a, v) in enumerate(zip(args, value, strict=True))
         )
     if origin in (typing.Union, types.UnionType):
-        raise TypeError(f"{path}: union types are not supported in config sections")
+        members = [a for a in typing.get_args(tp) if a is not type(None)]
+        if len(members) != 1 or len(typing.get_args(tp)) != 2:
+            raise TypeError(f"{path}: only `T | None` unions are supported in config sections")
+        return None if value is None else _coerce(members[0], value, path, meta)
     return _scalar(tp, value, path, meta)
 
 
@@ -687,6 +697,8 @@ def keys_markdown() -> str:
 
 def _type_text(tp: Any) -> str:
     origin = typing.get_origin(tp)
+    if origin in (typing.Union, types.UnionType):
+        return _type_text(next(a for a in typing.get_args(tp) if a is not type(None)))
     if origin is Literal:
         return "string" if isinstance(typing.get_args(tp)[0], str) else "integer"
     if origin is tuple:
@@ -700,10 +712,16 @@ def _allowed_text(tp: Any, meta: Mapping[str, Any]) -> str:
     if meta.get("choices"):
         return ", ".join(_toml_value(a) for a in meta["choices"])
     words = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}
-    return ", ".join(f"{w} {meta[k]:g}" for k, w in words.items() if meta.get(k) is not None)
+    return ", ".join(
+        f"{w} {meta[k] if isinstance(meta[k], int) else format(meta[k], 'g')}"
+        for k, w in words.items()
+        if meta.get(k) is not None
+    )
 
 
 def _toml_value(v: Any) -> str:
+    if v is None:
+        return "unset"
     if isinstance(v, bool):
         return "true" if v else "false"
     if isinstance(v, str):

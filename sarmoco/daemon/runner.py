@@ -647,10 +647,18 @@ def _nothing_focused(
     if n:
         radar_span.add(*store.read("pulses", ["t_ns"], 0, 1)["t_ns"].tolist())
         radar_span.add(*store.read("pulses", ["t_ns"], n - 1, n)["t_ns"].tolist())
-    radar_counts = radar.decoder.counters.snapshot() if isinstance(radar, RadarSource) else {}
+    radar_counts, streams = {}, ""
+    if isinstance(radar, RadarSource):
+        radar_counts = radar.decoder.counters.snapshot()
+        skipped = sorted(radar.decoder.skipped_streams)
+        if skipped:
+            streams = (
+                f"; skipped VITA streams {', '.join(str(s) for s in skipped)} "
+                f"(radar.stream_id = {radar.decoder.stream_id} is decoded; set it to one of these)"
+            )
     return (
         f"replay focused no pulse: radar {n} pulses{radar_span.text()}"
-        f"{_nonzero(radar_counts)}; INS {ins_span.n} samples{ins_span.text()}"
+        f"{_nonzero(radar_counts)}{streams}; INS {ins_span.n} samples{ins_span.text()}"
         f"{_nonzero(ins.counters.snapshot())}{_nonzero(pipe.nav.counts(), 'refused')}; "
         f"{pipe.summary.pulses_nav_flagged} pulses without navigation (INS gap "
         f"{pipe.aligner.nav_gap}, beyond the INS {pipe.aligner.nav_timeout}); store {out}"

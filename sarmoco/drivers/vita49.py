@@ -307,7 +307,11 @@ class VitaDecoder:
     stream_id : int or None
         Accept the signal packets of this VITA stream ID only (one receive channel);
         signal packets of other streams are counted in ``counters.rejected`` and
-        skipped (logged once per stream). None: every stream.
+        skipped (logged once per stream). None: every stream, or with ``first_stream``
+        the first one whose signal packet arrives.
+    first_stream : bool
+        With ``stream_id`` None: take the stream of the first well-formed signal packet
+        (logged with its ID) and only that stream from then on.
 
     Notes
     -----
@@ -331,6 +335,7 @@ class VitaDecoder:
         expect: ContextExpectation | None = None,
         link: str = "vita49",
         stream_id: int | None = None,
+        first_stream: bool = False,
     ) -> None:
         if n_samples < 1:
             raise ConfigError(f"radar.n_samples: {n_samples!r} is not >= 1")
@@ -341,6 +346,8 @@ class VitaDecoder:
         self.leap_s = leap_s
         self.expect = expect
         self.stream_id = stream_id
+        self.first_stream = first_stream and stream_id is None
+        """Whether the stream is still to be chosen: the first signal packet's."""
         self.skipped_streams: set[int] = set()
         """Stream IDs whose signal packets were skipped (each logged once)."""
         self.counters = VitaCounters()
@@ -467,6 +474,8 @@ class VitaDecoder:
                 self._count(ptype, stream_id, count)
                 self.last_ok = True
             return None
+        if self.first_stream:
+            self._choose_stream(stream_id)
         if not self._accepts(stream_id):
             self._skip_stream(stream_id)
             self.last_ok = True  # well formed: a framer steps past the whole packet
@@ -508,14 +517,26 @@ class VitaDecoder:
         """Whether signal packets of ``stream_id`` are decoded (int, or elementwise array)."""
         return True if self.stream_id is None else stream_id == self.stream_id
 
+    def _choose_stream(self, stream_id: int) -> None:
+        """Take ``stream_id``, the first signal stream seen, as the one decoded."""
+        self.stream_id, self.first_stream = stream_id, False
+        log.info(
+            "radar: decoding VITA stream 0x%08x (%d), the first signal stream seen "
+            "(radar.stream_id selects another)",
+            stream_id,
+            stream_id,
+        )
+
     def _skip_stream(self, stream_id: int) -> None:
         self.counters.rejected += 1
         if stream_id not in self.skipped_streams:
             self.skipped_streams.add(stream_id)
             log.warning(
-                "radar: skipping the signal packets of VITA stream 0x%08x (only stream 0x%08x "
-                "is focused; counted in rejected)",
+                "radar: skipping the signal packets of VITA stream 0x%08x (%d): only stream "
+                "0x%08x (%d) is decoded (radar.stream_id selects it; counted in rejected)",
                 stream_id,
+                stream_id,
+                self.stream_id,
                 self.stream_id,
             )
 
@@ -553,7 +574,8 @@ class VitaDecoder:
         """
         k = len(lengths)
         end = _FULL_HEADER.itemsize + self._payload_bytes
-        if k < BATCH_MIN_PACKETS or not out.flags.c_contiguous or stage.shape[1] < end + 4:
+        slow = k < BATCH_MIN_PACKETS or self.first_stream  # the stream is chosen packet by packet
+        if slow or not out.flags.c_contiguous or stage.shape[1] < end + 4:
             got: list[EchoPacket] = []
             for i in range(k):
                 pkt = self.decode_into(memoryview(stage[i])[: lengths[i]], out[len(got)])

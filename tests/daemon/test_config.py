@@ -31,10 +31,13 @@ def test_example_config_loads(repo_root: Path) -> None:
 
 
 def _documented_defaults() -> dict[str, dict[str, object]]:
-    """The default column of :func:`describe_keys` (the README table), parsed as TOML."""
+    """The default column of :func:`describe_keys` (the README table), parsed as TOML; a key
+    whose default is "unset" is left out, as a user leaves it out."""
     table: dict[str, dict[str, object]] = {}
     for row in describe_keys():
         section, key = row["key"].split(".")
+        if row["default"] == "unset":
+            continue
         table.setdefault(section, {})[key] = tomllib.loads(f"v = {row['default']}")["v"]
     return table
 

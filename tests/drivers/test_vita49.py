@@ -380,3 +380,31 @@ def test_timestamp_kinds_outside_the_profile_are_rejected(batched: bool) -> None
     keep = [k for k in range(len(datagrams)) if k not in bad]
     assert [e.t_gps_ns for e in got] == [times(len(iq))[k] for k in keep]
     assert dec.counters.parse_errors == len(bad)
+
+
+@pytest.mark.parametrize(("configured", "decoded"), [(None, 0xC0FFEE01), (7, 7)])
+def test_stream_selection_first_seen_or_configured(configured: int | None, decoded: int) -> None:
+    """Unset, the first signal stream seen is decoded (a context packet of another stream
+    before it does not choose); set, only that stream, whatever arrives first. Other streams
+    are counted in rejected and named in skipped_streams."""
+    iq = pulses(3 * BATCH)
+    order = [0xC0FFEE01, 7, 0x10]
+    ctx = encode_context_packet(
+        0x10, T0, 0, bandwidth_hz=1.5e8, rf_reference_hz=9.6e9, sample_rate_hz=1.8e8
+    )
+    raw = [ctx]
+    raw += [
+        encode_signal_packet(order[k % 3], t, k // 3, iq[k], "int16")
+        for k, t in enumerate(times(len(iq)))
+    ]
+    dec = VitaDecoder(N, "int16", stream_id=configured, first_stream=True)
+    stage = np.zeros((len(raw), max(map(len, raw))), np.uint8)
+    for i, p in enumerate(raw):
+        stage[i, : len(p)] = np.frombuffer(p, np.uint8)
+    out = np.zeros((len(raw), N), np.complex64)
+    got = dec.decode_batch(stage, [len(p) for p in raw], out)
+    mine = [k for k in range(len(iq)) if order[k % 3] == decoded]
+    assert [g.stream_id for g in got] == [decoded] * len(mine)
+    np.testing.assert_array_equal(out[: len(mine)], iq[mine])
+    assert dec.stream_id == decoded and dec.skipped_streams == set(order) - {decoded}
+    assert dec.counters.rejected == len(iq) - len(mine)
