@@ -18,6 +18,7 @@ from pathlib import Path
 import lxml.etree
 import numpy as np
 import pytest
+import sarkit.cphd as sksicd_cphd
 import sarkit.sicd as sksicd
 import sarkit.verification as skver
 import tifffile
@@ -168,6 +169,14 @@ def test_sicd_export_passes_the_consistency_check_and_holds_our_pixels(
     assert start.year == 2024  # GPS 1.4e18 ns, as UTC
     procs = [p.findtext("{*}Type") for p in xml.findall("./{*}ImageFormation/{*}Processing")]
     assert any("INS motion compensation" in p for p in procs)
+    # the frame and origin the geometry went through are stated
+    stated = {
+        p.get("name"): p.text for p in xml.findall("./{*}ImageFormation/{*}Processing/{*}Parameter")
+    }
+    origin = schema.decode_geodetic_origin(scene.store.attrs, "run")
+    assert stated["geodetic_origin_source"] == origin.source == "sbg.EKF_NAV"
+    lat, lon, _ = (float(v.split()[0]) for v in stated["geodetic_origin"].split(","))
+    assert (lat, lon) == pytest.approx(origin.lla[:2], abs=1e-9)
     # the scene centre point is the pixel at SCPPixel, on the ground below the track
     graze = helper.load("./{*}SCPCOA/{*}GrazeAng")
     assert graze == pytest.approx(np.degrees(np.arctan2(100.0, 894.43)), abs=0.1)
@@ -197,6 +206,10 @@ def test_cphd_of_the_recorded_echoes_passes_its_check_and_keeps_the_geometry(
     out = scene.out / "scene.cphd"
     assert main(["export", str(scene.store.path), "--cphd", str(out)]) == 0, capsys.readouterr()
     assert failures(skver.CphdConsistency.from_file, out, warnings=True) == []
+    with out.open("rb") as f, sksicd_cphd.Reader(f) as reader:
+        params = reader.metadata.xmltree.findall("./{*}CollectionID/{*}Parameter")
+    stated = {p.get("name"): p.text for p in params}
+    assert stated["geodetic_origin_source"] == "sbg.EKF_NAV"
     ph = read_cphd(out)
     rc, r_axis, fc = compressed_from_phase_history(ph.signal, ph.freq_hz)
     apc = ph.scene(ph.apc_ecef_m)
