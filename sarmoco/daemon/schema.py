@@ -12,7 +12,8 @@ dimension, plus a ``committed`` attribute counting the rows that are complete)::
 
     <run>.zarr/   attrs: sarmoco_store (layout version), created_utc, config, versions,
                          metrics, complete, reference_track, ins_raw (format of ins_bytes),
-                         geodetic_origin (:func:`encode_geodetic_origin`)
+                         geodetic_origin (:func:`encode_geodetic_origin`: the tangent
+                         point of the NED frame of nav/pos_ned and motion/pos_ned)
       pulses/     t_ns, pulse_id (pulse) int64    transmit time GPS ns, running number
                   channel (pulse) int32, flags (pulse) uint32 (PulseFlag bits)
                   echo (pulse, sample[, iq])      raw echoes, int16 I/Q or complex64 (optional)
