@@ -39,6 +39,7 @@ from sarmoco.daemon.echoring import EchoRing, sample_dtype, sample_shape, to_com
 from sarmoco.daemon.flags import FLAG_DTYPE
 from sarmoco.daemon.focuser import radar_params
 from sarmoco.daemon.links import open_ins, open_radar
+from sarmoco.daemon.navframe import StoreFrame
 from sarmoco.daemon.pipeline import nav_alignment, ring_format
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.runner import open_recorder, record_ins_format
@@ -133,6 +134,8 @@ class ArrayPipeline:
         self._scratch = np.empty((READ_PACKETS, *row), sample_dtype(fmt))
         self._row = row
         self._nav_rows: list[schema.NavRow] = []
+        self.frame = StoreFrame()
+        """The frame of the store's positions."""
         self._blocks: list[AlignedBlock] = []
         self._next_id = 0
         self.newest_ns: int | None = None
@@ -158,6 +161,8 @@ class ArrayPipeline:
     def add_nav(self, samples: list[Sample]) -> None:
         """Offer INS samples to the nav buffer and keep them for the store."""
         for s in samples:
+            if isinstance(s, VelocitySample):
+                s = self.frame.express(s)
             if isinstance(s, VelocitySample | AttitudeSample):
                 self._nav_rows.append((s, None, self.nav.push_sample(s)))
 
@@ -191,6 +196,11 @@ class ArrayPipeline:
             self._accept(block)
         if self._nav_rows:
             self.recorder.append_nav(**schema.encode_nav(self._nav_rows))
+            origin = schema.first_geodetic_origin(self._nav_rows)
+            if origin is not None:
+                self.recorder.set_attribute(
+                    schema.GEODETIC_ORIGIN_ATTR, schema.encode_geodetic_origin(origin)
+                )
         self._image()
         self.recorder.set_metrics(self.summary.as_dict())
         return self.summary
