@@ -19,9 +19,13 @@ straight track). The steps:
 4. azimuth compression ``exp(+j 4 pi r0 D / lambda)`` within the processed
    Doppler band, then inverse azimuth FFT.
 
-The processed band is ``|sin theta| <= sin(alpha / 2)`` with ``alpha`` the
-processed angle: given, or by default ``BAND_MARGIN`` times the angle the
-block subtends at each range, ``2 atan(P dx / (2 r0))``. The margin keeps the
+The processed band is ``|sin theta - sin theta_c| <= sin(alpha / 2)`` with ``alpha``
+the processed angle: given, or by default ``BAND_MARGIN`` times the angle the
+block subtends at each range, ``2 atan(P dx / (2 r0))``, and ``theta_c`` the squint
+of the Doppler centroid (0 for a beam at broadside; a crabbed platform squints the
+beam, Doppler centroid ``f_dc = 2 v sin(theta_c) / lambda``). The Doppler bins are
+unwrapped around the centroid, so a centroid beyond the sampled band (aliased)
+is processed at its true squint. The margin keeps the
 Fresnel edges of a short aperture's spectrum (small time-bandwidth product)
 inside the band, so the band edge does not weight them. The theoretical
 azimuth IRW of an unweighted target seen over an aperture of length ``L`` at
@@ -50,6 +54,8 @@ def range_doppler(
     integration_angle_rad: float | None = None,
     src: bool = True,
     taps: int = 16,
+    pad: bool = True,
+    centroid_squint_rad: float = 0.0,
 ) -> Image:
     """Focus a stripmap block with the range-Doppler algorithm.
 
@@ -71,12 +77,21 @@ def range_doppler(
         Apply secondary range compression.
     taps : int
         RCMC interpolation kernel length.
+    pad : bool
+        Zero-pad the azimuth FFT to ``>= 2P - 1`` (linear compression over the
+        whole block). False: the FFT is ``P`` long and compression is circular, so
+        only the outputs at least a half aperture from both ends of the block are
+        exact (a streaming former that overlaps its blocks keeps those).
+    centroid_squint_rad : float
+        Squint of the Doppler centroid ``theta_c`` (positive: the beam looks
+        forward, toward +x), rad; 0 for a beam at broadside.
 
     Returns
     -------
     Image
         complex64, frame ``"slant"``: axis 0 along-track (the pulse positions),
-        axis 1 slant range of closest approach.
+        axis 1 slant range of closest approach. Computed in single precision when
+        ``rc`` is complex64, else in double.
     """
     p, s = rc.shape
     if range_axis_m.shape != (s,) or along_track_m.shape != (p,) or p < 2 or s < 2:
@@ -87,18 +102,23 @@ def range_doppler(
     if not np.allclose(np.diff(along_track_m), dx, rtol=1e-3, atol=0.0) or dx <= 0:
         raise ProcessingError("rda: pulses are not uniformly spaced along the track (resample)")
     dr = float(range_axis_m[1] - range_axis_m[0])
-    n_az = scipy.fft.next_fast_len(2 * p - 1)
-    sin_sq = wavelength_m * np.fft.fftfreq(n_az, dx) / 2.0  # (n_az,)
+    n_az = scipy.fft.next_fast_len(2 * p - 1 if pad else p)
+    # Doppler bins as spatial frequency kx (cycles/m), unwrapped around the centroid's
+    kx_c = 2.0 * np.sin(centroid_squint_rad) / wavelength_m
+    kx = np.fft.fftfreq(n_az, dx)
+    kx = kx_c + (kx - kx_c + 0.5 / dx) % (1.0 / dx) - 0.5 / dx
+    sin_sq = wavelength_m * kx / 2.0  # (n_az,)
     if integration_angle_rad is None:
         sin_max = np.sin(BAND_MARGIN * np.arctan(p * dx / (2.0 * range_axis_m)))  # (S,)
     else:
         sin_max = np.full(s, np.sin(integration_angle_rad / 2.0))
-    band = np.abs(sin_sq)[:, None] <= sin_max[None, :]
+    band = np.abs(sin_sq - np.sin(centroid_squint_rad))[:, None] <= sin_max[None, :]
     if np.any(np.abs(sin_sq) >= 1.0):
         raise ProcessingError("rda: pulse spacing below lambda/2 gives evanescent Doppler bins")
     d = np.sqrt(1.0 - sin_sq**2)
 
-    rd = scipy.fft.fft(np.asarray(rc, dtype=np.complex128), n=n_az, axis=0)
+    cdtype = np.complex64 if rc.dtype == np.complex64 else np.complex128
+    rd = scipy.fft.fft(np.asarray(rc, dtype=cdtype), n=n_az, axis=0)
     if src:
         fc = C_MPS / wavelength_m
         fr = np.fft.fftfreq(s, dr) * C_MPS / 2.0
@@ -106,14 +126,13 @@ def range_doppler(
         resid = np.sqrt((fc + fr[None, :]) ** 2 - a2) - fc * d[:, None] - fr[None, :] / d[:, None]
         r_ref = float(range_axis_m[s // 2])
         # shift to the bin-0 origin does not matter: the filter is a pure range-frequency phase
-        rd = scipy.fft.ifft(
-            scipy.fft.fft(rd, axis=1) * np.exp(4j * np.pi * r_ref * resid / C_MPS), axis=1
-        )
+        src_filter = np.exp(4j * np.pi * r_ref * resid / C_MPS).astype(cdtype)
+        rd = scipy.fft.ifft(scipy.fft.fft(rd, axis=1) * src_filter, axis=1)
     pos = (range_axis_m[None, :] / d[:, None] - range_axis_m[0]) / dr
     rd = sinc_interp(rd, pos, taps)
     rd *= np.where(
         band, np.exp(4j * np.pi * range_axis_m[None, :] * d[:, None] / wavelength_m), 0.0
-    )
+    ).astype(cdtype)
     img = scipy.fft.ifft(rd, axis=0)[:p]
     axis0 = along_track_m[0] + np.arange(p) * dx
     return Image(
