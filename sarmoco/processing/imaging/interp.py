@@ -137,3 +137,10 @@ def fft_upsample(x: ComplexArray, factor: int) -> ComplexArray:
     out = scipy.fft.ifft(padded, axis=1, overwrite_x=True)
     out *= factor
     return np.asarray(out).astype(x.dtype, copy=False)
+
+
+def warm_up() -> None:
+    """Compile the kernel of :func:`sinc_interp` (or load it from numba's cache) for
+    complex64 and complex128 rows."""
+    for dtype in (np.complex64, np.complex128):
+        sinc_interp(np.ones((2, 8), dtype), np.full((2, 3), 2.5))

@@ -42,10 +42,12 @@ interpolations. Backprojection costs per pixel and pulse.
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from sarmoco.errors import ProcessingError
+from sarmoco.processing.imaging.grid import PlaneGrid
 from sarmoco.processing.imaging.interp import sinc_interp
 from sarmoco.processing.imaging.rda import range_doppler
 from sarmoco.processing.imaging.tiles import Tile, TileLayout
@@ -59,6 +61,21 @@ RANGE_GUARD_BINS = 32
 
 HOLE_SPACINGS = 1.5
 """A stretch between two pulses longer than this many nominal spacings is a hole."""
+
+LEVELS = ((1, 1), (2, 1), (2, 2), (4, 2))
+"""Degraded levels of the live image: (pixel spacing factor, swath divisor) of level 0, 1,
+2, 3. Each level about halves the cost of a tile (range bins and pixels)."""
+
+
+def degraded(layout: TileLayout, level: int) -> TileLayout:
+    """``layout`` at a degraded level of :data:`LEVELS` (pixels coarser, swath narrower
+    about the same centre); level 0 is ``layout`` itself."""
+    if not 0 <= level < len(LEVELS):
+        raise ProcessingError(f"degraded: level {level!r} is not in 0..{len(LEVELS) - 1}")
+    if level == 0:
+        return layout
+    pixel, narrow = LEVELS[level]
+    return replace(layout, pixel_m=layout.pixel_m * pixel, swath_m=layout.swath_m / narrow)
 
 
 class RdaTileImager:
@@ -96,15 +113,7 @@ class RdaTileImager:
         self._dr = float(axis[1] - axis[0])
         if not self._dr > 0:
             raise ProcessingError("RdaTileImager: the range axis does not increase")
-        h = layout.height_m
-        y_lo = layout.ground_range_m - layout.swath_m / 2.0
-        y_hi = layout.ground_range_m + layout.swath_m / 2.0
-        r_lo = math.hypot(h, max(y_lo, 0.0))
-        beam = layout.beamwidth_rad / 2.0 + abs(self.centroid_squint_rad)
-        r_hi = math.hypot(h, y_hi) / math.cos(beam)
-        i0 = int(np.searchsorted(axis, r_lo)) - RANGE_GUARD_BINS
-        i1 = int(np.searchsorted(axis, r_hi)) + RANGE_GUARD_BINS
-        self._bins = slice(max(i0, 0), min(i1, axis.size))
+        self._bins = self._range_bins(layout, axis)
         self.range_axis_m = axis[self._bins]
         """Slant range of the bins kept, m."""
         if self.range_axis_m.size < 2:
@@ -120,6 +129,23 @@ class RdaTileImager:
         """Index of the next tile to form (None before the first pulse)."""
         self._guard_m = 0.0
         """Along-track guard of the slow-time interpolation, m (set from the spacing)."""
+        self.level = 0
+        """Degraded level (:data:`LEVELS`) of the tiles formed from now on."""
+        self.only: range | None = None
+        """Form only these tiles (a block of a batch); None: every tile."""
+
+    def _range_bins(self, layout: TileLayout, axis: FloatArray) -> slice:
+        """The bins of ``axis`` that the tiles of ``layout`` need: their slant-range span,
+        the range migration of the band's edge and :data:`RANGE_GUARD_BINS` each side."""
+        h = layout.height_m
+        y_lo = layout.ground_range_m - layout.swath_m / 2.0
+        y_hi = layout.ground_range_m + layout.swath_m / 2.0
+        r_lo = math.hypot(h, max(y_lo, 0.0))
+        beam = layout.beamwidth_rad / 2.0 + abs(self.centroid_squint_rad)
+        r_hi = math.hypot(h, y_hi) / math.cos(beam)
+        i0 = int(np.searchsorted(axis, r_lo)) - RANGE_GUARD_BINS
+        i1 = int(np.searchsorted(axis, r_hi)) + RANGE_GUARD_BINS
+        return slice(max(i0, 0), min(i1, axis.size))
 
     def add(
         self,
@@ -183,19 +209,25 @@ class RdaTileImager:
         keep = x >= block.stop * length - reach
         self._rc, self._x, self._t = [rc[keep]], [x[keep]], [t[keep]]
         self._next = block.stop
-        formed = self.layout.formed(block)
-        if rows.size < 2 or len(formed) == 0:
+        formed = [k for k in self.layout.formed(block) if self.only is None or k in self.only]
+        if rows.size < 2 or not formed:
             return []
-        image, x_u = self._focus(rc[rows], x[rows])
+        layout = degraded(self.layout, self.level)
+        bins = self._range_bins(layout, self.range_axis_m)
+        image, x_u = self._focus(rc[rows, bins], x[rows], self.range_axis_m[bins])
         tiles = []
         for k in formed:
-            tile = self._tile(k, image, x_u, x[rows], t[rows])
+            grid = layout.grid(k)
+            tile = self._tile(grid, k, image, x_u, self.range_axis_m[bins], x[rows], t[rows])
             if tile is not None:
                 tiles.append(tile)
         return self.layout.clip(tiles)
 
-    def _focus(self, rc: ComplexArray, x: FloatArray) -> tuple[ComplexArray, FloatArray]:
-        """Resample pulses onto a uniform along-track grid and focus them.
+    def _focus(
+        self, rc: ComplexArray, x: FloatArray, range_m: FloatArray
+    ) -> tuple[ComplexArray, FloatArray]:
+        """Resample pulses (range bins at ``range_m``, m) onto a uniform along-track grid
+        and focus them.
 
         Returns the image (along-track × kept slant-range bins, scaled to backprojection's
         amplitude, basebanded: the range carrier ``exp(j 4 pi r / lambda)`` and the
@@ -223,7 +255,7 @@ class RdaTileImager:
             uniform = uniform * np.exp(2j * np.pi * kx_c * x_u)[:, None].astype(np.complex64)
         img = range_doppler(
             uniform,
-            self.range_axis_m,
+            range_m,
             x_u,
             self.wavelength_m,
             integration_angle_rad=self.layout.beamwidth_rad,
@@ -233,7 +265,7 @@ class RdaTileImager:
             centroid_squint_rad=self.centroid_squint_rad,
         ).data
         # backprojection's amplitude; the range carrier exp(j 4 pi r / lambda) off (baseband)
-        r = self.range_axis_m
+        r = range_m
         scale = np.sqrt(self.wavelength_m * r / 2.0) / dx * np.exp(-4j * np.pi * r / self.wavelength_m)
         img *= scale.astype(np.complex64)[None, :]
         if kx_c:
@@ -241,10 +273,17 @@ class RdaTileImager:
         return img, x_u
 
     def _tile(
-        self, k: int, image: ComplexArray, x_u: FloatArray, x: FloatArray, t: IntArray
+        self,
+        grid: PlaneGrid,
+        k: int,
+        image: ComplexArray,
+        x_u: FloatArray,
+        range_m: FloatArray,
+        x: FloatArray,
+        t: IntArray,
     ) -> Tile | None:
-        """Tile ``k`` resampled from the block's image (None: no pulse reaches it)."""
-        grid = self.layout.grid(k)
+        """Tile ``k`` on ``grid`` resampled from the block's image (along ``x_u`` × slant
+        range ``range_m``, m; None: no pulse reaches it)."""
         length, half = self.layout.tile_length_m, self.layout.half_footprint_m
         used = np.flatnonzero((x >= k * length - half) & (x <= (k + 1) * length + half))
         if used.size == 0:
@@ -256,7 +295,7 @@ class RdaTileImager:
         if a1 <= a0:
             return None
         r = np.hypot(grid.axis1_m, self.layout.height_m)
-        rg = (r - self.range_axis_m[0]) / self._dr
+        rg = (r - range_m[0]) / self._dr
         part = sinc_interp(image[a0:a1], np.broadcast_to(rg, (a1 - a0, rg.size)), TAPS)
         cols = np.ascontiguousarray(part.T)
         data = sinc_interp(cols, np.broadcast_to(az - a0, (cols.shape[0], az.size)), TAPS).T
