@@ -483,7 +483,7 @@ def bench(
         "record_raw_echoes": record,
         "presum_first": presum_first,
         "method": method,
-        "live_image_level": c.get("live_image_level"),
+        "live_image_level": run.status.get("gauges", {}).get("live_image_level"),
         "bytes_written": written,
         "exit_status": run.exit_status,
         "load_average": [load_start, os.getloadavg()[0]],
