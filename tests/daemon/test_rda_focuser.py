@@ -12,6 +12,7 @@ theory on the ground tiles: PSLR within 0.5 dB of the sinc's -13.26 dB and IRW w
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -36,7 +37,9 @@ SINC_PSLR_DB = -13.26
 def strip() -> SimRun:
     scn0 = load_preset("ku-vehicle", 0.05)
     c, sw = scn0.scene_center_ned, scn0.swath_m
-    targets = tuple(Target((c[0] + dn, c[1] + de, 0.0)) for dn, de in ((0, -0.4 * sw), (3, 0.4 * sw)))
+    targets = tuple(
+        Target((c[0] + dn, c[1] + de, 0.0)) for dn, de in ((0, -0.4 * sw), (3, 0.4 * sw))
+    )
     scn = load_preset("ku-vehicle", 0.05, snr_db=None, targets=targets)
     return simulate(scn, MotionSpec(kind="turbulence", seed=1), "ideal")
 
@@ -107,7 +110,7 @@ def test_live_level_rule_steps_up_holds_and_steps_down() -> None:
     # the cost halves at each level: 0.3 s per s now fits twice over with headroom
     down = [rule.update(1.0, 0.2) for _ in range(20)]
     assert down[-1] == 0 and max(down) <= 2
-    assert all(b - a in (-1, 0) for a, b in zip(down, down[1:], strict=False))
+    assert all(b - a in (-1, 0) for a, b in itertools.pairwise(down))
     top = LiveLevel(budget=0.8, window_s=1.0)
     assert max(top.update(1.0, 10.0) for _ in range(20)) == len(LEVELS) - 1
 

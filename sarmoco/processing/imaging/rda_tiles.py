@@ -242,7 +242,7 @@ class RdaTileImager:
             x_u = x[0] + dx * np.arange(x.size)
             uniform = rc
         else:
-            n_u = int(math.floor((x[-1] - x[0]) / dx)) + 1
+            n_u = math.floor((x[-1] - x[0]) / dx) + 1
             x_u = x[0] + dx * np.arange(n_u)
             idx = np.interp(x_u, x, np.arange(x.size, dtype=np.float64))
             nxt = np.clip(np.searchsorted(x, x_u), 1, x.size - 1)
@@ -266,7 +266,9 @@ class RdaTileImager:
         ).data
         # backprojection's amplitude; the range carrier exp(j 4 pi r / lambda) off (baseband)
         r = range_m
-        scale = np.sqrt(self.wavelength_m * r / 2.0) / dx * np.exp(-4j * np.pi * r / self.wavelength_m)
+        scale = (
+            np.sqrt(self.wavelength_m * r / 2.0) / dx * np.exp(-4j * np.pi * r / self.wavelength_m)
+        )
         img *= scale.astype(np.complex64)[None, :]
         if kx_c:
             img *= np.exp(-2j * np.pi * kx_c * x_u)[:, None].astype(np.complex64)
@@ -290,8 +292,8 @@ class RdaTileImager:
             return None
         dx = float(x_u[1] - x_u[0])
         az = (grid.axis0_m - x_u[0]) / dx
-        a0 = max(int(math.floor(az.min())) - TAPS, 0)
-        a1 = min(int(math.ceil(az.max())) + TAPS + 1, image.shape[0])
+        a0 = max(math.floor(az.min()) - TAPS, 0)
+        a1 = min(math.ceil(az.max()) + TAPS + 1, image.shape[0])
         if a1 <= a0:
             return None
         r = np.hypot(grid.axis1_m, self.layout.height_m)
@@ -300,7 +302,9 @@ class RdaTileImager:
         cols = np.ascontiguousarray(part.T)
         data = sinc_interp(cols, np.broadcast_to(az - a0, (cols.shape[0], az.size)), TAPS).T
         kx_c = 2.0 * math.sin(self.centroid_squint_rad) / self.wavelength_m
-        carrier = np.exp(2j * np.pi * (kx_c * grid.axis0_m[:, None] + 2.0 * r[None, :] / self.wavelength_m))
+        carrier = np.exp(
+            2j * np.pi * (kx_c * grid.axis0_m[:, None] + 2.0 * r[None, :] / self.wavelength_m)
+        )
         data = data * carrier
         return Tile(
             k,
