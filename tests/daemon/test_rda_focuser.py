@@ -7,7 +7,8 @@ azimuth pre-filter, then the range-Doppler tile former. Each target is judged ag
 theory on the ground tiles: PSLR within 0.5 dB of the sinc's -13.26 dB and IRW within
 5 % of ``0.886 c / 2B`` (range, projected to the ground) and of
 ``0.886 lambda / (4 sin(theta / 2))`` (azimuth, ``theta`` the real beam), position within
-2 cm. Without range cell migration correction the azimuth PSLR is -9.2 dB.
+2 cm. Without range cell migration correction the azimuth PSLR is -9.2 dB; with the
+pulses' along-track positions (uneven in gusts) taken as uniform, -10.4 dB.
 """
 
 from __future__ import annotations

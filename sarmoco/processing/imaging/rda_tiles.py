@@ -214,7 +214,7 @@ class RdaTileImager:
             return []
         layout = degraded(self.layout, self.level)
         bins = self._range_bins(layout, self.range_axis_m)
-        image, x_u = self._focus(rc[rows, bins], x[rows], self.range_axis_m[bins])
+        image, x_u = self._focus(rc[rows, bins], x[rows], self.range_axis_m[bins], lo, hi)
         tiles = []
         for k in formed:
             grid = layout.grid(k)
@@ -224,32 +224,37 @@ class RdaTileImager:
         return self.layout.clip(tiles)
 
     def _focus(
-        self, rc: ComplexArray, x: FloatArray, range_m: FloatArray
+        self, rc: ComplexArray, x: FloatArray, range_m: FloatArray, lo: float, hi: float
     ) -> tuple[ComplexArray, FloatArray]:
         """Resample pulses (range bins at ``range_m``, m) onto a uniform along-track grid
-        and focus them.
+        over ``[lo, hi]`` (m; zeros beyond the first and last pulse) and focus them.
 
         Returns the image (along-track × kept slant-range bins, scaled to backprojection's
         amplitude, basebanded: the range carrier ``exp(j 4 pi r / lambda)`` and the
         centroid's along-track frequency taken off) and its along-track axis, m.
         """
-        dx = float(np.median(np.diff(x)))
+        steps = np.diff(x)
+        dx = float(np.median(steps))
         kx_c = 2.0 * math.sin(self.centroid_squint_rad) / self.wavelength_m
         if kx_c:
             rc = rc * np.exp(-2j * np.pi * kx_c * x)[:, None].astype(np.complex64)
-        if np.allclose(np.diff(x), dx, rtol=1e-3, atol=0.0):
+        regular = np.allclose(steps, dx, rtol=1e-3, atol=0.0)
+        if regular:
             dx = float(x[-1] - x[0]) / (x.size - 1)
-            x_u = x[0] + dx * np.arange(x.size)
-            uniform = rc
+        first = min(0, math.floor((lo - x[0]) / dx))
+        last = max(x.size - 1, math.ceil((hi - x[0]) / dx))
+        x_u = x[0] + dx * np.arange(first, last + 1)
+        if regular:  # the pulses are the grid: zeros before and after
+            uniform = np.zeros((x_u.size, rc.shape[1]), np.complex64)
+            uniform[-first : -first + x.size] = rc
         else:
-            n_u = math.floor((x[-1] - x[0]) / dx) + 1
-            x_u = x[0] + dx * np.arange(n_u)
             idx = np.interp(x_u, x, np.arange(x.size, dtype=np.float64))
             nxt = np.clip(np.searchsorted(x, x_u), 1, x.size - 1)
-            idx[x[nxt] - x[nxt - 1] > HOLE_SPACINGS * dx] = -1.0  # a hole: zeros
+            hole = (x[nxt] - x[nxt - 1] > HOLE_SPACINGS * dx) | (x_u < x[0]) | (x_u > x[-1])
+            idx[hole] = -1.0  # zeros
             cols = np.ascontiguousarray(rc.T)
             uniform = np.ascontiguousarray(
-                sinc_interp(cols, np.broadcast_to(idx, (cols.shape[0], n_u)), TAPS).T
+                sinc_interp(cols, np.broadcast_to(idx, (cols.shape[0], x_u.size)), TAPS).T
             )
         if kx_c:
             uniform = uniform * np.exp(2j * np.pi * kx_c * x_u)[:, None].astype(np.complex64)
