@@ -16,7 +16,7 @@ exponential average over ``imaging.live_window_s`` of data:
   average then reflects the new level).
 
 The level and the load are served as the status gauges ``live_image_level`` and
-``live_image_load``.
+``live_image_load``; the live page shows the level in words (:func:`level_names`).
 """
 
 from __future__ import annotations
@@ -29,6 +29,17 @@ COST_STEP = 2.0
 
 HEADROOM = 0.7
 """Share of the budget the level below must fit in before the rule steps down."""
+
+
+def level_names() -> list[str]:
+    """Each level of :data:`LEVELS` in words, for the operator (level 0: ``"full"``)."""
+    names = []
+    for pixel, narrow in LEVELS:
+        parts = ([f"pixels x{pixel}"] if pixel > 1 else []) + (
+            [f"swath 1/{narrow}"] if narrow > 1 else []
+        )
+        names.append(", ".join(parts) or "full")
+    return names
 
 
 class LiveLevel:

@@ -14,6 +14,7 @@ pulses' along-track positions (uneven in gusts) taken as uniform, -10.4 dB.
 from __future__ import annotations
 
 import itertools
+import json
 import math
 
 import numpy as np
@@ -21,7 +22,8 @@ import pytest
 
 from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.focuser import Focuser
-from sarmoco.daemon.livelevel import LiveLevel
+from sarmoco.daemon.livelevel import LiveLevel, level_names
+from sarmoco.daemon.status import LIVE_PAGE
 from sarmoco.processing.imaging.rda_tiles import LEVELS, RdaTileImager, degraded
 from sarmoco.processing.imaging.tiles import Tile, TileLayout
 from sarmoco.processing.metrics import point_target_metrics
@@ -125,3 +127,9 @@ def test_focuser_applies_the_level_to_the_tiles_it_forms(strip: SimRun) -> None:
     assert spacing - {1} and spacing <= {p for p, _ in LEVELS}
     _, steady = _focus(strip, live_degrade=False)
     assert steady.live is None
+
+
+def test_live_page_names_every_level() -> None:
+    names = level_names()
+    assert names[0] == "full" and len(names) == len(LEVELS)
+    assert json.dumps(names) in LIVE_PAGE
