@@ -45,11 +45,12 @@ import math
 from dataclasses import replace
 
 import numpy as np
+import scipy.fft
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.imaging.grid import PlaneGrid
 from sarmoco.processing.imaging.interp import sinc_interp
-from sarmoco.processing.imaging.rda import range_doppler
+from sarmoco.processing.imaging.rda import RdaFilters, focus_block, rda_filters
 from sarmoco.processing.imaging.tiles import Tile, TileLayout
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 
@@ -127,8 +128,12 @@ class RdaTileImager:
         """Pulses held (kept range bins), their along-track positions (m) and times (GPS ns)."""
         self._next: int | None = None
         """Index of the next tile to form (None before the first pulse)."""
-        self._guard_m = 0.0
-        """Along-track guard of the slow-time interpolation, m (set from the spacing)."""
+        self._dx = 0.0
+        """Spacing of the uniform along-track grid, m: the median spacing of the first
+        pulses (0 before two have come)."""
+        self._filters: dict[tuple[int, int, int], RdaFilters] = {}
+        """Range-Doppler filters by (FFT length, first and end kept bin): the blocks of one
+        level have one shape, so each is computed once."""
         self.level = 0
         """Degraded level (:data:`LEVELS`) of the tiles formed from now on."""
         self.only: range | None = None
@@ -179,11 +184,10 @@ class RdaTileImager:
         length, half = self.layout.tile_length_m, self.layout.half_footprint_m
         if self._next is None:
             self._next = math.floor((float(x[0]) - half) / length)
-        if self._guard_m == 0.0 and sum(a.size for a in self._x) >= 2:
-            xs = np.concatenate(self._x)
-            self._guard_m = TAPS * float(np.median(np.diff(xs)))
+        if self._dx == 0.0 and sum(a.size for a in self._x) >= 2:
+            self._dx = float(np.median(np.diff(np.concatenate(self._x))))
         tiles: list[Tile] = []
-        reach = half + self._guard_m
+        reach = half + TAPS * self._dx
         while float(x[-1]) >= (self._next + self.block_tiles) * length + reach:
             tiles += self._form(range(self._next, self._next + self.block_tiles))
         return tiles
@@ -202,7 +206,7 @@ class RdaTileImager:
         """Form the tiles of ``block`` (contiguous) from the pulses held; drop the pulses no
         later tile takes and advance to the tile after the block."""
         length = self.layout.tile_length_m
-        reach = self.layout.half_footprint_m + self._guard_m
+        reach = self.layout.half_footprint_m + TAPS * self._dx
         rc, x, t = np.concatenate(self._rc), np.concatenate(self._x), np.concatenate(self._t)
         lo, hi = block.start * length - reach, block.stop * length + reach
         rows = np.flatnonzero((x >= lo) & (x <= hi))
@@ -210,11 +214,11 @@ class RdaTileImager:
         self._rc, self._x, self._t = [rc[keep]], [x[keep]], [t[keep]]
         self._next = block.stop
         formed = [k for k in self.layout.formed(block) if self.only is None or k in self.only]
-        if rows.size < 2 or not formed:
+        if rows.size < 2 or not formed or self._dx <= 0.0:
             return []
         layout = degraded(self.layout, self.level)
         bins = self._range_bins(layout, self.range_axis_m)
-        image, x_u = self._focus(rc[rows, bins], x[rows], self.range_axis_m[bins], lo, hi)
+        image, x_u = self._focus(rc[rows, bins], x[rows], bins, lo, hi)
         tiles = []
         for k in formed:
             grid = layout.grid(k)
@@ -224,60 +228,52 @@ class RdaTileImager:
         return self.layout.clip(tiles)
 
     def _focus(
-        self, rc: ComplexArray, x: FloatArray, range_m: FloatArray, lo: float, hi: float
+        self, rc: ComplexArray, x: FloatArray, bins: slice, lo: float, hi: float
     ) -> tuple[ComplexArray, FloatArray]:
-        """Resample pulses (range bins at ``range_m``, m) onto a uniform along-track grid
-        over ``[lo, hi]`` (m; zeros beyond the first and last pulse) and focus them.
+        """Resample pulses (the kept range bins ``bins``) onto the uniform along-track grid
+        over ``[lo, hi]`` (m; zeros beyond the first and last pulse and in holes) and focus
+        them.
 
-        Returns the image (along-track × kept slant-range bins, scaled to backprojection's
-        amplitude, basebanded: the range carrier ``exp(j 4 pi r / lambda)`` and the
-        centroid's along-track frequency taken off) and its along-track axis, m.
+        Returns the image (along-track × range bins, scaled to backprojection's amplitude,
+        basebanded: the range carrier ``exp(j 4 pi r / lambda)`` and the centroid's
+        along-track frequency taken off) and its along-track axis, m.
         """
-        steps = np.diff(x)
-        dx = float(np.median(steps))
+        dx = self._dx
+        first = math.ceil(lo / dx)
+        x_u: FloatArray = dx * np.arange(first, first + round((hi - lo) / dx) + 1, dtype=np.float64)
         kx_c = 2.0 * math.sin(self.centroid_squint_rad) / self.wavelength_m
         if kx_c:
             rc = rc * np.exp(-2j * np.pi * kx_c * x)[:, None].astype(np.complex64)
-        regular = np.allclose(steps, dx, rtol=1e-3, atol=0.0)
-        if regular:
-            dx = float(x[-1] - x[0]) / (x.size - 1)
-        first = min(0, math.floor((lo - x[0]) / dx))
-        last = max(x.size - 1, math.ceil((hi - x[0]) / dx))
-        x_u = x[0] + dx * np.arange(first, last + 1)
-        if regular:  # the pulses are the grid: zeros before and after
-            uniform = np.zeros((x_u.size, rc.shape[1]), np.complex64)
-            uniform[-first : -first + x.size] = rc
-        else:
-            idx = np.interp(x_u, x, np.arange(x.size, dtype=np.float64))
-            nxt = np.clip(np.searchsorted(x, x_u), 1, x.size - 1)
-            hole = (x[nxt] - x[nxt - 1] > HOLE_SPACINGS * dx) | (x_u < x[0]) | (x_u > x[-1])
-            idx[hole] = -1.0  # zeros
-            cols = np.ascontiguousarray(rc.T)
-            uniform = np.ascontiguousarray(
-                sinc_interp(cols, np.broadcast_to(idx, (cols.shape[0], x_u.size)), TAPS).T
-            )
+        idx = np.interp(x_u, x, np.arange(x.size, dtype=np.float64))
+        nxt = np.clip(np.searchsorted(x, x_u), 1, x.size - 1)
+        hole = (x[nxt] - x[nxt - 1] > HOLE_SPACINGS * dx) | (x_u < x[0]) | (x_u > x[-1])
+        idx[hole] = -1.0  # zeros
+        cols = np.ascontiguousarray(rc.T)
+        uniform = sinc_interp(cols, np.broadcast_to(idx, (cols.shape[0], x_u.size)), TAPS).T
         if kx_c:
             uniform = uniform * np.exp(2j * np.pi * kx_c * x_u)[:, None].astype(np.complex64)
-        img = range_doppler(
-            uniform,
-            range_m,
-            x_u,
-            self.wavelength_m,
-            integration_angle_rad=self.layout.beamwidth_rad,
-            src=True,
-            taps=TAPS,
-            pad=False,
-            centroid_squint_rad=self.centroid_squint_rad,
-        ).data
-        # backprojection's amplitude; the range carrier exp(j 4 pi r / lambda) off (baseband)
-        r = range_m
-        scale = (
-            np.sqrt(self.wavelength_m * r / 2.0) / dx * np.exp(-4j * np.pi * r / self.wavelength_m)
-        )
-        img *= scale.astype(np.complex64)[None, :]
+        img = focus_block(uniform, self._block_filters(x_u.size, bins), TAPS)
         if kx_c:
             img *= np.exp(-2j * np.pi * kx_c * x_u)[:, None].astype(np.complex64)
         return img, x_u
+
+    def _block_filters(self, rows: int, bins: slice) -> RdaFilters:
+        """The filters of a block of ``rows`` grid rows and the kept bins ``bins``: circular
+        azimuth compression (no zero padding), the imaged beam as the processed band, and
+        the output scaled to backprojection's amplitude and basebanded in range."""
+        n_az = scipy.fft.next_fast_len(rows)
+        key = (n_az, bins.start, bins.stop)
+        if key not in self._filters:
+            r = self.range_axis_m[bins]
+            sin_max = np.full(r.size, math.sin(self.layout.beamwidth_rad / 2.0))
+            f = rda_filters(
+                n_az, self._dx, r, self.wavelength_m, sin_max, True, self.centroid_squint_rad,
+                np.complex64,
+            )  # fmt: skip
+            lam = self.wavelength_m
+            column = np.sqrt(lam * r / 2.0) / self._dx * np.exp(-4j * np.pi * r / lam)
+            self._filters[key] = replace(f, azimuth=f.azimuth * column.astype(np.complex64))
+        return self._filters[key]
 
     def _tile(
         self,
