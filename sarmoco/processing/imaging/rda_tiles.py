@@ -19,15 +19,17 @@ footprint at far range plus the interpolation guard):
 1. the range bins of the tiles' slant-range span (plus the range cell migration and a
    guard) are kept when a pulse arrives;
 2. slow time is resampled onto a uniform along-track grid (the chain places pulses at
-   their INS along-track positions, which are not uniform): Kaiser-windowed sinc, in the
-   band of the Doppler centroid (demodulated, then remodulated); grid points in a hole
-   of more than 1.5 spacings get zeros;
-3. :func:`~sarmoco.processing.imaging.rda.range_doppler` without azimuth zero padding
-   (circular compression: the rows kept lie a half footprint from both block ends), its
-   processed band the imaged beam ``|sin theta - sin theta_c| <= sin(theta_b / 2)`` (the
-   same pulses a backprojected pixel takes), scaled to backprojection's amplitude
-   (stationary phase: a point target peaks at ``a sqrt(lambda r0 / 2) / dx`` over
-   ``a`` per pulse times the pulses in its beam);
+   their INS along-track positions, which are not uniform; the grid's spacing is the
+   pulses' rounded down to :data:`GRID_DIGITS` significant digits): Kaiser-windowed sinc,
+   in the band of the Doppler centroid (demodulated, then remodulated); grid points in a
+   hole of more than 1.5 spacings, and beyond the first and last pulse, get zeros;
+3. the range-Doppler algorithm (:func:`~sarmoco.processing.imaging.rda.focus_block`, its
+   filters computed once per block shape: :func:`block_filters`) without azimuth zero
+   padding (circular compression: the rows kept lie a half footprint from both block
+   ends), its processed band the imaged beam ``|sin theta - sin theta_c| <= sin(theta_b
+   / 2)`` (the same pulses a backprojected pixel takes), scaled to backprojection's
+   amplitude (stationary phase: a point target peaks at ``a sqrt(lambda r0 / 2) / dx``,
+   against ``a`` per pulse times the pulses in its beam);
 4. the (along-track, slant range) image is basebanded (its range carrier
    ``exp(j 4 pi r / lambda)`` and the centroid's along-track frequency off), resampled
    onto each tile's ground grid (slant range ``sqrt(y^2 + H^2)`` of ground range ``y``),
@@ -41,6 +43,7 @@ interpolations. Backprojection costs per pixel and pulse.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import replace
 
@@ -60,6 +63,9 @@ TAPS = 16
 RANGE_GUARD_BINS = 32
 """Range bins kept beyond each end of the tiles' span (interpolation and SRC filter)."""
 
+GRID_DIGITS = 3
+"""Significant digits of the along-track grid spacing (:func:`grid_spacing`)."""
+
 HOLE_SPACINGS = 1.5
 """A stretch between two pulses longer than this many nominal spacings is a hole."""
 
@@ -77,6 +83,56 @@ def degraded(layout: TileLayout, level: int) -> TileLayout:
         return layout
     pixel, narrow = LEVELS[level]
     return replace(layout, pixel_m=layout.pixel_m * pixel, swath_m=layout.swath_m / narrow)
+
+
+def grid_spacing(dx_m: float) -> float:
+    """The along-track grid spacing for pulses ``dx_m`` apart, m: ``dx_m`` rounded down to
+    :data:`GRID_DIGITS` significant digits (a grid at most that much finer), so that the
+    segments of a flight (reference tracks of slightly different speeds) share one grid
+    and its filters (:func:`block_filters`)."""
+    scale = 10.0 ** (math.floor(math.log10(dx_m)) - GRID_DIGITS + 1)
+    return math.floor(dx_m / scale) * scale
+
+
+@functools.lru_cache(maxsize=4)
+def block_filters(
+    n_az: int,
+    dx_m: float,
+    r_first_m: float,
+    dr_m: float,
+    n_bins: int,
+    wavelength_m: float,
+    beamwidth_rad: float,
+    centroid_squint_rad: float,
+) -> RdaFilters:
+    """Range-Doppler filters of one block shape, computed once for the blocks (and
+    segments) that share it: circular azimuth compression over ``n_az`` rows (no zero
+    padding), the imaged beam as the processed band, and the output scaled to
+    backprojection's amplitude for pulses ``dx_m`` apart and basebanded in range (step 3
+    of the module).
+
+    Parameters
+    ----------
+    n_az : int
+        Azimuth FFT length (grid rows, padded to a fast length).
+    dx_m : float
+        Along-track grid spacing, m.
+    r_first_m, dr_m : float
+        Slant range of the first bin and the bin spacing, m.
+    n_bins : int
+        Range bins.
+    wavelength_m : float
+        Carrier wavelength, m.
+    beamwidth_rad : float
+        Processed band as an angle (the imaged beam), rad.
+    centroid_squint_rad : float
+        Doppler centroid as a squint, rad.
+    """
+    r: FloatArray = r_first_m + dr_m * np.arange(n_bins, dtype=np.float64)
+    sin_max = np.full(n_bins, math.sin(beamwidth_rad / 2.0))
+    f = rda_filters(n_az, dx_m, r, wavelength_m, sin_max, True, centroid_squint_rad, np.complex64)
+    column = np.sqrt(wavelength_m * r / 2.0) / dx_m * np.exp(-4j * np.pi * r / wavelength_m)
+    return replace(f, azimuth=f.azimuth * column.astype(np.complex64))
 
 
 class RdaTileImager:
@@ -129,11 +185,10 @@ class RdaTileImager:
         self._next: int | None = None
         """Index of the next tile to form (None before the first pulse)."""
         self._dx = 0.0
-        """Spacing of the uniform along-track grid, m: the median spacing of the first
-        pulses (0 before two have come)."""
-        self._filters: dict[tuple[int, int, int], RdaFilters] = {}
-        """Range-Doppler filters by (FFT length, first and end kept bin): the blocks of one
-        level have one shape, so each is computed once."""
+        """Spacing of the uniform along-track grid, m (0 before two pulses have come):
+        :func:`grid_spacing` of the first pulses' median spacing."""
+        self._gain = 1.0
+        """Grid over pulse spacing: the filters' amplitude is that of pulses on the grid."""
         self.level = 0
         """Degraded level (:data:`LEVELS`) of the tiles formed from now on."""
         self.only: range | None = None
@@ -185,7 +240,9 @@ class RdaTileImager:
         if self._next is None:
             self._next = math.floor((float(x[0]) - half) / length)
         if self._dx == 0.0 and sum(a.size for a in self._x) >= 2:
-            self._dx = float(np.median(np.diff(np.concatenate(self._x))))
+            spacing = float(np.median(np.diff(np.concatenate(self._x))))
+            self._dx = grid_spacing(spacing)
+            self._gain = self._dx / spacing
         tiles: list[Tile] = []
         reach = half + TAPS * self._dx
         while float(x[-1]) >= (self._next + self.block_tiles) * length + reach:
@@ -258,22 +315,18 @@ class RdaTileImager:
         return img, x_u
 
     def _block_filters(self, rows: int, bins: slice) -> RdaFilters:
-        """The filters of a block of ``rows`` grid rows and the kept bins ``bins``: circular
-        azimuth compression (no zero padding), the imaged beam as the processed band, and
-        the output scaled to backprojection's amplitude and basebanded in range."""
-        n_az = scipy.fft.next_fast_len(rows)
-        key = (n_az, bins.start, bins.stop)
-        if key not in self._filters:
-            r = self.range_axis_m[bins]
-            sin_max = np.full(r.size, math.sin(self.layout.beamwidth_rad / 2.0))
-            f = rda_filters(
-                n_az, self._dx, r, self.wavelength_m, sin_max, True, self.centroid_squint_rad,
-                np.complex64,
-            )  # fmt: skip
-            lam = self.wavelength_m
-            column = np.sqrt(lam * r / 2.0) / self._dx * np.exp(-4j * np.pi * r / lam)
-            self._filters[key] = replace(f, azimuth=f.azimuth * column.astype(np.complex64))
-        return self._filters[key]
+        """The filters of a block of ``rows`` grid rows and the kept bins ``bins``."""
+        r = self.range_axis_m[bins]
+        return block_filters(
+            scipy.fft.next_fast_len(rows),
+            self._dx,
+            float(r[0]),
+            self._dr,
+            r.size,
+            self.wavelength_m,
+            self.layout.beamwidth_rad,
+            self.centroid_squint_rad,
+        )
 
     def _tile(
         self,
@@ -303,7 +356,7 @@ class RdaTileImager:
         cols = np.ascontiguousarray(part.T)
         data = sinc_interp(cols, np.broadcast_to(az - a0, (cols.shape[0], az.size)), TAPS).T
         kx_c = 2.0 * math.sin(self.centroid_squint_rad) / self.wavelength_m
-        carrier = np.exp(
+        carrier = self._gain * np.exp(
             2j * np.pi * (kx_c * grid.axis0_m[:, None] + 2.0 * r[None, :] / self.wavelength_m)
         )
         data = data * carrier
