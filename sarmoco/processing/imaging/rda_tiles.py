@@ -28,8 +28,9 @@ footprint at far range plus the interpolation guard):
    padding (circular compression: the rows kept lie a half footprint from both block
    ends), its processed band the imaged beam ``|sin theta - sin theta_c| <= sin(theta_b
    / 2)`` (the same pulses a backprojected pixel takes), scaled to backprojection's
-   amplitude (stationary phase: a point target peaks at ``a sqrt(lambda r0 / 2) / dx``,
-   against ``a`` per pulse times the pulses in its beam);
+   amplitude and phase (stationary phase: a point target peaks at
+   ``a sqrt(lambda r0 / 2) / dx exp(-j pi / 4)``, against ``a`` per pulse times the pulses
+   in its beam);
 4. the (along-track, slant range) image is basebanded (its range carrier
    ``exp(j 4 pi r / lambda)`` and the centroid's along-track frequency off), resampled
    onto each tile's ground grid (slant range ``sqrt(y^2 + H^2)`` of ground range ``y``),
@@ -131,7 +132,10 @@ def block_filters(
     r: FloatArray = r_first_m + dr_m * np.arange(n_bins, dtype=np.float64)
     sin_max = np.full(n_bins, math.sin(beamwidth_rad / 2.0))
     f = rda_filters(n_az, dx_m, r, wavelength_m, sin_max, True, centroid_squint_rad, np.complex64)
-    column = np.sqrt(wavelength_m * r / 2.0) / dx_m * np.exp(-4j * np.pi * r / wavelength_m)
+    # amplitude and phase of backprojection: the stationary-phase factor
+    # sqrt(lambda r / 2) / dx exp(-j pi / 4) of the azimuth chirp's spectrum divided out
+    phase = -4.0 * np.pi * r / wavelength_m + np.pi / 4.0
+    column = np.sqrt(wavelength_m * r / 2.0) / dx_m * np.exp(1j * phase)
     return replace(f, azimuth=f.azimuth * column.astype(np.complex64))
 
 
