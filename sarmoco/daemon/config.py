@@ -310,10 +310,30 @@ class ImagingConfig:
         "and before range compression: range compression, envelope shift, per-bin D_los, "
         "autofocus and imaging then run at the decimated pulse rate (with prefilter on)",
     )
-    method: Literal["direct", "ffbp"] = _key(
+    method: Literal["direct", "ffbp", "rda"] = _key(
         "direct",
-        "Tile image formation: direct backprojection, or fast factorised backprojection "
-        "(polar subimages merged in stages, factorisation set by ffbp_max_phase_error_rad)",
+        "Tile image formation: direct backprojection, fast factorised backprojection "
+        "(polar subimages merged in stages, factorisation set by ffbp_max_phase_error_rad), "
+        "or the range-Doppler algorithm on blocks of tiles (frequency domain, the live "
+        "imager: its cost is per sample, not per pixel and pulse; resampled onto the same "
+        "ground tiles)",
+    )
+    live_degrade: bool = _key(
+        True,
+        "With method rda in a live run: when focusing needs more than live_budget of real "
+        "time, form the live tiles at a degraded level (1: twice the pixel spacing; 2: also "
+        "half the swath; 3: four times the pixel spacing and half the swath), one level up "
+        "at a time, and back down when the level below would fit with a margin; the level "
+        "is the status gauge live_image_level. A replay never degrades",
+    )
+    live_budget: float = _key(
+        0.8,
+        "Share of real time the live imager may spend focusing before it degrades "
+        "(focusing CPU seconds per second of data, averaged over live_window_s)",
+        gt=0,
+    )
+    live_window_s: float = _key(
+        5.0, "Seconds of data over which the live imager's load is averaged", unit="s", gt=0
     )
     ffbp_max_phase_error_rad: float = _key(
         0.3,

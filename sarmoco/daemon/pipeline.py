@@ -585,6 +585,10 @@ class Pipeline:
 
     def _update_counters(self) -> None:
         self.counters.set("echo_backlog_pulses", len(self.ring))
+        live = self.focuser.live if self.focuser is not None else None
+        if live is not None:  # the live image's degraded level (sarmoco.daemon.livelevel)
+            self.counters.set("live_image_level", live.level)
+            self.counters.set("live_image_load", live.load)
 
 
 def tile_metrics(data: ComplexArray) -> dict[str, float]:

@@ -11,7 +11,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import FrameType
 
@@ -610,6 +610,7 @@ def _replay(
         When no pulse was focused (the store is still closed complete): the message
         gives the time span each stream covered and what was rejected, and how often.
     """
+    cfg = replace(cfg, imaging=replace(cfg.imaging, live_degrade=False))  # full image
     lead_ns = round(cfg.ins.max_gap_s * 1e9)
     ins_span = _Span()
     with open_recorder(cfg, out) as recorder:
