@@ -57,7 +57,7 @@ import numpy.typing as npt
 from sarmoco.daemon.echoring import SampleFormat, sample_dtype, sample_shape
 from sarmoco.daemon.flags import FLAG_DTYPE, PulseFlag
 from sarmoco.daemon.navbuffer import PushResult
-from sarmoco.drivers.samples import AttitudeSample, EchoPacket, Validity, VelocitySample
+from sarmoco.drivers.samples import AttitudeSample, EchoPackets, Validity, VelocitySample
 from sarmoco.errors import RecorderError
 from sarmoco.processing.array.imaging3d import DemProduct
 from sarmoco.processing.autofocus.report import SubapertureReport
@@ -411,10 +411,10 @@ def decode_nav(cols: Mapping[str, npt.NDArray[Any]], source: str = "store.nav") 
     return out
 
 
-def decode_pulses(cols: Mapping[str, npt.NDArray[Any]], n_samples: int) -> list[EchoPacket]:
+def decode_pulses(cols: Mapping[str, npt.NDArray[Any]], n_samples: int) -> EchoPackets:
     """The radar packet metadata of recorded pulses (for a replay through the radar path).
 
-    The receiver and link bits of ``flags`` (:meth:`PulseFlag.from_packet`) become the
+    The receiver and link bits of ``flags`` (:meth:`PulseFlag.of_packets`) become the
     packet's indicators again; the packet count is not recorded (0).
 
     Parameters
@@ -424,22 +424,18 @@ def decode_pulses(cols: Mapping[str, npt.NDArray[Any]], n_samples: int) -> list[
     n_samples : int
         Complex samples per pulse.
     """
-    return [
-        EchoPacket(
-            channel,
-            t,
-            0,
-            n_samples,
-            not flags & PulseFlag.INVALID_DATA,
-            bool(flags & PulseFlag.SAMPLE_LOSS),
-            bool(flags & PulseFlag.OVER_RANGE),
-            int(bool(flags & PulseFlag.LOST_BEFORE)),
-            bool(flags & PulseFlag.CONTEXT_MISMATCH),
-        )
-        for t, channel, flags in zip(
-            cols["t_ns"].tolist(), cols["channel"].tolist(), cols["flags"].tolist(), strict=True
-        )
-    ]
+    flags = np.asarray(cols["flags"])
+    return EchoPackets(
+        n_samples,
+        stream_id=np.asarray(cols["channel"], np.int64),
+        t_gps_ns=np.asarray(cols["t_ns"], np.int64),
+        packet_count=np.zeros(flags.shape, np.uint8),
+        valid_data=(flags & PulseFlag.INVALID_DATA) == 0,
+        sample_loss=(flags & PulseFlag.SAMPLE_LOSS) != 0,
+        over_range=(flags & PulseFlag.OVER_RANGE) != 0,
+        lost_before=((flags & PulseFlag.LOST_BEFORE) != 0).astype(np.int64),
+        context_mismatch=(flags & PulseFlag.CONTEXT_MISMATCH) != 0,
+    )
 
 
 def encode_autofocus(subapertures: Sequence[SubapertureReport]) -> dict[str, npt.NDArray[Any]]:

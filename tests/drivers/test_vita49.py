@@ -124,7 +124,7 @@ def test_context_change_flags_the_pulses_after_it_until_it_agrees_again(
             stage = np.zeros((len(stream), dec.max_packet_bytes), np.uint8)
             for i, p in enumerate(stream):
                 stage[i, : len(p)] = np.frombuffer(p, np.uint8)
-            got = dec.decode_batch(stage, [len(p) for p in stream], rows)
+            got = list(dec.decode_batch(stage, [len(p) for p in stream], rows))
         else:
             got = [e for p in stream if (e := dec.decode_into(p, rows[0])) is not None]
         mismatch = [e.context_mismatch for e in got]
@@ -353,7 +353,7 @@ def test_batch_decoder_equals_packet_decoder(
     for i, d in enumerate(datagrams):
         stage[i, : len(d)] = np.frombuffer(bytes(d), np.uint8)
     out = np.zeros((len(datagrams), N), np.complex64)
-    got = dec.decode_batch(stage, [len(d) for d in datagrams], out)
+    got = list(dec.decode_batch(stage, [len(d) for d in datagrams], out))
     assert got == want
     np.testing.assert_array_equal(out[: len(got)], rows)
     assert dec.counters.snapshot() == counters
@@ -374,7 +374,7 @@ def test_timestamp_kinds_outside_the_profile_are_rejected(batched: bool) -> None
         stage = np.zeros((len(datagrams), dec.max_packet_bytes + 4), np.uint8)
         for i, d in enumerate(datagrams):
             stage[i, : len(d)] = np.frombuffer(bytes(d), np.uint8)
-        got = dec.decode_batch(stage, [len(d) for d in datagrams], out)
+        got = list(dec.decode_batch(stage, [len(d) for d in datagrams], out))
     else:
         got = [e for i, d in enumerate(datagrams) if (e := dec.decode_into(bytes(d), out[i]))]
     keep = [k for k in range(len(datagrams)) if k not in bad]
