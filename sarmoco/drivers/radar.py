@@ -121,34 +121,46 @@ class RadarUdpSource(RadarSource):
                 "or give the daemon CAP_NET_ADMIN, or pulses are lost whenever it stalls",
                 self.address, self.rcvbuf_bytes, rcvbuf_bytes,
             )  # fmt: skip
-        self._stage = np.empty((UDP_BATCH_PACKETS, decoder.max_packet_bytes + 4), np.uint8)
-        self._receiver = DatagramReceiver(self._sock, self._stage, batch_receive)
+        self.stage = np.empty((UDP_BATCH_PACKETS, decoder.max_packet_bytes + 4), np.uint8)
+        """Where datagrams land, one per row (:meth:`receive`), before they are decoded."""
+        self.receiver = DatagramReceiver(self._sock, self.stage, batch_receive)
 
     def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.1) -> EchoPackets:
         parts: list[EchoPackets] = []
         got, rows = 0, out.shape[0]
-        if rows == 0 or not select.select([self._sock], [], [], timeout_s)[0]:
+        if rows == 0 or not select.select([self], [], [], timeout_s)[0]:
             return EchoPackets.concat(parts, self.decoder.n_samples)
         gathered = rows < BATCH_MIN_PACKETS
         while got < rows:
             want = min(rows - got, UDP_BATCH_PACKETS)
-            lengths = self._receive(0, want)
+            lengths = self.receive(0, want)
             if not gathered and lengths.size < BATCH_MIN_PACKETS:
                 gathered = True
                 time.sleep(UDP_GATHER_S)
-                lengths = np.concatenate([lengths, self._receive(lengths.size, want)])
-            parts.append(self.decoder.decode_batch(self._stage, lengths, out[got:]))
+                lengths = np.concatenate([lengths, self.receive(lengths.size, want)])
+            parts.append(self.decoder.decode_batch(self.stage, lengths, out[got:]))
             got += len(parts[-1])
             if lengths.size < want:  # the socket is drained
                 break
         return EchoPackets.concat(parts, self.decoder.n_samples)
 
-    def _receive(self, first: int, stop: int) -> npt.NDArray[np.int64]:
-        """Datagrams waiting now, into stage rows ``first .. stop - 1``: their lengths."""
+    def receive(self, first: int, stop: int) -> npt.NDArray[np.int64]:
+        """Receive the datagrams waiting now into rows ``first .. stop - 1`` of :attr:`stage`
+        (no decoding); their lengths, bytes.
+
+        Raises
+        ------
+        DriverError
+            The socket failed.
+        """
         try:
-            return self._receiver.receive(first, stop)
+            return self.receiver.receive(first, stop)
         except OSError as exc:
             raise DriverError(f"radar udp {self.address}: {exc}") from exc
+
+    def fileno(self) -> int:
+        """The socket's file descriptor (to wait for datagrams with :func:`select.select`)."""
+        return self._sock.fileno()
 
     def close(self) -> None:
         self._sock.close()

@@ -556,11 +556,11 @@ class VitaDecoder:
         """
         k = len(lengths)
         end = _FULL_HEADER.itemsize + self._payload_bytes
-        parts: list[EchoPackets] = []
+        got = _Gathered(self.n_samples)
         if k < BATCH_MIN_PACKETS or not out.flags.c_contiguous or stage.shape[1] < end + 4:
             for i in range(k):
-                self._decode_one(memoryview(stage[i])[: lengths[i]], out, parts)
-            return EchoPackets.concat(parts, self.n_samples)
+                got.add(self.decode_into(memoryview(stage[i])[: lengths[i]], out[got.rows]))
+            return got.packets()
         flat_dtype = self.check_row(out[0]).dtype
         hdr = stage[:k, : _FULL_HEADER.itemsize].view(_FULL_HEADER)[:, 0]
         w0, n = hdr["w0"], np.asarray(lengths)[:k]
@@ -574,26 +574,13 @@ class VitaDecoder:
         i = 0
         for j in [*np.flatnonzero(~fast).tolist(), k]:  # a slow packet ends a fast run
             if j > i:
-                row = sum(len(p) for p in parts)
                 src = stage[i:j, _FULL_HEADER.itemsize : end].view(self._src_dtype)
-                np.copyto(dest[row : row + j - i], src, casting="same_kind")
-                parts.append(self._run_metadata(hdr[i:j], trailer[i:j]))
+                np.copyto(dest[got.rows : got.rows + j - i], src, casting="same_kind")
+                got.add_run(self._run_metadata(hdr[i:j], trailer[i:j]))
             if j < k:
-                self._decode_one(memoryview(stage[j])[: lengths[j]], out, parts)
+                got.add(self.decode_into(memoryview(stage[j])[: lengths[j]], out[got.rows]))
             i = j + 1
-        return EchoPackets.concat(parts, self.n_samples)
-
-    def _decode_one(
-        self,
-        packet: memoryview,
-        out: npt.NDArray[np.generic],
-        parts: list[EchoPackets],
-    ) -> None:
-        """:meth:`decode_into` the next free row of ``out`` (the rows of ``parts`` are taken);
-        an accepted pulse's metadata is appended to ``parts``."""
-        pkt = self.decode_into(packet, out[sum(len(p) for p in parts)])
-        if pkt is not None:
-            parts.append(EchoPackets.of([pkt], self.n_samples))
+        return got.packets()
 
     def _run_metadata(
         self, hdr: npt.NDArray[np.void], trailer: npt.NDArray[np.uint32]
@@ -702,6 +689,40 @@ class VitaDecoder:
                 "pulses are recorded flagged CONTEXT_MISMATCH and not focused until a "
                 "context packet agrees again", sid, reason,
             )  # fmt: skip
+
+
+class _Gathered:
+    """The metadata of a batch's pulses as they are decoded, in row order: runs decoded
+    together (arrays) and single packets (objects, made arrays once per stretch of them)."""
+
+    def __init__(self, n_samples: int) -> None:
+        self.n_samples = n_samples
+        self.rows = 0
+        """Rows written so far (the next pulse's row)."""
+        self._parts: list[EchoPackets] = []
+        self._singles: list[EchoPacket] = []
+
+    def add(self, packet: EchoPacket | None) -> None:
+        """A packet decoded on its own (None: nothing written)."""
+        if packet is not None:
+            self._singles.append(packet)
+            self.rows += 1
+
+    def add_run(self, run: EchoPackets) -> None:
+        """Pulses decoded together, after the ones added so far."""
+        self._flush()
+        self._parts.append(run)
+        self.rows += len(run)
+
+    def packets(self) -> EchoPackets:
+        """Every pulse added, in row order."""
+        self._flush()
+        return EchoPackets.concat(self._parts, self.n_samples)
+
+    def _flush(self) -> None:
+        if self._singles:
+            self._parts.append(EchoPackets.of(self._singles, self.n_samples))
+            self._singles = []
 
 
 def _lost(count: Any, before: Any) -> Any:

@@ -414,7 +414,7 @@ def test_udp_batch_path_equals_one_packet_path_on_real_sockets(batch_receive: bo
     want: list[EchoPacket] = []
     dec = VitaDecoder(N, leap_s=18)
     with RadarUdpSource("127.0.0.1", 0, dec, batch_receive=batch_receive) as src:
-        assert src._receiver.batched == batch_receive
+        assert src.receiver.batched == batch_receive
         for d in datagrams:
             tx.sendto(d, src.address)
             tx.sendto(d, rx.getsockname())
