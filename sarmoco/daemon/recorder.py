@@ -22,12 +22,15 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import datetime
+import errno
 import importlib.metadata
 import json
+import mmap
 import os
 import platform
 import threading
 import time
+import uuid
 from collections.abc import Awaitable, Callable, Coroutine, Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -51,6 +54,13 @@ from sarmoco.processing.types import Image
 _VERSION_PACKAGES = ("sarmoco", "numpy", "scipy", "zarr", "xarray", "pymavlink", "python-can")
 
 
+DIRECT_MIN_BYTES = 1 << 20
+"""Files at least this large (chunks of raw echoes) are written with ``O_DIRECT``, bytes."""
+_DIRECT_ALIGN = 4096
+"""Alignment of the address and length of an ``O_DIRECT`` write, bytes (a page: what every
+Linux block device and file system accepts)."""
+
+
 class _SyncingStore(LocalStore):
     """A zarr local store that remembers which files it wrote, for fsync.
 
@@ -58,6 +68,12 @@ class _SyncingStore(LocalStore):
     :class:`~sarmoco.errors.RecorderError` naming the store, the file and the reason;
     so does a write after the store's directory was removed (zarr would silently
     recreate the chunk's folders without the store's metadata).
+
+    Files of :data:`DIRECT_MIN_BYTES` or more are written with ``O_DIRECT`` where the file
+    system takes it: the bytes go from an aligned buffer to the disk without being copied
+    into the page cache, which on a buffered write costs about as much CPU as the rest of
+    the recorder (and a radar's echoes are not read back). Like zarr's own writes, each goes
+    to a temporary name first and is renamed into place.
     """
 
     def __init__(self, root: Path) -> None:
@@ -68,6 +84,10 @@ class _SyncingStore(LocalStore):
         self._dirty_lock = threading.Lock()
         self._rooted = False
         """The root ``zarr.json`` was written: from then on, its absence means removed."""
+        self._direct = hasattr(os, "O_DIRECT")
+        """Large files are written with O_DIRECT (until the file system refuses it)."""
+        self._buffers = threading.local()
+        """Each writing thread's aligned buffer for O_DIRECT writes."""
 
     def _removed(self) -> RecorderError | None:
         """The error of a store whose directory is gone (its root ``zarr.json`` missing)."""
@@ -84,7 +104,46 @@ class _SyncingStore(LocalStore):
         return RecorderError(f"recorder: {self._root}: cannot write {key!r}: {exc.strerror}")
 
     async def set(self, key: str, value: Buffer) -> None:
-        await self._set_checked(key, value, super().set)
+        large = self._direct and len(value) >= DIRECT_MIN_BYTES
+        await self._set_checked(key, value, self._set_direct if large else super().set)
+
+    async def _set_direct(self, key: str, value: Buffer) -> None:
+        await asyncio.to_thread(self._put_direct, self._root / key, value.as_buffer_like())
+
+    def _put_direct(self, path: Path, data: Any) -> None:
+        """Write ``data`` to ``path`` (through a temporary name) with O_DIRECT: copied into
+        this thread's aligned buffer, written padded to the alignment, cut to its length.
+        A file system that refuses O_DIRECT gets a plain write, and no O_DIRECT after."""
+        view = memoryview(data).cast("B")
+        n = view.nbytes
+        padded = -(-n // _DIRECT_ALIGN) * _DIRECT_ALIGN
+        buf: mmap.mmap | None = getattr(self._buffers, "buf", None)
+        if buf is None or len(buf) < padded:
+            buf = self._buffers.buf = mmap.mmap(-1, padded)  # anonymous: page-aligned
+        buf[:n] = view
+        buf[n:padded] = bytes(padded - n)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{uuid.uuid4().hex}.partial")
+        try:
+            try:
+                fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_DIRECT, 0o644)
+            except OSError as exc:
+                if exc.errno != errno.EINVAL:
+                    raise
+                self._direct = False  # e.g. tmpfs
+                fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            try:
+                done = 0
+                with memoryview(buf) as aligned:
+                    while done < padded:
+                        done += os.write(fd, aligned[done:padded])
+                os.ftruncate(fd, n)
+            finally:
+                os.close(fd)
+            os.replace(tmp, path)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
 
     async def set_if_not_exists(self, key: str, value: Buffer) -> None:
         await self._set_checked(key, value, super().set_if_not_exists)
@@ -275,7 +334,7 @@ class Table:
                 dtype=col.dtype,
                 dimension_names=(spec.row_dim, *col.dims),
                 fill_value=np.nan if col.dtype.kind == "f" else 0,
-                compressors=None if name in spec.uncompressed else "auto",
+                compressors=spec.compressors.get(name, "auto"),
                 attributes=spec.column_attrs(name),
             )
         self.group.update_attributes({COMMITTED_ATTR: 0})
@@ -377,6 +436,9 @@ class Recorder(Closing):
         Interval between fsyncs of the files written, s (0: after every append).
     chunk_rows : int
         Rows per chunk of the other tables.
+    echo_compression : str
+        Lossless compressor of the raw echoes, a key of
+        :data:`~sarmoco.daemon.schema.ECHO_COMPRESSION` (``"none"``: stored as they are).
     live : LiveFeed, optional
         The live page's feed: each tile and autofocus row recorded is handed to it in
         memory, so that the page never opens the store.
@@ -399,6 +461,7 @@ class Recorder(Closing):
         chunk_pulses: int = 256,
         fsync_interval_s: float = 1.0,
         chunk_rows: int = 1024,
+        echo_compression: str = "none",
         live: LiveFeed | None = None,
         writer_queue: int = 0,
     ) -> None:
@@ -431,7 +494,9 @@ class Recorder(Closing):
                 schema.GEODETIC_ORIGIN_ATTR: schema.encode_geodetic_origin(None),
             }
         )
-        self.pulses = self._create(schema.pulses_table(n_samples, sample_format, raw_echoes))
+        self.pulses = self._create(
+            schema.pulses_table(n_samples, sample_format, raw_echoes, echo_compression)
+        )
         self.nav = self._create(schema.NAV)
         self.ins_raw = self._create(schema.INS_RAW)
         self.ins_bytes = self._create(schema.INS_BYTES)
