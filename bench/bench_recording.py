@@ -36,6 +36,7 @@ import numpy as np
 from sarmoco.daemon.pipeline import RING_SECONDS
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.schema import ECHO_COMPRESSION
+from sarmoco.sim.echostream import EchoStream
 from sarmoco.sim.emit_radar import int16_scale
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
@@ -61,7 +62,7 @@ CODECS: dict[str, Any] = {
 def disk_rate(work: Path) -> float:
     """MB/s of 2 GiB written in 16 MiB blocks and fdatasync'd in ``work`` (``dd``'s way)."""
     path = work / "dd.bin"
-    block = np.zeros(DD_BLOCK, np.uint8)
+    block = bytes(DD_BLOCK)
     fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
     try:
         t0 = time.perf_counter()
@@ -80,6 +81,7 @@ def simulated_blocks(n_blocks: int = 4) -> list[np.ndarray]:
     ``(BLOCK, N_SAMPLES, 2)``, scaled as the simulator's radar scales them for the wire."""
     scn = load_preset("thz-spotlight")
     echo = simulate(scn, MotionSpec(kind="ideal"), "ideal", stream_echo=True).echo
+    assert isinstance(echo, EchoStream)
     scale = int16_scale(echo)
     mid = len(echo) // echo.block_pulses // 2
     blocks = []
@@ -145,6 +147,30 @@ def record_at_radar_rate(
     return stored * N_SAMPLES * 4 / 1e6 / wall, stored, dropped
 
 
+def report(work: Path, seconds: float, compressions: list[str]) -> None:
+    """Print the disk's rate, the codecs on simulated echoes and the recorder offered
+    ``seconds`` of pulses at the radar's rate with each of ``compressions``, in ``work``."""
+    disk = disk_rate(work)
+    print(
+        f"disk: {disk:.0f} MB/s sequential (2 GiB in 16 MiB writes + fdatasync, {work}); "
+        f"the radar needs {NEEDED_MB_S:.0f} MB/s"
+    )
+    blocks = simulated_blocks()
+    print(f"compression of simulated thz-spotlight echoes ({len(blocks) * BLOCK} pulses):")
+    for name, ratio, mb_s in codec_table(blocks):
+        print(f"  {name:28s} ratio {ratio:5.3f}, {mb_s:6.0f} MB/s of CPU (one thread)")
+    for comp in compressions:
+        load0 = os.getloadavg()[0]
+        rate, stored, dropped = record_at_radar_rate(work / f"{comp}.zarr", blocks, seconds, comp)
+        shutil.rmtree(work / f"{comp}.zarr", ignore_errors=True)
+        print(
+            f"recorder, echo_compression {comp!r}, {seconds:.0f} s offered at {PRF_HZ:.0f} Hz: "
+            f"{rate:.0f} MB/s stored ({rate / NEEDED_MB_S:.2f} x the radar, {rate / disk:.2f} x "
+            f"the disk); {stored} pulses stored, {dropped} not stored (counted); load "
+            f"{load0:.1f} -> {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores"
+        )
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=60.0, help="seconds of radar data to offer")
@@ -159,28 +185,7 @@ def main(argv: list[str] | None = None) -> None:
     args = ap.parse_args(argv)
     work = Path(tempfile.mkdtemp(prefix="sarmoco-bench-rec-", dir=args.work))
     try:
-        disk = disk_rate(work)
-        print(
-            f"disk: {disk:.0f} MB/s sequential (2 GiB in 16 MiB writes + fdatasync, {work}); "
-            f"the radar needs {NEEDED_MB_S:.0f} MB/s"
-        )
-        blocks = simulated_blocks()
-        print(f"compression of simulated thz-spotlight echoes ({len(blocks) * BLOCK} pulses):")
-        for name, ratio, mb_s in codec_table(blocks):
-            print(f"  {name:28s} ratio {ratio:5.3f}, {mb_s:6.0f} MB/s of CPU (one thread)")
-        for comp in args.compression:
-            load0 = os.getloadavg()[0]
-            rate, stored, dropped = record_at_radar_rate(
-                work / f"{comp}.zarr", blocks, args.seconds, comp
-            )
-            shutil.rmtree(work / f"{comp}.zarr", ignore_errors=True)
-            print(
-                f"recorder, echo_compression {comp!r}, {args.seconds:.0f} s offered at "
-                f"{PRF_HZ:.0f} Hz: {rate:.0f} MB/s stored ({rate / NEEDED_MB_S:.2f} x the "
-                f"radar, {rate / disk:.2f} x the disk); {stored} pulses stored, {dropped} not "
-                f"stored (counted); load {load0:.1f} -> {os.getloadavg()[0]:.1f} on "
-                f"{os.cpu_count()} cores"
-            )
+        report(work, args.seconds, args.compression)
     finally:
         shutil.rmtree(work, ignore_errors=True)
 

@@ -46,9 +46,10 @@ docstrings.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -145,7 +146,7 @@ class TableSpec:
     columns: Mapping[str, Column]
     per_pulse: bool = False
     chunk_rows: int | None = None
-    compressors: Mapping[str, Any] = field(default_factory=dict)
+    compressors: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     coords: tuple[str, ...] = ()
 
     def column_attrs(self, name: str) -> dict[str, Any]:

@@ -102,7 +102,7 @@ class DatagramReceiver:
         self._lengths = np.ndarray(
             (rows,),
             dtype=np.uint32,
-            buffer=self._msgs,  # type: ignore[call-overload]
+            buffer=self._msgs,
             offset=_MMsgHdr.msg_len.offset,
             strides=(ctypes.sizeof(_MMsgHdr),),
         )
