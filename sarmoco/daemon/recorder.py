@@ -315,6 +315,16 @@ class Table:
         The table's name, row dimension and columns.
     chunk_rows : int
         Rows per chunk (unless the spec fixes it).
+
+    Notes
+    -----
+    A column whose chunks hold :data:`DIRECT_MIN_BYTES` or more (raw echoes) is written a
+    whole chunk at a time: the rows of its last, partial chunk wait in memory until the
+    chunk is full (or :meth:`trim` writes them), and ``committed`` stays at the chunk
+    boundary until then. Zarr would otherwise write the partial chunk, then read it back
+    (from the disk: it was written with O_DIRECT) to write it again whole with the next
+    rows; blocks of pulses rarely end on a chunk boundary. A crash loses the rows waiting,
+    fewer than a chunk's.
     """
 
     def __init__(self, root: zarr.Group, spec: TableSpec, chunk_rows: int) -> None:
@@ -323,6 +333,8 @@ class Table:
         self.grow_rows = rows * 16  # a multiple of the chunk keeps metadata writes rare
         self.committed = 0
         """Rows written and counted in the store's ``committed`` attribute."""
+        self._handed = 0
+        """Rows handed to :meth:`write` (written, or waiting in a whole-chunk column)."""
         self.rows = 0
         """Rows handed to :meth:`prepare` (the caller's count: ``committed`` once written)."""
         self.arrays: dict[str, zarr.Array] = {}
@@ -338,6 +350,13 @@ class Table:
                 attributes=spec.column_attrs(name),
             )
         self.group.update_attributes({COMMITTED_ATTR: 0})
+        self._waiting: dict[str, npt.NDArray[Any]] = {
+            name: np.zeros((0, *col.shape), col.dtype)
+            for name, col in spec.columns.items()
+            if rows * col.dtype.itemsize * int(np.prod(col.shape)) >= DIRECT_MIN_BYTES
+        }
+        """Columns written a whole chunk at a time (class notes): their rows waiting for
+        the chunk to fill."""
 
     def append(self, **columns: npt.ArrayLike) -> int:
         """Write rows to every column, then advance ``committed``; returns the new count.
@@ -384,10 +403,11 @@ class Table:
 
     def write(self, rows: Mapping[str, npt.NDArray[Any]], start: int) -> int:
         """Write rows :meth:`prepare` placed at ``start``, then advance ``committed`` to
-        their end; returns it. Rows are written in the order they were prepared."""
-        if start != self.committed:
+        their end (in a table with a whole-chunk column, to its last whole chunk: class
+        notes); returns it. Rows are written in the order they were prepared."""
+        if start != self._handed:
             raise RecorderError(
-                f"table {self.group.path!r}: rows from {start} written after {self.committed}"
+                f"table {self.group.path!r}: rows from {start} written after {self._handed}"
             )
         stop = start + next(iter(rows.values())).shape[0]
         try:
@@ -395,21 +415,57 @@ class Table:
                 if arr.shape[0] < stop:
                     grow = -(-(stop - arr.shape[0]) // self.grow_rows) * self.grow_rows
                     arr.resize((arr.shape[0] + grow, *arr.shape[1:]))
-            writes = [
-                a.async_array.setitem(slice(start, stop), rows[k]) for k, a in self.arrays.items()
-            ]
-            zarr_sync(_gather(writes))  # one trip to zarr's event loop for all columns
-            self.group.update_attributes({COMMITTED_ATTR: stop})
+            regions = {k: (slice(start, stop), v) for k, v in rows.items()}
+            waiting = {}
+            for name in self._waiting:
+                regions[name], waiting[name] = self._whole_chunks(name, rows[name], stop)
+            committed = min([stop, *(region.stop for region, _ in regions.values())])
+            self._write_regions(regions, committed)
         except BaseException:
             # not committed: the next rows take their place (a writer thread runs no
             # write after a failed one, so none was placed after these)
             self.rows = start
             raise
-        self.committed = stop
-        return stop
+        self._waiting.update(waiting)
+        self._handed = stop
+        self.committed = committed
+        return committed
+
+    def _whole_chunks(
+        self, name: str, rows: npt.NDArray[Any], stop: int
+    ) -> tuple[tuple[slice, npt.NDArray[Any]], npt.NDArray[Any]]:
+        """Of the rows waiting in column ``name`` and ``rows`` after them (up to row
+        ``stop``): the whole chunks to write (region and rows; maybe none), and the rows
+        left waiting (a copy: the caller may reuse ``rows``)."""
+        waiting = self._waiting[name]
+        both = np.concatenate([waiting, rows]) if waiting.shape[0] else rows
+        first = stop - both.shape[0]
+        whole = stop // self.arrays[name].chunks[0] * self.arrays[name].chunks[0] - first
+        return (slice(first, first + whole), both[:whole]), both[whole:].copy()
+
+    def _write_regions(
+        self, regions: Mapping[str, tuple[slice, npt.NDArray[Any]]], committed: int
+    ) -> None:
+        """Write each column's rows into its region (none when empty), then set
+        ``committed``."""
+        writes = [
+            self.arrays[k].async_array.setitem(region, data)
+            for k, (region, data) in regions.items()
+            if data.shape[0]
+        ]
+        zarr_sync(_gather(writes))  # one trip to zarr's event loop for all columns
+        self.group.update_attributes({COMMITTED_ATTR: committed})
 
     def trim(self) -> None:
-        """Shrink every array to the committed rows (at the end of a run)."""
+        """Write the rows still waiting (class notes), then shrink every array to the
+        committed rows (at the end of a run)."""
+        if any(w.shape[0] for w in self._waiting.values()):
+            h = self._handed
+            self._write_regions(
+                {k: (slice(h - w.shape[0], h), w) for k, w in self._waiting.items()}, h
+            )
+            self._waiting = {k: w[:0] for k, w in self._waiting.items()}
+            self.committed = self._handed
         for arr in self.arrays.values():
             if arr.shape[0] != self.committed:
                 arr.resize((self.committed, *arr.shape[1:]))
