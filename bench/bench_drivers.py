@@ -121,6 +121,31 @@ def radar_udp(pps: int, duration_s: float, batch_receive: bool = True) -> RadarI
     return RadarIngest(int(pps * duration_s), received, rx_cpu * per, dec_cpu * per)
 
 
+def decode_only(batch: int, repeats: int = 200) -> tuple[float, float]:
+    """CPU per pulse of decoding batches of ``batch`` thz-spotlight packets already received
+    (no socket) into an int16 ring, and of the byte-swapping copy of their payloads alone, µs.
+    """
+    dec = VitaDecoder(N_SAMPLES, "int16")
+    iq = np.random.default_rng(0).integers(-2000, 2000, (N_SAMPLES, 2)).astype(np.int16)
+    packets = [encode_signal_packet(1, 10**18 + 50_000 * k, k, iq) for k in range(batch)]
+    stage = np.zeros((batch, dec.max_packet_bytes + 4), np.uint8)
+    for i, p in enumerate(packets):
+        stage[i, : len(p)] = np.frombuffer(p, np.uint8)
+    lengths = np.array([len(p) for p in packets])
+    ring = np.zeros((batch, N_SAMPLES, 2), np.int16)
+    dec.decode_batch(stage, lengths, ring)
+    t0 = time.thread_time()
+    for _ in range(repeats):
+        dec.decode_batch(stage, lengths, ring)
+    t1 = time.thread_time()
+    payloads = stage[:, 32 : 32 + 4 * N_SAMPLES].view(">i2")
+    for _ in range(repeats):
+        np.copyto(ring.reshape(batch, -1), payloads, casting="same_kind")
+    t2 = time.thread_time()
+    per = 1e6 / (repeats * batch)
+    return (t1 - t0) * per, (t2 - t1) * per
+
+
 def radar_drain(n_pulses: int = 6000) -> tuple[int, int, float]:
     """Send a burst while the reader sleeps, then drain the socket buffer.
 

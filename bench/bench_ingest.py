@@ -7,7 +7,7 @@ Run as ``python -m bench.bench_ingest [--seconds 10] [--record-seconds 60] [--wo
    (``recvmmsg``) and decodes them into an int16 ring. Printed: pulses received of those
    sent, and the reader's CPU per pulse in the receive system calls and in decoding
    (:func:`bench.bench_drivers.radar_udp`); then the same with one ``recv_into`` per
-   datagram.
+   datagram; then decoding alone, on batches of 40 and 128 packets already received.
 2. **recorder against the disk**: the disk's sequential write rate (as ``dd bs=16M
    conv=fdatasync``, 2 GiB), and the daemon's recorder offered simulated thz-spotlight
    echoes at 20 kHz for ``--record-seconds``, each echo compression, the pulses it could
@@ -42,6 +42,12 @@ def main(argv: list[str] | None = None) -> None:
             f"{pps} pulses/s for {args.seconds:.0f} s: {r.received}/{r.sent} received; CPU "
             f"per pulse: receive {r.receive_us:.1f} µs, decode {r.decode_us:.1f} µs, "
             f"together {r.receive_us + r.decode_us:.1f} µs"
+        )
+    for batch in (40, 128):
+        decode_us, copy_us = bench_drivers.decode_only(batch)
+        print(
+            f"decode alone, batches of {batch} packets already received: {decode_us:.1f} µs "
+            f"of CPU per pulse, {copy_us:.1f} µs of it the byte-swapping copy"
         )
     work = Path(tempfile.mkdtemp(prefix="sarmoco-bench-ingest-", dir=args.work))
     try:
