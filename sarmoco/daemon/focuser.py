@@ -204,7 +204,7 @@ class _Segment:
             else None
         )
         self._last_tau_ns: int | None = None
-        self._eq29 = cfg.mocomp.order == 2 and not af.enabled
+        self._eq29 = not af.enabled
         """Whether the imager removes each pixel's squint residual (eq. 29) of the compensation.
 
         Not with the autofocus on: it measures that residual as a Doppler-rate error

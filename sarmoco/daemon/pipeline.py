@@ -35,6 +35,7 @@ from sarmoco.daemon.echoring import Block, EchoRing, SampleFormat, sample_dtype,
 from sarmoco.daemon.flags import NAV_UNUSABLE, UNFOCUSABLE, PulseFlag
 from sarmoco.daemon.focuser import Focuser, FocusOutput, SinkFactory
 from sarmoco.daemon.navbuffer import NavBuffer
+from sarmoco.daemon.navframe import StoreFrame
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.status import Counters
 from sarmoco.drivers.radar import UDP_BATCH_PACKETS
@@ -226,6 +227,8 @@ class Pipeline:
         counters.add_source("pipeline", self.totals)
         self._nav_rows: queue.SimpleQueue[schema.NavRow] = queue.SimpleQueue()
         self._geodetic_origin: schema.GeodeticOrigin | None = None
+        self.frame = StoreFrame()
+        """The frame of the store's positions."""
         self._ins_raw: queue.SimpleQueue[tuple[bytes, int | None]] = queue.SimpleQueue()
         self._ins_recorded_mono = -math.inf
         self._id_lock = threading.Lock()
@@ -345,6 +348,8 @@ class Pipeline:
     def add_nav(self, samples: list[Sample], rx_ns: int | None) -> None:
         """Offer INS samples to the nav buffer and queue them for the recorder."""
         for s in samples:
+            if isinstance(s, VelocitySample):
+                s = self.frame.express(s)
             if isinstance(s, VelocitySample | AttitudeSample):
                 result = self.nav.push_sample(s, rx_ns)
                 self._nav_rows.put((s, rx_ns, result))

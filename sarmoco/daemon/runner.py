@@ -244,6 +244,8 @@ class _LiveRun:
         """The recorder's writer thread failed and that was counted and logged."""
         record_ins_format(self.recorder, ins)
         self.counters.add_source("radar", radar.decoder.counters.snapshot)
+        self.decoder = radar.decoder
+        """The radar's decoder (the same across reconnections): the streams it skipped."""
         self.counters.add_source("ins", ins.counters.snapshot)
         self.threads = [
             self._reader(
@@ -482,7 +484,29 @@ class _LiveRun:
             ins_detail = f"{st.ins_bus_fault}, {ins_detail}"
         fresh = nav_age < INS_STALE_S or "ins" in ended
         self.health.set("ins", fresh and not st.ins_bus_fault, ins_detail)
+        self._radar_streams()
         return ok
+
+    def _radar_streams(self) -> None:
+        """Set the ``radar`` health check once signal packets of other VITA streams than the
+        decoded one arrived: unhealthy while none of the decoded stream came (the detail
+        names the streams that arrived and ``radar.stream_id``), healthy after."""
+        skipped = sorted(self.decoder.skipped_streams)  # one C call: no lock needed
+        if not skipped:
+            return
+        sid = self.decoder.stream_id
+        arrived = ", ".join(f"{s} (0x{s:08x})" for s in skipped)
+        if self.pipe.summary.pulses_received == 0:
+            self.health.set(
+                "radar",
+                False,
+                f"no signal packet of VITA stream {sid} (radar.stream_id); signal packets of "
+                f"streams {arrived} arrived and are skipped: set radar.stream_id to one of them",
+            )
+        else:
+            self.health.set(
+                "radar", True, f"decoding VITA stream {sid} (radar.stream_id); skipping {arrived}"
+            )
 
     def _publish_status(self, now: float) -> None:
         """The systemd ``STATUS=`` line."""
@@ -648,10 +672,18 @@ def _nothing_focused(
     if n:
         radar_span.add(*store.read("pulses", ["t_ns"], 0, 1)["t_ns"].tolist())
         radar_span.add(*store.read("pulses", ["t_ns"], n - 1, n)["t_ns"].tolist())
-    radar_counts = radar.decoder.counters.snapshot() if isinstance(radar, RadarSource) else {}
+    radar_counts, streams = {}, ""
+    if isinstance(radar, RadarSource):
+        radar_counts = radar.decoder.counters.snapshot()
+        skipped = sorted(radar.decoder.skipped_streams)
+        if skipped:
+            streams = (
+                f"; skipped VITA streams {', '.join(str(s) for s in skipped)} "
+                f"(radar.stream_id = {radar.decoder.stream_id} is decoded; set it to one of these)"
+            )
     return (
         f"replay focused no pulse: radar {n} pulses{radar_span.text()}"
-        f"{_nonzero(radar_counts)}; INS {ins_span.n} samples{ins_span.text()}"
+        f"{_nonzero(radar_counts)}{streams}; INS {ins_span.n} samples{ins_span.text()}"
         f"{_nonzero(ins.counters.snapshot())}{_nonzero(pipe.nav.counts(), 'refused')}; "
         f"{pipe.summary.pulses_nav_flagged} pulses without navigation (INS gap "
         f"{pipe.aligner.nav_gap}, beyond the INS {pipe.aligner.nav_timeout}); store {out}"

@@ -12,7 +12,8 @@ dimension, plus a ``committed`` attribute counting the rows that are complete)::
 
     <run>.zarr/   attrs: sarmoco_store (layout version), created_utc, config, versions,
                          metrics, complete, reference_track, ins_raw (format of ins_bytes),
-                         geodetic_origin (:func:`encode_geodetic_origin`)
+                         geodetic_origin (:func:`encode_geodetic_origin`: the tangent
+                         point of the NED frame of nav/pos_ned and motion/pos_ned)
       pulses/     t_ns, pulse_id (pulse) int64    transmit time GPS ns, running number
                   channel (pulse) int32, flags (pulse) uint32 (PulseFlag bits)
                   echo (pulse, sample[, iq])      raw echoes, int16 I/Q or complex64 (optional)
@@ -59,7 +60,13 @@ from zarr.codecs import BloscCodec
 from sarmoco.daemon.echoring import SampleFormat, sample_dtype, sample_shape
 from sarmoco.daemon.flags import FLAG_DTYPE, PulseFlag
 from sarmoco.daemon.navbuffer import PushResult
-from sarmoco.drivers.samples import AttitudeSample, EchoPackets, Validity, VelocitySample
+from sarmoco.drivers.samples import (
+    AttitudeSample,
+    EchoPackets,
+    TangentFrame,
+    Validity,
+    VelocitySample,
+)
 from sarmoco.errors import RecorderError
 from sarmoco.processing.array.imaging3d import DemProduct
 from sarmoco.processing.autofocus.report import SubapertureReport
@@ -394,7 +401,11 @@ def encode_nav(rows: Sequence[NavRow]) -> dict[str, npt.NDArray[Any]]:
     return cols
 
 
-def decode_nav(cols: Mapping[str, npt.NDArray[Any]], source: str = "store.nav") -> list[NavSample]:
+def decode_nav(
+    cols: Mapping[str, npt.NDArray[Any]],
+    source: str = "store.nav",
+    frame: TangentFrame | None = None,
+) -> list[NavSample]:
     """INS samples back from rows of the ``nav`` table (:func:`encode_nav` inverted).
 
     Parameters
@@ -403,6 +414,9 @@ def decode_nav(cols: Mapping[str, npt.NDArray[Any]], source: str = "store.nav") 
         Columns ``t_ns``, ``kind``, ``vel_ned``, ``pos_ned``, ``quat``, ``lla`` of some rows.
     source : str
         ``source`` of the samples made.
+    frame : TangentFrame or None
+        The frame of the rows' ``pos_ned`` (the store's ``geodetic_origin``), given to
+        the samples with a position.
 
     Returns
     -------
@@ -434,7 +448,16 @@ def decode_nav(cols: Mapping[str, npt.NDArray[Any]], source: str = "store.nav") 
             lla = None if any(map(math.isnan, g)) else (g[0], g[1], g[2])
             valid = Validity.VELOCITY | (Validity.POSITION if pos or lla else Validity.NONE)
             out.append(
-                VelocitySample(t, (v[0], v[1], v[2]), valid, source, t, pos, lat_lon_alt=lla)
+                VelocitySample(
+                    t,
+                    (v[0], v[1], v[2]),
+                    valid,
+                    source,
+                    t,
+                    pos,
+                    lat_lon_alt=lla,
+                    pos_frame=frame if pos else None,
+                )
             )
         else:
             raise RecorderError(f"nav/kind: {kind} is not a sample kind (0 velocity, 1 attitude)")
@@ -590,16 +613,18 @@ def decode_dem(
 
 @dataclass(frozen=True)
 class GeodeticOrigin:
-    """Where a run is on Earth: the first valid geodetic position its INS gave.
+    """Where a run is on Earth: the tangent point of the local NED frame of the store's
+    positions (``nav/pos_ned``, ``motion/pos_ned``; :mod:`sarmoco.daemon.navframe`).
 
     Attributes
     ----------
     t_ns : int
-        GPS time of that INS sample, ns.
+        GPS time of the first INS sample recorded in that frame, ns.
     lla : tuple of 3 float
-        Latitude, longitude (deg, WGS-84) and altitude (m) as the INS reported it.
+        Latitude, longitude (deg, WGS-84) and altitude (m) as the INS gave them.
     source : str
-        The INS message (e.g. ``"sbg.EKF_NAV"``, ``"mavlink.GLOBAL_POSITION_INT"``).
+        What set the frame (e.g. ``"mavlink.GPS_GLOBAL_ORIGIN"``, the autopilot's EKF
+        origin; ``"sbg.EKF_NAV"``, its first valid position).
     """
 
     t_ns: int
@@ -609,14 +634,25 @@ class GeodeticOrigin:
 
 HEIGHT_NOTE = "INS altitude (MSL) used as WGS-84 ellipsoid height: geoid undulation not applied"
 """How the altitude of :class:`GeodeticOrigin` is used as a height (stored beside it)."""
+FRAME_STATED = (
+    "nav/pos_ned (INS point) and motion/pos_ned (antenna phase centre): NED, m, in the tangent "
+    "frame at this point"
+)
+"""``geodetic_origin.frame`` of a store whose INS named the frame of its positions."""
+FRAME_UNSTATED = (
+    "nav/pos_ned (INS point) and motion/pos_ned (antenna phase centre): NED, m, in the INS's "
+    "own local frame, whose origin it did not state"
+)
+"""``geodetic_origin.frame`` of a store whose INS gave no absolute position."""
 
 
 def encode_geodetic_origin(origin: GeodeticOrigin | None) -> dict[str, Any]:
     """The root attribute :data:`GEODETIC_ORIGIN_ATTR`: ``{"absent": why}`` while the INS
     gave no absolute position, else ``t_ns``, ``lat_deg``, ``lon_deg``, ``alt_m``,
-    ``source`` and ``height`` (:data:`HEIGHT_NOTE`)."""
+    ``source`` and ``height`` (:data:`HEIGHT_NOTE`); ``frame`` says what the store's
+    positions are in (:data:`FRAME_STATED` or :data:`FRAME_UNSTATED`)."""
     if origin is None:
-        return {"absent": NO_ABSOLUTE_POSITION}
+        return {"absent": NO_ABSOLUTE_POSITION, "frame": FRAME_UNSTATED}
     lat, lon, alt = origin.lla
     return {
         "t_ns": origin.t_ns,
@@ -625,6 +661,7 @@ def encode_geodetic_origin(origin: GeodeticOrigin | None) -> dict[str, Any]:
         "alt_m": alt,
         "source": origin.source,
         "height": HEIGHT_NOTE,
+        "frame": FRAME_STATED,
     }
 
 
@@ -653,14 +690,9 @@ def decode_geodetic_origin(attrs: Mapping[str, Any], where: str) -> GeodeticOrig
 
 
 def first_geodetic_origin(rows: Sequence[NavRow]) -> GeodeticOrigin | None:
-    """The origin a run takes from INS rows: the first accepted velocity sample with a
-    valid geodetic position (None when there is none)."""
+    """The origin a run takes from INS rows: the frame of the first accepted velocity
+    sample whose position names one (None when there is none)."""
     for s, _, result in rows:
-        if (
-            result == PushResult.ACCEPTED
-            and isinstance(s, VelocitySample)
-            and s.lat_lon_alt is not None
-            and s.valid & Validity.POSITION
-        ):
-            return GeodeticOrigin(s.t_gps_ns, s.lat_lon_alt, s.source)
+        if result == PushResult.ACCEPTED and isinstance(s, VelocitySample) and s.pos_frame:
+            return GeodeticOrigin(s.t_gps_ns, s.pos_frame.lat_lon_alt, s.pos_frame.source)
     return None

@@ -34,6 +34,25 @@ class Validity(enum.IntFlag):
 
 
 @dataclass(frozen=True, slots=True)
+class TangentFrame:
+    """A local NED frame on the Earth: north, east, down axes at a geodetic point, origin there.
+
+    Attributes
+    ----------
+    lat_lon_alt : tuple of 3 float
+        The point: latitude, longitude (deg, WGS 84) and altitude (m, as the INS gives it;
+        used as the ellipsoid height).
+    source : str
+        What set it: the INS's own statement of its frame (``"mavlink.GPS_GLOBAL_ORIGIN"``,
+        the autopilot's EKF origin) or the first valid position a driver received
+        (``"sbg.EKF_NAV"``, ``"mavlink.GLOBAL_POSITION_INT"``).
+    """
+
+    lat_lon_alt: tuple[float, float, float]
+    source: str
+
+
+@dataclass(frozen=True, slots=True)
 class VelocitySample:
     """Velocity (and position when the message has one) of the INS.
 
@@ -50,12 +69,16 @@ class VelocitySample:
     device_time_ns : int
         The same instant on the device's own clock (boot time), ns.
     pos_ned : tuple of 3 float or None
-        Local NED position, m, when the message carries one.
+        Local NED position, m, when the message carries one (or its driver derives it
+        from a geodetic one), in the frame ``pos_frame``.
     vel_std_mps : tuple of 3 float or None
         1-sigma velocity accuracy, m/s, when the message carries one.
     lat_lon_alt : tuple of 3 float or None
         Latitude, longitude (deg, WGS 84) and altitude above mean sea level (m),
-        when the message carries a global position.
+        when the message carries a global position (or its driver derives it from a
+        local one in a stated frame).
+    pos_frame : TangentFrame or None
+        The frame of ``pos_ned``; None when the INS does not state where its local frame is.
     """
 
     t_gps_ns: int
@@ -66,6 +89,7 @@ class VelocitySample:
     pos_ned: tuple[float, float, float] | None = None
     vel_std_mps: tuple[float, float, float] | None = None
     lat_lon_alt: tuple[float, float, float] | None = None
+    pos_frame: TangentFrame | None = None
 
 
 @dataclass(frozen=True, slots=True)

@@ -11,9 +11,10 @@ Profile (what sarmoco reads and what its simulator writes; README "Radar wire fo
 * Payload: interleaved I/Q, signed 16-bit or IEEE-754 float32, big-endian.
 * Trailer: valid-data (enable bit 30 / indicator bit 18), over-range (25 / 13) and
   sample-loss (24 / 12) indicators are read when enabled.
-* Context packets (type 4) with CIF0 bandwidth (bit 29), RF reference frequency
-  (bit 27) and sample rate (bit 21), each 64-bit two's complement with 20
-  fractional bits, Hz; checked against configuration when expectations are given.
+* Context packets (type 4) with CIF0 bandwidth (bit 29: the usable band of the digitised
+  signal, :class:`ContextExpectation`), RF reference frequency (bit 27) and sample rate
+  (bit 21), each 64-bit two's complement with 20 fractional bits, Hz; checked against
+  configuration when expectations are given.
   A context packet that disagrees marks its stream: the signal packets after it carry
   ``context_mismatch`` until a context packet agrees again (counted, logged).
 
@@ -245,18 +246,55 @@ def encode_context_packet(
 class ContextExpectation:
     """Radar parameters from configuration that context packets must agree with.
 
+    VITA 49.2 describes, in a context packet, the signal digitised in its stream: the
+    Bandwidth field (CIF0 bit 29) is the usable band of that digitised signal, the RF
+    Reference Frequency (bit 27) the RF frequency translated to it, the Sample Rate (bit 21)
+    the rate of its samples. So the bandwidth a digitiser reports is not the chirp's in
+    general: a pulsed-LFM receiver that samples the whole chirp reports a band that holds
+    the chirp (its bandwidth up to the sample rate, e.g. its anti-alias filter's); a dechirp
+    (stretch) receiver digitises the beat band, its IF, a small part of the chirp's. Either
+    way complex (I/Q) samples at the rate ``f_s`` hold at most a band ``f_s``. The bandwidth
+    agrees with configuration when it lies in ``bandwidth_hz`` (:meth:`for_receiver`).
+
     Attributes
     ----------
-    bandwidth_hz, rf_reference_hz, sample_rate_hz : float
+    bandwidth_hz : tuple of float
+        Lowest and highest digitised bandwidth that agree, Hz.
+    rf_reference_hz, sample_rate_hz : float
         Expected values, Hz.
     rel_tol : float
-        Allowed relative difference.
+        Allowed relative difference (for the bandwidth: beyond its two bounds).
     """
 
-    bandwidth_hz: float
+    bandwidth_hz: tuple[float, float]
     rf_reference_hz: float
     sample_rate_hz: float
     rel_tol: float = 1e-6
+
+    @classmethod
+    def for_receiver(
+        cls,
+        receive: Literal["matched", "dechirp"],
+        chirp_bandwidth_hz: float,
+        rf_reference_hz: float,
+        sample_rate_hz: float,
+    ) -> ContextExpectation:
+        """The expectation for a configured receiver (class notes).
+
+        Parameters
+        ----------
+        receive : {"matched", "dechirp"}
+            ``matched``: the digitised band must hold the chirp (as much of it as the sample
+            rate can) and fit in the sample rate, ``[min(chirp_bandwidth_hz,
+            sample_rate_hz), sample_rate_hz]``; ``dechirp``: the beat band, anything
+            up to the sample rate, ``(0, sample_rate_hz]`` (the range gate of a dechirp
+            receiver spans the beat band ``f_s`` over the chirp rate; a narrower IF filter
+            darkens the far ranges but leaves the pulses right).
+        chirp_bandwidth_hz, rf_reference_hz, sample_rate_hz : float
+            Transmitted chirp bandwidth, carrier and complex sample rate, Hz.
+        """
+        low = min(chirp_bandwidth_hz, sample_rate_hz) if receive == "matched" else 0.0
+        return cls((low, sample_rate_hz), rf_reference_hz, sample_rate_hz)
 
 
 @dataclass
@@ -307,7 +345,11 @@ class VitaDecoder:
     stream_id : int or None
         Accept the signal packets of this VITA stream ID only (one receive channel);
         signal packets of other streams are counted in ``counters.rejected`` and
-        skipped (logged once per stream). None: every stream.
+        skipped (logged once per stream). None: every stream, or with ``first_stream``
+        the first one whose signal packet arrives.
+    first_stream : bool
+        With ``stream_id`` None: take the stream of the first well-formed signal packet
+        (logged with its ID) and only that stream from then on.
 
     Notes
     -----
@@ -331,6 +373,7 @@ class VitaDecoder:
         expect: ContextExpectation | None = None,
         link: str = "vita49",
         stream_id: int | None = None,
+        first_stream: bool = False,
     ) -> None:
         if n_samples < 1:
             raise ConfigError(f"radar.n_samples: {n_samples!r} is not >= 1")
@@ -341,6 +384,8 @@ class VitaDecoder:
         self.leap_s = leap_s
         self.expect = expect
         self.stream_id = stream_id
+        self.first_stream = first_stream and stream_id is None
+        """Whether the stream is still to be chosen: the first signal packet's."""
         self.skipped_streams: set[int] = set()
         """Stream IDs whose signal packets were skipped (each logged once)."""
         self.counters = VitaCounters()
@@ -470,6 +515,8 @@ class VitaDecoder:
                 self._count(ptype, stream_id, count)
                 self.last_ok = True
             return None
+        if self.first_stream:
+            self._choose_stream(stream_id)
         if not self._accepts(stream_id):
             self._skip_stream(stream_id)
             self.last_ok = True  # well formed: a framer steps past the whole packet
@@ -511,14 +558,26 @@ class VitaDecoder:
         """Whether signal packets of ``stream_id`` are decoded (int, or elementwise array)."""
         return True if self.stream_id is None else stream_id == self.stream_id
 
+    def _choose_stream(self, stream_id: int) -> None:
+        """Take ``stream_id``, the first signal stream seen, as the one decoded."""
+        self.stream_id, self.first_stream = stream_id, False
+        log.info(
+            "radar: decoding VITA stream 0x%08x (%d), the first signal stream seen "
+            "(radar.stream_id selects another)",
+            stream_id,
+            stream_id,
+        )
+
     def _skip_stream(self, stream_id: int) -> None:
         self.counters.rejected += 1
         if stream_id not in self.skipped_streams:
             self.skipped_streams.add(stream_id)
             log.warning(
-                "radar: skipping the signal packets of VITA stream 0x%08x (only stream 0x%08x "
-                "is focused; counted in rejected)",
+                "radar: skipping the signal packets of VITA stream 0x%08x (%d): only stream "
+                "0x%08x (%d) is decoded (radar.stream_id selects it; counted in rejected)",
                 stream_id,
+                stream_id,
+                self.stream_id,
                 self.stream_id,
             )
 
@@ -557,7 +616,8 @@ class VitaDecoder:
         k = len(lengths)
         end = _FULL_HEADER.itemsize + self._payload_bytes
         got = _Gathered(self.n_samples)
-        if k < BATCH_MIN_PACKETS or not out.flags.c_contiguous or stage.shape[1] < end + 4:
+        slow = k < BATCH_MIN_PACKETS or self.first_stream  # the stream is chosen packet by packet
+        if slow or not out.flags.c_contiguous or stage.shape[1] < end + 4:
             for i in range(k):
                 got.add(self.decode_into(memoryview(stage[i])[: lengths[i]], out[got.rows]))
             return got.packets()
@@ -665,11 +725,21 @@ class VitaDecoder:
     def _check_context(self, ctx: ContextValues) -> None:
         """Mark or clear the stream's mismatch (class notes); log each change once."""
         assert self.expect is not None
+        tol = self.expect.rel_tol
         wrong = []
-        for name in ("bandwidth_hz", "rf_reference_hz", "sample_rate_hz"):
+        low, high = self.expect.bandwidth_hz
+        band = ctx.bandwidth_hz
+        inside = band is not None and band > 0.0 and low * (1 - tol) <= band <= high * (1 + tol)
+        if band is not None and not inside:
+            wrong.append(
+                f"radar.bandwidth_hz: the radar says its digitised band is {band!r} Hz, "
+                f"outside {low!r} .. {high!r} Hz that radar.receive, radar.bandwidth_hz and "
+                "radar.sample_rate_hz allow"
+            )
+        for name in ("rf_reference_hz", "sample_rate_hz"):
             got = getattr(ctx, name)
             want = getattr(self.expect, name)
-            if got is not None and abs(got - want) > self.expect.rel_tol * abs(want):
+            if got is not None and abs(got - want) > tol * abs(want):
                 wrong.append(f"radar.{name}: configured {want!r} Hz, the radar says {got!r} Hz")
         sid, before = ctx.stream_id, self.mismatch.get(ctx.stream_id)
         if not wrong:

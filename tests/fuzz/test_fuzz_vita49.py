@@ -135,7 +135,7 @@ def test_context_packets_against_configuration(packets: list[bytes]) -> None:
     """A context packet either agrees, is rejected (counted), or contradicts the
     configuration: then its stream is marked with a reason naming the radar key, counted,
     and nothing is raised."""
-    expect = ContextExpectation(750e6, 15e9, 1e9)
+    expect = ContextExpectation.for_receiver("matched", 750e6, 15e9, 1e9)
     dec = VitaDecoder(8, expect=expect)
     row = np.empty(8, np.complex64)
     for pkt in packets:
