@@ -19,7 +19,7 @@ import numpy as np
 import numpy.typing as npt
 
 from sarmoco.daemon.flags import PulseFlag
-from sarmoco.drivers.samples import EchoPacket
+from sarmoco.drivers.samples import EchoPackets
 
 MAX_OPEN_PULSES = 8
 """Pulses being assembled at once: the oldest is dropped when a newer one would exceed it."""
@@ -72,7 +72,7 @@ class ChannelGrouper:
         """Stream IDs of the packets counted in ``foreign``."""
         self.duplicates = 0
 
-    def add(self, rows: npt.NDArray[np.generic], packets: list[EchoPacket]) -> list[GroupedPulse]:
+    def add(self, rows: npt.NDArray[np.generic], packets: EchoPackets) -> list[GroupedPulse]:
         """Take decoded packets (``rows[i]`` holds ``packets[i]``'s samples).
 
         Returns
@@ -81,7 +81,8 @@ class ChannelGrouper:
             The pulses completed by these packets, oldest first.
         """
         done: list[GroupedPulse] = []
-        for row, packet in zip(rows, packets, strict=False):
+        packet_flags = PulseFlag.of_packets(packets).tolist()
+        for row, packet, packet_flag in zip(rows, packets, packet_flags, strict=False):
             c = self.channel_of.get(packet.stream_id)
             if c is None:
                 self.foreign += 1
@@ -96,7 +97,7 @@ class ChannelGrouper:
                 continue
             samples[c] = row
             seen[c] = True
-            flags |= int(PulseFlag.from_packet(packet))
+            flags |= packet_flag
             if seen.all():
                 del self._open[t]
                 done.append(GroupedPulse(t, samples, flags))

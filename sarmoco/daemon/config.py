@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from sarmoco.daemon.links import INS_OPENERS
+from sarmoco.daemon.schema import ECHO_COMPRESSION
 from sarmoco.errors import ConfigError, ProcessingError
 from sarmoco.keys import key as _key
 from sarmoco.processing.autofocus.settings import AutofocusConfig
@@ -410,6 +411,13 @@ class RecorderConfig:
         True, "Record the INS bytes as received (ins_raw / ins_bytes; MAVLink, SBG, SBG CAN)"
     )
     chunk_pulses: int = _key(256, "Pulses per chunk of the echo arrays", gt=0)
+    echo_compression: str = _key(
+        "none",
+        "Lossless compression of the raw echoes: 'lz4-bitshuffle' stores noise-like int16 "
+        "echoes in about 10 % less space (README, recording) for about a quarter of a core "
+        "at 330 MB/s; 'none' stores them as they are",
+        choices=tuple(ECHO_COMPRESSION),
+    )
     fsync_interval_s: float = _key(1.0, "Interval between fsyncs of committed data", unit="s", gt=0)
     writer_queue: int = _key(
         0,

@@ -64,6 +64,7 @@ def open_recorder(cfg: Config, path: Path, live: LiveFeed | None = None) -> Reco
         config=config_to_dict(cfg),
         raw_echoes=cfg.recorder.raw_echoes,
         chunk_pulses=cfg.recorder.chunk_pulses,
+        echo_compression=cfg.recorder.echo_compression,
         fsync_interval_s=cfg.recorder.fsync_interval_s,
         live=live,
         writer_queue=cfg.recorder.writer_queue,

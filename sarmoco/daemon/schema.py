@@ -47,6 +47,7 @@ docstrings.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -54,13 +55,14 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from zarr.codecs import BloscCodec
 
 from sarmoco.daemon.echoring import SampleFormat, sample_dtype, sample_shape
 from sarmoco.daemon.flags import FLAG_DTYPE, PulseFlag
 from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.drivers.samples import (
     AttitudeSample,
-    EchoPacket,
+    EchoPackets,
     TangentFrame,
     Validity,
     VelocitySample,
@@ -137,9 +139,9 @@ class TableSpec:
         Rows are pulses (chunked like the pulses) rather than other records.
     chunk_rows : int or None
         Rows per chunk when fixed by the layout (None: the recorder's setting).
-    uncompressed : tuple of str
-        Columns stored without compression (raw echoes: noise does not compress, and
-        the CPU is needed for focusing).
+    compressors : mapping of str to codec or None
+        Columns not stored with zarr's default compression: their compressor (a zarr
+        codec), or None for none (:func:`pulses_table`'s raw echoes).
     coords : tuple of str
         Columns that are coordinates of the others (times along the row dimension): every
         other column names them in its ``coordinates`` attribute (CF and xarray
@@ -151,7 +153,7 @@ class TableSpec:
     columns: Mapping[str, Column]
     per_pulse: bool = False
     chunk_rows: int | None = None
-    uncompressed: tuple[str, ...] = ()
+    compressors: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     coords: tuple[str, ...] = ()
 
     def column_attrs(self, name: str) -> dict[str, Any]:
@@ -161,8 +163,31 @@ class TableSpec:
         return {"coordinates": " ".join(self.coords)}
 
 
-def pulses_table(n_samples: int, sample_format: SampleFormat, raw_echoes: bool) -> TableSpec:
-    """The ``pulses`` table for echoes of ``n_samples`` complex samples in ``sample_format``."""
+ECHO_COMPRESSION: Mapping[str, Any] = {
+    "none": None,
+    "lz4-bitshuffle": BloscCodec(cname="lz4", clevel=5, shuffle="bitshuffle"),
+}
+"""Lossless compressors of the raw echoes, by name (``recorder.echo_compression``). Echoes
+are mostly receiver noise, whose low bits are random: a byte compressor (zstd) finds little
+in them; a bit shuffle gathers the high bits of the samples, which a signal using part of
+the ADC's range leaves alike, and lz4 packs those fast."""
+
+
+def pulses_table(
+    n_samples: int, sample_format: SampleFormat, raw_echoes: bool, echo_compression: str = "none"
+) -> TableSpec:
+    """The ``pulses`` table for echoes of ``n_samples`` complex samples in ``sample_format``,
+    compressed with :data:`ECHO_COMPRESSION` ``[echo_compression]``.
+
+    Raises
+    ------
+    RecorderError
+        ``echo_compression`` is not a key of :data:`ECHO_COMPRESSION`.
+    """
+    if echo_compression not in ECHO_COMPRESSION:
+        raise RecorderError(
+            f"echo compression {echo_compression!r} is not one of {sorted(ECHO_COMPRESSION)}"
+        )
     columns = {
         "t_ns": _col(np.int64),
         "pulse_id": _col(np.int64),
@@ -174,7 +199,12 @@ def pulses_table(n_samples: int, sample_format: SampleFormat, raw_echoes: bool) 
         shape = sample_shape(n_samples, sample_format)
         columns["echo"] = _col(sample_dtype(sample_format), shape, dims)
     return TableSpec(
-        "pulses", "pulse", columns, per_pulse=True, uncompressed=("echo",), coords=("t_ns",)
+        "pulses",
+        "pulse",
+        columns,
+        per_pulse=True,
+        compressors={"echo": ECHO_COMPRESSION[echo_compression]},
+        coords=("t_ns",),
     )
 
 
@@ -434,10 +464,10 @@ def decode_nav(
     return out
 
 
-def decode_pulses(cols: Mapping[str, npt.NDArray[Any]], n_samples: int) -> list[EchoPacket]:
+def decode_pulses(cols: Mapping[str, npt.NDArray[Any]], n_samples: int) -> EchoPackets:
     """The radar packet metadata of recorded pulses (for a replay through the radar path).
 
-    The receiver and link bits of ``flags`` (:meth:`PulseFlag.from_packet`) become the
+    The receiver and link bits of ``flags`` (:meth:`PulseFlag.of_packets`) become the
     packet's indicators again; the packet count is not recorded (0).
 
     Parameters
@@ -447,22 +477,18 @@ def decode_pulses(cols: Mapping[str, npt.NDArray[Any]], n_samples: int) -> list[
     n_samples : int
         Complex samples per pulse.
     """
-    return [
-        EchoPacket(
-            channel,
-            t,
-            0,
-            n_samples,
-            not flags & PulseFlag.INVALID_DATA,
-            bool(flags & PulseFlag.SAMPLE_LOSS),
-            bool(flags & PulseFlag.OVER_RANGE),
-            int(bool(flags & PulseFlag.LOST_BEFORE)),
-            bool(flags & PulseFlag.CONTEXT_MISMATCH),
-        )
-        for t, channel, flags in zip(
-            cols["t_ns"].tolist(), cols["channel"].tolist(), cols["flags"].tolist(), strict=True
-        )
-    ]
+    flags = np.asarray(cols["flags"])
+    return EchoPackets(
+        n_samples,
+        stream_id=np.asarray(cols["channel"], np.int64),
+        t_gps_ns=np.asarray(cols["t_ns"], np.int64),
+        packet_count=np.zeros(flags.shape, np.uint8),
+        valid_data=(flags & PulseFlag.INVALID_DATA) == 0,
+        sample_loss=(flags & PulseFlag.SAMPLE_LOSS) != 0,
+        over_range=(flags & PulseFlag.OVER_RANGE) != 0,
+        lost_before=((flags & PulseFlag.LOST_BEFORE) != 0).astype(np.int64),
+        context_mismatch=(flags & PulseFlag.CONTEXT_MISMATCH) != 0,
+    )
 
 
 def encode_autofocus(subapertures: Sequence[SubapertureReport]) -> dict[str, npt.NDArray[Any]]:

@@ -28,7 +28,7 @@ from sarmoco.closing import Closing
 from sarmoco.daemon import schema
 from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.daemon.schema import COMMITTED_ATTR
-from sarmoco.drivers.samples import EchoPacket, Sample, TangentFrame
+from sarmoco.drivers.samples import EchoPackets, Sample, TangentFrame
 from sarmoco.drivers.source import Source
 from sarmoco.errors import RecorderError
 from sarmoco.processing.array.imaging3d import DemProduct
@@ -267,7 +267,7 @@ class StorePulses(Closing):
         """Pulses recorded."""
         self.eof = self.total == 0
 
-    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.0) -> list[EchoPacket]:
+    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.0) -> EchoPackets:
         """Copy the next recorded echoes into ``out[0], out[1], ...``; their packet metadata.
 
         Parameters

@@ -35,7 +35,7 @@ import numpy.typing as npt
 
 from sarmoco.drivers.clock import NS_PER_S, gps_ns_to_unix_ns, unix_ns_to_gps_ns
 from sarmoco.drivers.counters import BurstLog, DriverCounters
-from sarmoco.drivers.samples import EchoPacket
+from sarmoco.drivers.samples import EchoPacket, EchoPackets
 from sarmoco.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -445,9 +445,12 @@ class VitaDecoder:
         self.counters.parse_errors += 1
         self._burst.error(kind, detail)
 
-    def _time(self, tsi: int, seconds: int, ps: int) -> int:
+    def _time(self, tsi: Any, seconds: Any, ps: Any) -> Any:
+        """GPS ns of timestamps: TSI, integer seconds and picoseconds (ints, or int64 arrays
+        elementwise)."""
+        utc_to_gps_ns = unix_ns_to_gps_ns(0, self.leap_s)
         t = seconds * NS_PER_S + (ps + PS_PER_NS // 2) // PS_PER_NS
-        return unix_ns_to_gps_ns(t, self.leap_s) if tsi == TSI_UTC else t
+        return t + (tsi == TSI_UTC) * utc_to_gps_ns
 
     def _count(self, ptype: int, stream_id: int, count: int) -> int:
         key = (ptype, stream_id)
@@ -455,7 +458,7 @@ class VitaDecoder:
         self._last_count[key] = count
         if last is None:
             return 0
-        lost = (count - last - 1) & 0xF
+        lost = _lost(count, last)
         if lost:
             self.counters.gaps += 1
             self.counters.drops += lost
@@ -581,16 +584,16 @@ class VitaDecoder:
     def decode_batch(
         self,
         stage: npt.NDArray[np.uint8],
-        lengths: Sequence[int],
+        lengths: Sequence[int] | npt.NDArray[np.integer],
         out: npt.NDArray[np.generic],
-    ) -> list[EchoPacket]:
+    ) -> EchoPackets:
         """Decode packets received into the rows of ``stage``; same result as :meth:`decode_into`.
 
         Parameters
         ----------
         stage : ndarray of uint8, shape (>= len(lengths), row_bytes)
             Packet ``i`` is ``stage[i, :lengths[i]]``.
-        lengths : sequence of int
+        lengths : sequence or ndarray of int
             Length of each packet, bytes.
         out : ndarray
             Destination rows (as for :meth:`decode_into`), at least ``len(lengths)``;
@@ -598,71 +601,91 @@ class VitaDecoder:
 
         Returns
         -------
-        list of EchoPacket
+        EchoPackets
             Metadata of the pulses written, in row order.
 
         Notes
         -----
         From :data:`BATCH_MIN_PACKETS` packets on, runs of signal packets of the
         full profile (class ID and trailer present, the configured size) have
-        their headers checked and their payloads converted with a few numpy calls
-        per batch instead of per packet (about half the cost per packet when a
-        backlog is drained); anything else (context packets, damage) goes through
-        :meth:`decode_into` in its place in the order.
+        their headers checked, their payloads converted and their metadata and
+        counters worked out with a few numpy calls per run, whatever its length;
+        anything else (context packets, damage) goes through :meth:`decode_into`
+        in its place in the order.
         """
         k = len(lengths)
         end = _FULL_HEADER.itemsize + self._payload_bytes
+        got = _Gathered(self.n_samples)
         slow = k < BATCH_MIN_PACKETS or self.first_stream  # the stream is chosen packet by packet
         if slow or not out.flags.c_contiguous or stage.shape[1] < end + 4:
-            got: list[EchoPacket] = []
             for i in range(k):
-                pkt = self.decode_into(memoryview(stage[i])[: lengths[i]], out[len(got)])
-                if pkt is not None:
-                    got.append(pkt)
-            return got
+                got.add(self.decode_into(memoryview(stage[i])[: lengths[i]], out[got.rows]))
+            return got.packets()
         flat_dtype = self.check_row(out[0]).dtype
         hdr = stage[:k, : _FULL_HEADER.itemsize].view(_FULL_HEADER)[:, 0]
-        w0, n = hdr["w0"], np.asarray(lengths)
+        w0, n = hdr["w0"], np.asarray(lengths)[:k]
         # the checks decode_into makes, on every header at once; then what makes a packet
         # one of the full profile's signal packets (type, class ID and trailer, size)
         fast = np.logical_and.reduce([ok for _, ok in _header_checks(w0, n)])
         fast &= _fraction_ok(hdr["ps"]) & self._accepts(hdr["sid"])
         fast &= ((w0 >> 28) == TYPE_SIGNAL_SID) & (((w0 >> 26) & 3) == 3) & (n == end + 4)
-        fields = (w0.tolist(), hdr["sid"].tolist(), hdr["sec"].tolist(), hdr["ps"].tolist(),
-                  stage[:k, end : end + 4].view(">u4")[:, 0].tolist())  # fmt: skip
+        trailer = stage[:k, end : end + 4].view(">u4")[:, 0]
         dest = out.reshape(out.shape[0], -1).view(flat_dtype)
-        got = []
         i = 0
         for j in [*np.flatnonzero(~fast).tolist(), k]:  # a slow packet ends a fast run
             if j > i:
-                row = len(got)
                 src = stage[i:j, _FULL_HEADER.itemsize : end].view(self._src_dtype)
-                np.copyto(dest[row : row + j - i], src, casting="same_kind")
-                got += self._run_metadata(*(f[i:j] for f in fields))
+                np.copyto(dest[got.rows : got.rows + j - i], src, casting="same_kind")
+                got.add_run(self._run_metadata(hdr[i:j], trailer[i:j]))
             if j < k:
-                pkt = self.decode_into(memoryview(stage[j])[: lengths[j]], out[len(got)])
-                if pkt is not None:
-                    got.append(pkt)
+                got.add(self.decode_into(memoryview(stage[j])[: lengths[j]], out[got.rows]))
             i = j + 1
-        return got
+        return got.packets()
 
     def _run_metadata(
-        self, w0s: list[int], sids: list[int], secs: list[int], pss: list[int], trs: list[int]
-    ) -> list[EchoPacket]:
-        """Counters and metadata of a run of full-profile signal packets (already checked)."""
-        got = []
-        n = self.n_samples
-        for w0, sid, sec, ps, tr in zip(w0s, sids, secs, pss, trs, strict=True):
-            count = (w0 >> 16) & 0xF
-            got.append(EchoPacket(
-                sid, self._time((w0 >> 22) & 3, sec, ps), count, n, _indicator(tr, _TR_VALID, True),
-                _indicator(tr, _TR_SAMPLE_LOSS, False), _indicator(tr, _TR_OVER_RANGE, False),
-                self._count(TYPE_SIGNAL_SID, sid, count), self._mismatched(sid),
-            ))  # fmt: skip
-        self.counters.bytes += len(got) * (_FULL_HEADER.itemsize + self._payload_bytes + 4)
-        self.counters.frames += len(got)
+        self, hdr: npt.NDArray[np.void], trailer: npt.NDArray[np.uint32]
+    ) -> EchoPackets:
+        """Counters and metadata of a run of full-profile signal packets (already checked).
+
+        Parameters
+        ----------
+        hdr : ndarray of :data:`_FULL_HEADER`, shape (R,)
+            Their headers, in arrival order.
+        trailer : ndarray of uint32, shape (R,)
+            Their trailer words.
+        """
+        w0 = hdr["w0"].astype(np.int64)
+        sid = hdr["sid"].astype(np.int64)
+        ps = hdr["ps"].astype(np.int64)
+        t_ns = self._time((w0 >> 22) & 3, hdr["sec"].astype(np.int64), ps)
+        count = ((w0 >> 16) & 0xF).astype(np.uint8)
+        lost = np.zeros(w0.shape, np.int64)
+        streams = np.unique(sid)
+        for stream in streams.tolist():
+            mine = sid == stream if streams.size > 1 else slice(None)
+            lost[mine] = self._count_run(stream, count[mine])
+        mismatch = np.isin(sid, list(self.mismatch)) if self.mismatch else np.zeros(sid.shape, bool)
+        self.counters.context_mismatch += int(np.count_nonzero(mismatch))
+        self.counters.bytes += sid.size * (_FULL_HEADER.itemsize + self._payload_bytes + 4)
+        self.counters.frames += sid.size
         self._burst.ok()
-        return got
+        return EchoPackets(
+            self.n_samples, sid, t_ns, count,
+            _indicator(trailer, _TR_VALID, True), _indicator(trailer, _TR_SAMPLE_LOSS, False),
+            _indicator(trailer, _TR_OVER_RANGE, False), lost, mismatch,
+        )  # fmt: skip
+
+    def _count_run(self, stream_id: int, count: npt.NDArray[np.uint8]) -> npt.NDArray[np.int64]:
+        """:meth:`_count` of consecutive signal packets of one stream: packets lost before
+        each (from the 4-bit counts, modulo 16; 0 for the stream's first packet)."""
+        key = (TYPE_SIGNAL_SID, stream_id)
+        c = count.astype(np.int64)
+        last = self._last_count.get(key)
+        self._last_count[key] = int(c[-1])
+        lost = _lost(c, np.concatenate([[c[0] - 1 if last is None else last], c[:-1]]))
+        self.counters.gaps += int(np.count_nonzero(lost))
+        self.counters.drops += int(lost.sum())
+        return lost
 
     def _context(self, packet: bytes | bytearray | memoryview, pos: int, sid: int, t: int) -> bool:
         n = len(packet)
@@ -738,11 +761,52 @@ class VitaDecoder:
             )  # fmt: skip
 
 
-def _indicator(trailer: int, bits: tuple[int, int], default: bool) -> bool:
+class _Gathered:
+    """The metadata of a batch's pulses as they are decoded, in row order: runs decoded
+    together (arrays) and single packets (objects, made arrays once per stretch of them)."""
+
+    def __init__(self, n_samples: int) -> None:
+        self.n_samples = n_samples
+        self.rows = 0
+        """Rows written so far (the next pulse's row)."""
+        self._parts: list[EchoPackets] = []
+        self._singles: list[EchoPacket] = []
+
+    def add(self, packet: EchoPacket | None) -> None:
+        """A packet decoded on its own (None: nothing written)."""
+        if packet is not None:
+            self._singles.append(packet)
+            self.rows += 1
+
+    def add_run(self, run: EchoPackets) -> None:
+        """Pulses decoded together, after the ones added so far."""
+        self._flush()
+        self._parts.append(run)
+        self.rows += len(run)
+
+    def packets(self) -> EchoPackets:
+        """Every pulse added, in row order."""
+        self._flush()
+        return EchoPackets.concat(self._parts, self.n_samples)
+
+    def _flush(self) -> None:
+        if self._singles:
+            self._parts.append(EchoPackets.of(self._singles, self.n_samples))
+            self._singles = []
+
+
+def _lost(count: Any, before: Any) -> Any:
+    """Packets missing between packet counts ``before`` and ``count`` of one stream (ints, or
+    arrays elementwise): the 4-bit count steps by one per packet."""
+    return (count - before - 1) & 0xF
+
+
+def _indicator(trailer: Any, bits: tuple[int, int], default: bool) -> Any:
+    """A trailer indicator: its bit when its enable bit is set, else ``default`` (one trailer
+    word as an int, or an array of them elementwise)."""
     enable, indicator = bits
-    if not (trailer >> enable) & 1:
-        return default
-    return bool((trailer >> indicator) & 1)
+    d = int(default)
+    return d ^ ((trailer >> enable) & ((trailer >> indicator) ^ d) & 1) == 1
 
 
 class VitaStreamFramer:

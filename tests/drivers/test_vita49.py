@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import select
 import socket
 import struct
 import threading
@@ -124,7 +125,7 @@ def test_context_change_flags_the_pulses_after_it_until_it_agrees_again(
             stage = np.zeros((len(stream), dec.max_packet_bytes), np.uint8)
             for i, p in enumerate(stream):
                 stage[i, : len(p)] = np.frombuffer(p, np.uint8)
-            got = dec.decode_batch(stage, [len(p) for p in stream], rows)
+            got = list(dec.decode_batch(stage, [len(p) for p in stream], rows))
         else:
             got = [e for p in stream if (e := dec.decode_into(p, rows[0])) is not None]
         mismatch = [e.context_mismatch for e in got]
@@ -389,7 +390,7 @@ def test_batch_decoder_equals_packet_decoder(
     for i, d in enumerate(datagrams):
         stage[i, : len(d)] = np.frombuffer(bytes(d), np.uint8)
     out = np.zeros((len(datagrams), N), np.complex64)
-    got = dec.decode_batch(stage, [len(d) for d in datagrams], out)
+    got = list(dec.decode_batch(stage, [len(d) for d in datagrams], out))
     assert got == want
     np.testing.assert_array_equal(out[: len(got)], rows)
     assert dec.counters.snapshot() == counters
@@ -410,12 +411,67 @@ def test_timestamp_kinds_outside_the_profile_are_rejected(batched: bool) -> None
         stage = np.zeros((len(datagrams), dec.max_packet_bytes + 4), np.uint8)
         for i, d in enumerate(datagrams):
             stage[i, : len(d)] = np.frombuffer(bytes(d), np.uint8)
-        got = dec.decode_batch(stage, [len(d) for d in datagrams], out)
+        got = list(dec.decode_batch(stage, [len(d) for d in datagrams], out))
     else:
         got = [e for i, d in enumerate(datagrams) if (e := dec.decode_into(bytes(d), out[i]))]
     keep = [k for k in range(len(datagrams)) if k not in bad]
     assert [e.t_gps_ns for e in got] == [times(len(iq))[k] for k in keep]
     assert dec.counters.parse_errors == len(bad)
+
+
+def _udp_pair() -> tuple[socket.socket, socket.socket]:
+    """A bound non-blocking receiver on 127.0.0.1 and a sender."""
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+    rx.bind(("127.0.0.1", 0))
+    rx.setblocking(False)
+    return rx, socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+
+
+@pytest.mark.parametrize("batch_receive", [True, False], ids=["recvmmsg", "recv_into"])
+def test_udp_batch_path_equals_one_packet_path_on_real_sockets(batch_receive: bool) -> None:
+    """The same datagrams over UDP on 127.0.0.1 to the radar source (batches of datagrams per
+    system call, decoded together into an int16 ring) and to a socket read one datagram per
+    call and decoded one packet per call: byte-identical rows, identical metadata and
+    identical counters. The mix spans several batches, with other streams' packets, context
+    packets, junk, torn packets, timestamps out of range, lost packets, and datagrams longer
+    than the largest packet (cut by the receive buffer)."""
+    mixed = _mixed_datagrams()
+    iq = pulses(200, seed=9)
+    datagrams = [*packets(iq[:150], sid=1)]
+    datagrams[10:10] = mixed  # a damaged stretch inside a long clean run
+    datagrams[80:80] = [datagrams[79] + bytes(64), datagrams[81][:-4] + bytes(4000)]  # too long
+    datagrams += [encode_signal_packet(1, T0 + k, 150 + k, iq[150 + k]) for k in range(50)]
+    del datagrams[200:203]  # a gap in the counts
+    one = VitaDecoder(N, leap_s=18)
+    rx, tx = _udp_pair()
+    buf = bytearray(one.max_packet_bytes + 4)  # what the source receives into
+    want_rows = np.zeros((len(datagrams), N, 2), np.int16)
+    want: list[EchoPacket] = []
+    dec = VitaDecoder(N, leap_s=18)
+    with RadarUdpSource("127.0.0.1", 0, dec, batch_receive=batch_receive) as src:
+        assert src.receiver.batched == batch_receive
+        for d in datagrams:
+            tx.sendto(d, src.address)
+            tx.sendto(d, rx.getsockname())
+        for _ in datagrams:
+            n = rx.recv_into(buf) if select.select([rx], [], [], 1.0)[0] else 0
+            assert n, "timed out"
+            if (e := one.decode_into(memoryview(buf)[:n], want_rows[len(want)])) is not None:
+                want.append(e)
+        rows = np.zeros_like(want_rows)
+        got: list[EchoPacket] = []
+        while len(got) < len(want):
+            batch = src.read_into(rows[len(got) :], timeout_s=1.0)
+            assert len(batch), "timed out"
+            got += batch
+    rx.close()
+    tx.close()
+    assert got == want
+    assert rows.tobytes() == want_rows.tobytes()
+    assert dec.counters.snapshot() == one.counters.snapshot()
+    c = one.counters
+    assert (c.frames, c.parse_errors, c.gaps) == (len(want) + 1, 5, 6)  # (the mix is as meant)
 
 
 @pytest.mark.parametrize(("configured", "decoded"), [(None, 0xC0FFEE01), (7, 7)])

@@ -180,7 +180,7 @@ def test_batch_decode_equals_packet_by_packet(case: tuple[int, str, list[bytes]]
     out_fast = np.full((len(packets), n_samples), 3 + 3j, np.complex64)
     out_slow = out_fast.copy()
     with bounded_allocation():
-        got_fast = fast.decode_batch(stage, lengths, out_fast)
+        got_fast = list(fast.decode_batch(stage, lengths, out_fast))
     got_slow = []
     for i, n in enumerate(lengths):
         pkt = slow.decode_into(bytes(stage[i, :n]), out_slow[len(got_slow)])
