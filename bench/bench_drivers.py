@@ -5,7 +5,9 @@ pytest (``pytest -m bench bench/bench_drivers.py``). The radar test sends
 ``thz-spotlight``-sized pulses (4096 int16 I/Q samples, 16 KiB payload) from a
 second process at a paced rate and counts what the driver decodes into a ring;
 if pulses are lost it steps the rate down and reports the highest loss-free one,
-with the reader's CPU per pulse and the socket buffer it got. The drain test sends a
+with the reader's CPU per pulse (in the receive system calls, and in decoding into an
+int16 ring, apart) and the socket buffer it got; then again with one system call per
+datagram. The drain test sends a
 burst while the reader sleeps and times how fast the reader empties the buffer.
 """
 
@@ -15,6 +17,7 @@ import argparse
 import multiprocessing as mp
 import socket
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +25,7 @@ import pytest
 
 from sarmoco.drivers import sbg_codec
 from sarmoco.drivers.mavlink import MavlinkSource
-from sarmoco.drivers.radar import RadarUdpSource
+from sarmoco.drivers.radar import UDP_BATCH_PACKETS, RadarUdpSource
 from sarmoco.drivers.sbg import SbgDecoder
 from sarmoco.drivers.vita49 import VitaDecoder, encode_signal_packet
 
@@ -56,15 +59,50 @@ def _sender(port: int, pps: int, duration_s: float, start: float) -> None:
     tx.close()
 
 
-def radar_udp(pps: int, duration_s: float) -> tuple[int, int, float]:
-    """Send ``pps × duration_s`` pulses; return (sent, received, reader CPU s per pulse).
+@dataclass
+class RadarIngest:
+    """What :func:`radar_udp` measured.
 
-    The reader CPU is this thread's CPU time over the receive loop (waits cost none).
+    Attributes
+    ----------
+    sent, received : int
+        Pulses sent and decoded into the ring.
+    receive_us, decode_us : float
+        The reader's CPU per pulse received, µs: in the system calls that fill the stage
+        with datagrams, and in decoding the stage into the ring (headers, counters,
+        byte swap into int16 I/Q rows).
+    """
+
+    sent: int
+    received: int
+    receive_us: float
+    decode_us: float
+
+
+def radar_udp(pps: int, duration_s: float, batch_receive: bool = True) -> RadarIngest:
+    """Send ``pps × duration_s`` pulses and receive them as the daemon does: batches of
+    datagrams (``recvmmsg``, or ``recv_into`` each with ``batch_receive`` False) decoded
+    into an int16 ring (the daemon's ring for int16 payloads).
+
+    The CPU is this thread's CPU time in :meth:`RadarUdpSource.read_into` (waits cost
+    none), split between the receive calls (:meth:`RadarUdpSource.receive`) and the rest:
+    decoding, and waiting for the socket.
     """
     dec = VitaDecoder(N_SAMPLES, "int16")
-    src = RadarUdpSource("127.0.0.1", 0, dec)
+    src = RadarUdpSource("127.0.0.1", 0, dec, batch_receive=batch_receive)
     print(f"radar udp: socket receive buffer {src.rcvbuf_bytes / 2**20:.0f} MiB")
-    ring = np.zeros((256, N_SAMPLES), np.complex64)
+    ring = np.zeros((UDP_BATCH_PACKETS, N_SAMPLES, 2), np.int16)
+    rx_cpu = 0.0
+    receive = src.receive
+
+    def timed_receive(first: int, stop: int) -> np.ndarray:
+        nonlocal rx_cpu
+        t0 = time.thread_time()
+        lengths = receive(first, stop)
+        rx_cpu += time.thread_time() - t0
+        return lengths
+
+    src.receive = timed_receive  # type: ignore[method-assign]
     start = time.time() + 0.3
     proc = mp.get_context("spawn").Process(
         target=_sender, args=(src.address[1], pps, duration_s, start)
@@ -77,9 +115,35 @@ def radar_udp(pps: int, duration_s: float) -> tuple[int, int, float]:
     proc.join()
     while batch := len(src.read_into(ring, 0.2)):
         received += batch
-    cpu = time.thread_time() - cpu0
+    dec_cpu = time.thread_time() - cpu0 - rx_cpu
     src.close()
-    return int(pps * duration_s), received, cpu / max(received, 1)
+    per = 1e6 / max(received, 1)
+    return RadarIngest(int(pps * duration_s), received, rx_cpu * per, dec_cpu * per)
+
+
+def decode_only(batch: int, repeats: int = 200) -> tuple[float, float]:
+    """CPU per pulse of decoding batches of ``batch`` thz-spotlight packets already received
+    (no socket) into an int16 ring, and of the byte-swapping copy of their payloads alone, µs.
+    """
+    dec = VitaDecoder(N_SAMPLES, "int16")
+    iq = np.random.default_rng(0).integers(-2000, 2000, (N_SAMPLES, 2)).astype(np.int16)
+    packets = [encode_signal_packet(1, 10**18 + 50_000 * k, k, iq) for k in range(batch)]
+    stage = np.zeros((batch, dec.max_packet_bytes + 4), np.uint8)
+    for i, p in enumerate(packets):
+        stage[i, : len(p)] = np.frombuffer(p, np.uint8)
+    lengths = np.array([len(p) for p in packets])
+    ring = np.zeros((batch, N_SAMPLES, 2), np.int16)
+    dec.decode_batch(stage, lengths, ring)
+    t0 = time.thread_time()
+    for _ in range(repeats):
+        dec.decode_batch(stage, lengths, ring)
+    t1 = time.thread_time()
+    payloads = stage[:, 32 : 32 + 4 * N_SAMPLES].view(">i2")
+    for _ in range(repeats):
+        np.copyto(ring.reshape(batch, -1), payloads, casting="same_kind")
+    t2 = time.thread_time()
+    per = 1e6 / (repeats * batch)
+    return (t1 - t0) * per, (t2 - t1) * per
 
 
 def radar_drain(n_pulses: int = 6000) -> tuple[int, int, float]:
@@ -104,19 +168,24 @@ def radar_drain(n_pulses: int = 6000) -> tuple[int, int, float]:
     return int(pps * duration_s), got, rate
 
 
-def radar_search(duration_s: float) -> dict[str, float]:
-    """Loss-free rate at the target, or the highest loss-free rate below it."""
+def radar_search(duration_s: float, batch_receive: bool = True) -> dict[str, float]:
+    """Loss-free rate at the target, or the highest loss-free rate below it; the reader's
+    CPU per pulse (receive, decode) at that rate."""
     pps = TARGET_PPS
-    results = {}
     while pps >= 500:
-        sent, got, cpu_s = radar_udp(pps, duration_s)
-        results[pps] = got / sent
+        r = radar_udp(pps, duration_s, batch_receive)
         print(
-            f"radar udp: {pps} pulses/s for {duration_s} s: {got}/{sent} received, "
-            f"reader CPU {cpu_s * 1e6:.1f} µs per pulse"
+            f"radar udp ({'recvmmsg' if batch_receive else 'recv_into'}): {pps} pulses/s for "
+            f"{duration_s} s: {r.received}/{r.sent} received; reader CPU per pulse: receive "
+            f"{r.receive_us:.1f} µs, decode {r.decode_us:.1f} µs"
         )
-        if got == sent:
-            return {"loss_free_pps": pps, "mbyte_per_s": pps * (16384 + 32) / 1e6}
+        if r.received == r.sent:
+            return {
+                "loss_free_pps": pps,
+                "mbyte_per_s": pps * (16384 + 32) / 1e6,
+                "receive_us": r.receive_us,
+                "decode_us": r.decode_us,
+            }
         pps = int(pps * 0.7)
     return {"loss_free_pps": 0.0, "mbyte_per_s": 0.0}
 
@@ -165,6 +234,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--duration", type=float, default=60.0, help="seconds per radar rate")
     args = ap.parse_args(argv)
     print(f"radar: {radar_search(args.duration)}")
+    print(f"radar, one system call per datagram: {radar_search(args.duration, False)}")
     sent, drained, rate = radar_drain()
     print(f"radar udp backlog: {drained} of a {sent}-pulse burst drained at {rate:.0f} pulses/s")
     print(f"mavlink tlog decode: {mavlink_rate():.0f} messages/s")

@@ -22,6 +22,7 @@ def key(
     le: float | None = None,
     lt: float | None = None,
     choices: tuple[str, ...] = (),
+    refused: tuple[tuple[Any, str], ...] = (),
 ) -> Any:
     """Declare a config key with its documentation, numeric bounds or allowed strings.
 
@@ -38,6 +39,9 @@ def key(
     choices : tuple of str
         Allowed values of a string key whose values come from a registry (a ``Literal``
         type states fixed ones).
+    refused : tuple of (value, reason)
+        Values of the type that the loader refuses with their reason (a value that would
+        parse but gives a wrong product).
 
     Returns
     -------
@@ -49,7 +53,16 @@ def key(
     TypeError
         If ``default`` is mutable.
     """
-    meta = {"doc": doc, "unit": unit, "gt": gt, "ge": ge, "le": le, "lt": lt, "choices": choices}
+    meta = {
+        "doc": doc,
+        "unit": unit,
+        "gt": gt,
+        "ge": ge,
+        "le": le,
+        "lt": lt,
+        "choices": choices,
+        "refused": dict(refused),
+    }
     if isinstance(default, list | dict):
         raise TypeError("mutable defaults are not allowed in config sections")
     return field(default=default, metadata=meta)

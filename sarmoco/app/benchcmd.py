@@ -404,6 +404,7 @@ def bench(
     record: bool = True,
     autofocus: bool = True,
     presum_first: bool = False,
+    method: str = "direct",
     work: Path | None = None,
     keep: bool = False,
 ) -> dict[str, Any]:
@@ -424,6 +425,8 @@ def bench(
         aperture holds fewer than two subapertures).
     presum_first : bool
         Pre-filter before range compression (``imaging.presum_first``).
+    method : str
+        Tile image formation (``imaging.method``: direct, ffbp or rda).
     work : Path, optional
         Where the temporary run folder is made (default: the system's temporary folder).
     keep : bool
@@ -445,7 +448,7 @@ def bench(
     out = Path(tempfile.mkdtemp(prefix=f"sarmoco-bench-{preset}-", dir=work))
     sections: dict[str, dict[str, Any]] = {
         "recorder": {"raw_echoes": record},
-        "imaging": {"presum_first": presum_first},
+        "imaging": {"presum_first": presum_first, "method": method},
     }
     if not autofocus:
         sections["autofocus"] = {"enabled": False}
@@ -479,6 +482,8 @@ def bench(
         "fft_cpu_s_per_pulse": fft_s,
         "record_raw_echoes": record,
         "presum_first": presum_first,
+        "method": method,
+        "live_image_level": run.status.get("gauges", {}).get("live_image_level"),
         "bytes_written": written,
         "exit_status": run.exit_status,
         "load_average": [load_start, os.getloadavg()[0]],
@@ -503,6 +508,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--presum-first", action="store_true", help="pre-filter before range compression"
     )
+    p.add_argument(
+        "--method",
+        choices=("direct", "ffbp", "rda"),
+        default="direct",
+        help="tile image formation, imaging.method (default direct)",
+    )
     p.add_argument("--work", type=Path, help="folder for the temporary run folder")
 
 
@@ -515,6 +526,7 @@ def run_command(args: argparse.Namespace) -> int:
         record=not args.no_record,
         autofocus=not args.no_autofocus,
         presum_first=args.presum_first,
+        method=args.method,
         work=args.work,
         keep=args.keep,
     )

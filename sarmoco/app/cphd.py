@@ -184,7 +184,6 @@ def from_store(store: RunStore, segment: int = 0) -> FxPhaseHistory:
     RecorderError
         No absolute position, no raw echoes, or no such segment.
     """
-    from sarmoco.daemon import schema
     from sarmoco.daemon.config import parse_config
     from sarmoco.daemon.echoring import to_complex64
     from sarmoco.daemon.focuser import radar_params
@@ -235,7 +234,7 @@ def from_store(store: RunStore, segment: int = 0) -> FxPhaseHistory:
         notes=(
             ("source", f"{store.path.name}: segment {segment}, {t.size} pulses"),
             ("compensation", "deramped to the SRP from the INS-integrated antenna track"),
-            ("height", schema.HEIGHT_NOTE),
+            *geo.parameters(),
         ),
         toa_span_s=(2.0 * float(extent.min()) / C_MPS, 2.0 * float(extent.max()) / C_MPS),
     )

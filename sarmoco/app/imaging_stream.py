@@ -26,9 +26,10 @@ from pathlib import Path
 import numpy as np
 import zarr
 
+from sarmoco.daemon.focuser import TileFormer
 from sarmoco.errors import RecorderError
 from sarmoco.processing.geometry import ReferenceTrack
-from sarmoco.processing.imaging.tiles import Tile, TileImager, TileLayout
+from sarmoco.processing.imaging.tiles import Tile, TileLayout
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 
 CHUNK_PULSES = 256
@@ -104,14 +105,14 @@ class StreamSink:
     ----------
     path : Path
         The segment's group to create in the scratch store.
-    imager : TileImager
-        The imager the segment would have used (its layout and range axis are kept).
+    imager : TileFormer
+        The imager the segment would have used (its layout is kept).
     track : ReferenceTrack
         The segment's reference track.
     """
 
     path: Path
-    imager: TileImager
+    imager: TileFormer
     track: ReferenceTrack
     _rows: list[int] = field(default_factory=lambda: [0])
     _x: list[tuple[float, float]] = field(default_factory=list)
@@ -193,7 +194,7 @@ class StreamRecorder:
     scratch: Path
     sinks: list[StreamSink] = field(default_factory=list)
 
-    def __call__(self, imager: TileImager, track: ReferenceTrack) -> StreamSink:
+    def __call__(self, imager: TileFormer, track: ReferenceTrack) -> StreamSink:
         """The sink of the next segment (:data:`~sarmoco.daemon.focuser.SinkFactory`)."""
         if not self.sinks:
             zarr.open_group(str(self.scratch), mode="w-", zarr_format=3)

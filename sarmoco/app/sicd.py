@@ -138,8 +138,9 @@ def _grid_dim(uvect: FloatArray, ss: float, bw: float, kctr: float, window: str)
     }
 
 
-def _processing(cfg: Config, store: RunStore) -> list[dict[str, Any]]:
-    """``ImageFormation/Processing``: the INS motion compensation and the autofocus."""
+def _processing(cfg: Config, store: RunStore, geo: Georeference) -> list[dict[str, Any]]:
+    """``ImageFormation/Processing``: the INS motion compensation, the autofocus and the
+    georeference (the frame and origin the geometry went through)."""
     af = cfg.autofocus
     applied = 0
     if "autofocus" in store.tables() and store.committed("autofocus"):
@@ -162,6 +163,11 @@ def _processing(cfg: Config, store: RunStore) -> list[dict[str, Any]]:
                 ("hop_s", f"{af.hop_s:g}"),
                 ("subapertures_applied", str(applied)),
             ],
+        },
+        {
+            "Type": "georeference (run frame to WGS-84 through the INS positions)",
+            "Applied": True,
+            "Parameter": list(geo.parameters()),
         },
     ]
 
@@ -256,7 +262,7 @@ def _strip(store: RunStore, cfg: Config, geo: Georeference, seg: SegmentImage) -
         polarization=("UNKNOWN", "UNKNOWN"),
         t_end_proc=duration,
         az_autofocus="SV" if cfg.autofocus.enabled else "NO",
-        processing=_processing(cfg, store),
+        processing=_processing(cfg, store, geo),
     )
 
 

@@ -123,7 +123,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def add_platform_arguments(p: argparse.ArgumentParser) -> None:
-    """The platform's arguments: track heading, look side, lever arm, approach."""
+    """The platform's arguments: track heading, look side, crab, lever arm, approach."""
     p.add_argument(
         "--heading-deg", type=float, default=0.0, help="track heading, deg from north (default 0)"
     )
@@ -136,6 +136,12 @@ def add_platform_arguments(p: argparse.ArgumentParser) -> None:
         help="INS to antenna phase centre, body frame, m (default: the preset's "
         f"{','.join(map(str, DEFAULT_LEVER_ARM_M))})",
     )
+    p.add_argument(
+        "--crab-deg", type=float, default=0.0, metavar="DEG",
+        help="body yaw minus track heading, deg, positive clockwise from above (a crosswind w "
+        "across an airspeed V crabs by asin(w / V), nose into the wind); the INS reports it "
+        "and the antenna, fixed to the body, squints with it (default 0)",
+    )  # fmt: skip
     p.add_argument(
         "--approach-s", type=float, default=0.0, metavar="S",
         help="fly S s of straight track before the targets' aperture (default 0)",
@@ -159,11 +165,12 @@ def platform_arguments(argv: Sequence[str]) -> argparse.Namespace:
 
 
 def scenario_overrides(args: argparse.Namespace) -> dict[str, Any]:
-    """The :func:`load_preset` overrides of the platform arguments (heading, look side, arm,
-    approach)."""
+    """The :func:`load_preset` overrides of the platform arguments (heading, look side, crab,
+    arm, approach)."""
     over: dict[str, Any] = {
         "heading_rad": math.radians(args.heading_deg),
         "look_side": args.look_side,
+        "crab_rad": math.radians(args.crab_deg),
     }
     if args.lever_arm is not None:
         over["lever_arm_m"] = args.lever_arm

@@ -34,11 +34,12 @@ import numpy as np
 from sarmoco.daemon import schema
 from sarmoco.daemon.aligner import AlignedBlock
 from sarmoco.daemon.channelgroup import ChannelGrouper
-from sarmoco.daemon.config import Config
+from sarmoco.daemon.config import Config, array_stream_ids
 from sarmoco.daemon.echoring import EchoRing, sample_dtype, sample_shape, to_complex64
 from sarmoco.daemon.flags import FLAG_DTYPE
 from sarmoco.daemon.focuser import radar_params
 from sarmoco.daemon.links import open_ins, open_radar
+from sarmoco.daemon.navframe import StoreFrame
 from sarmoco.daemon.pipeline import nav_alignment, ring_format
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.runner import open_recorder, record_ins_format
@@ -127,12 +128,14 @@ class ArrayPipeline:
         fmt = ring_format(cfg)
         n_c, n_s = cfg.radar.channels, cfg.radar.n_samples
         row = sample_shape(n_s, fmt)
-        self.grouper = ChannelGrouper(n_c, row, sample_dtype(fmt))
+        self.grouper = ChannelGrouper(array_stream_ids(cfg), row, sample_dtype(fmt))
         self.ring = EchoRing(RING_PULSES, n_c * n_s, fmt)
         self.nav, self.aligner = nav_alignment(cfg, self.ring, RING_PULSES)
         self._scratch = np.empty((READ_PACKETS, *row), sample_dtype(fmt))
         self._row = row
         self._nav_rows: list[schema.NavRow] = []
+        self.frame = StoreFrame()
+        """The frame of the store's positions."""
         self._blocks: list[AlignedBlock] = []
         self._next_id = 0
         self.newest_ns: int | None = None
@@ -158,6 +161,8 @@ class ArrayPipeline:
     def add_nav(self, samples: list[Sample]) -> None:
         """Offer INS samples to the nav buffer and keep them for the store."""
         for s in samples:
+            if isinstance(s, VelocitySample):
+                s = self.frame.express(s)
             if isinstance(s, VelocitySample | AttitudeSample):
                 self._nav_rows.append((s, None, self.nav.push_sample(s)))
 
@@ -191,6 +196,11 @@ class ArrayPipeline:
             self._accept(block)
         if self._nav_rows:
             self.recorder.append_nav(**schema.encode_nav(self._nav_rows))
+            origin = schema.first_geodetic_origin(self._nav_rows)
+            if origin is not None:
+                self.recorder.set_attribute(
+                    schema.GEODETIC_ORIGIN_ATTR, schema.encode_geodetic_origin(origin)
+                )
         self._image()
         self.recorder.set_metrics(self.summary.as_dict())
         return self.summary
@@ -278,13 +288,21 @@ def replay_array_files(
         _feed_ins(pipe, ins, ahead, None, lead_ns, recorder)
         summary = pipe.finish()
     if summary.pulses_imaged == 0:
+        foreign = sorted(pipe.grouper.foreign_ids)
         raise DataFileError(
             f"array replay imaged no pulse: {summary.pulses} whole pulses "
             f"({summary.incomplete} dropped for missing channels, {summary.foreign} packets of "
-            f"stream IDs beyond radar.channels {cfg.radar.channels}), {summary.nav_flagged} "
-            f"without navigation; radar {radar_file}, INS {nav_file}; store {out}"
+            f"VITA streams {_id_list(foreign)} that are no Tx/Rx pair of array.stream_ids "
+            f"{_id_list(list(pipe.grouper.channel_of))}), {summary.nav_flagged} without "
+            f"navigation; radar {radar_file}, INS {nav_file}; store {out}"
         )
     return summary
+
+
+def _id_list(ids: list[int], most: int = 8) -> str:
+    """``ids`` in a message: the first ``most`` and how many more."""
+    text = ", ".join(map(str, ids[:most]))
+    return f"[{text}{f', ... {len(ids) - most} more' if len(ids) > most else ''}]"
 
 
 def _feed_ins(

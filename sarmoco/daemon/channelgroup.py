@@ -1,23 +1,25 @@
 """Group the per-channel packets of an array radar into pulses [channel, sample] by time.
 
-An array radar sends each pulse as one VITA 49.2 packet per Tx/Rx pair (stream ID =
-channel), all stamped with the pulse's transmit time. :class:`ChannelGrouper` collects
+An array radar sends each pulse as one VITA 49.2 packet per Tx/Rx pair (each pair, a
+channel, on its own stream ID: ``array.stream_ids``), all stamped with the pulse's
+transmit time. :class:`ChannelGrouper` collects
 them and hands out a pulse once every channel has arrived. A pulse still missing
 channels when :data:`MAX_OPEN_PULSES` newer pulses have started is dropped and counted
 (``incomplete``); a packet whose stream ID is not a channel of the array is counted
-(``foreign``) and skipped, a second packet of a channel already held counted
-(``duplicates``) and skipped.
+(``foreign``, its ID kept in ``foreign_ids``) and skipped, a second packet of a channel
+already held counted (``duplicates``) and skipped.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
 from sarmoco.daemon.flags import PulseFlag
-from sarmoco.drivers.samples import EchoPacket
+from sarmoco.drivers.samples import EchoPackets
 
 MAX_OPEN_PULSES = 8
 """Pulses being assembled at once: the oldest is dropped when a newer one would exceed it."""
@@ -47,24 +49,30 @@ class ChannelGrouper:
 
     Parameters
     ----------
-    n_channels : int
-        Channels per pulse (VITA stream IDs ``0 .. n_channels - 1``).
+    stream_ids : sequence of int
+        VITA stream ID of each channel: channel ``c`` arrives on ``stream_ids[c]``.
     row_shape : tuple of int
         Shape of one packet's samples: ``(S,)`` or ``(S, 2)``.
     dtype : numpy dtype
         Sample type (complex64 or int16).
     """
 
-    def __init__(self, n_channels: int, row_shape: tuple[int, ...], dtype: npt.DTypeLike) -> None:
-        self.n_channels = n_channels
+    def __init__(
+        self, stream_ids: Sequence[int], row_shape: tuple[int, ...], dtype: npt.DTypeLike
+    ) -> None:
+        self.channel_of = {sid: c for c, sid in enumerate(stream_ids)}
+        """Channel index of each stream ID."""
+        self.n_channels = len(stream_ids)
         self.row_shape = row_shape
         self.dtype = np.dtype(dtype)
         self._open: dict[int, tuple[npt.NDArray[np.generic], npt.NDArray[np.bool_], int]] = {}
         self.incomplete = 0
         self.foreign = 0
+        self.foreign_ids: set[int] = set()
+        """Stream IDs of the packets counted in ``foreign``."""
         self.duplicates = 0
 
-    def add(self, rows: npt.NDArray[np.generic], packets: list[EchoPacket]) -> list[GroupedPulse]:
+    def add(self, rows: npt.NDArray[np.generic], packets: EchoPackets) -> list[GroupedPulse]:
         """Take decoded packets (``rows[i]`` holds ``packets[i]``'s samples).
 
         Returns
@@ -73,10 +81,12 @@ class ChannelGrouper:
             The pulses completed by these packets, oldest first.
         """
         done: list[GroupedPulse] = []
-        for row, packet in zip(rows, packets, strict=False):
-            c = packet.stream_id
-            if not 0 <= c < self.n_channels:
+        packet_flags = PulseFlag.of_packets(packets).tolist()
+        for row, packet, packet_flag in zip(rows, packets, packet_flags, strict=False):
+            c = self.channel_of.get(packet.stream_id)
+            if c is None:
                 self.foreign += 1
+                self.foreign_ids.add(packet.stream_id)
                 continue
             t = packet.t_gps_ns
             if t not in self._open:
@@ -87,7 +97,7 @@ class ChannelGrouper:
                 continue
             samples[c] = row
             seen[c] = True
-            flags |= int(PulseFlag.from_packet(packet))
+            flags |= packet_flag
             if seen.all():
                 del self._open[t]
                 done.append(GroupedPulse(t, samples, flags))

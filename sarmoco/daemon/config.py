@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from sarmoco.daemon.links import INS_OPENERS
+from sarmoco.daemon.schema import ECHO_COMPRESSION
 from sarmoco.errors import ConfigError, ProcessingError
 from sarmoco.keys import key as _key
 from sarmoco.processing.autofocus.settings import AutofocusConfig
@@ -65,7 +66,7 @@ class RadarConfig:
     channels: int = _key(
         1,
         "Receive channels: 1 in single mode; array.n_tx * array.n_rx in array mode (VITA "
-        "stream IDs 0..channels-1)",
+        "stream IDs: array.stream_ids)",
         gt=0,
     )
     stream_id: int | None = _key(
@@ -191,11 +192,20 @@ class GeometryConfig:
 class MocompConfig:
     """INS-only per-pulse motion compensation (docs/methods.md §2)."""
 
-    order: Literal[1, 2] = _key(
+    order: Literal[2] = _key(
         2,
-        "1: scene-centre look angle for every bin; 2: look angle per range bin and the "
-        "deviation across the line of sight to second order, and with the autofocus off "
-        "the image former removes the eq. 29 squint residual per pixel",
+        "2: look angle per range bin and the deviation across the line of sight to second "
+        "order, and with the autofocus off the image former removes the eq. 29 squint "
+        "residual per pixel. 1 (the scene-centre look angle for every bin) is refused: it "
+        "defocuses a real flight",
+        refused=(
+            (
+                1,
+                "the scene-centre look angle for every bin leaves a look-angle error across "
+                "the swath that the autofocus does not remove (acceptance reference case: "
+                "worst azimuth PSLR -10.6 dB against -12.5 dB with 2); use 2",
+            ),
+        ),
     )
     envelope_fraction: float = _key(
         DEFAULT_ENVELOPE_FRACTION,
@@ -301,10 +311,30 @@ class ImagingConfig:
         "and before range compression: range compression, envelope shift, per-bin D_los, "
         "autofocus and imaging then run at the decimated pulse rate (with prefilter on)",
     )
-    method: Literal["direct", "ffbp"] = _key(
+    method: Literal["direct", "ffbp", "rda"] = _key(
         "direct",
-        "Tile image formation: direct backprojection, or fast factorised backprojection "
-        "(polar subimages merged in stages, factorisation set by ffbp_max_phase_error_rad)",
+        "Tile image formation: direct backprojection, fast factorised backprojection "
+        "(polar subimages merged in stages, factorisation set by ffbp_max_phase_error_rad), "
+        "or the range-Doppler algorithm on blocks of tiles (frequency domain, the live "
+        "imager: its cost is per sample, not per pixel and pulse; resampled onto the same "
+        "ground tiles)",
+    )
+    live_degrade: bool = _key(
+        True,
+        "With method rda in a live run: when focusing needs more than live_budget of real "
+        "time, form the live tiles at a degraded level (1: twice the pixel spacing; 2: also "
+        "half the swath; 3: four times the pixel spacing and half the swath), one level up "
+        "at a time, and back down when the level below would fit with a margin; the level "
+        "is the status gauge live_image_level. A replay never degrades",
+    )
+    live_budget: float = _key(
+        0.8,
+        "Share of real time the live imager may spend focusing before it degrades "
+        "(focusing CPU seconds per second of data, averaged over live_window_s)",
+        gt=0,
+    )
+    live_window_s: float = _key(
+        5.0, "Seconds of data over which the live imager's load is averaged", unit="s", gt=0
     )
     ffbp_max_phase_error_rad: float = _key(
         0.3,
@@ -325,12 +355,21 @@ class ArrayConfig:
     (``ins.lever_arm_m`` from the IMU) in the filled MIMO layout
     (:func:`~sarmoco.processing.array.geometry.mimo_layout`): receivers ``2 d`` apart,
     transmitters ``n_rx 2 d`` apart, so that the equivalent phase centres of the pairs are one
-    uniform virtual array of spacing ``d = epc_spacing_m``. Tx ``m`` / Rx ``n`` arrive on VITA
-    stream ID ``m * n_rx + n``.
+    uniform virtual array of spacing ``d = epc_spacing_m``. Pair ``m * n_rx + n`` (Tx ``m``,
+    Rx ``n``) arrives on VITA stream ID ``stream_ids[m * n_rx + n]`` (``m * n_rx + n`` when
+    ``stream_ids`` is empty).
     """
 
     n_tx: int = _key(2, "Transmitters across the wing", gt=0)
     n_rx: int = _key(80, "Receivers across the wing", gt=0)
+    stream_ids: tuple[int, ...] = _key(
+        (),
+        "VITA stream identifier (the digitiser's own 32-bit values) of each Tx/Rx pair, in "
+        "pair order m * n_rx + n (Tx m, Rx n): n_tx * n_rx distinct values; signal packets "
+        "of other streams are counted and skipped. Empty: 0 .. n_tx * n_rx - 1",
+        ge=0,
+        le=0xFFFFFFFF,
+    )
     epc_spacing_m: float = _key(
         0.02,
         "Spacing d of the equivalent phase centres (virtual array) along the wing",
@@ -372,6 +411,13 @@ class RecorderConfig:
         True, "Record the INS bytes as received (ins_raw / ins_bytes; MAVLink, SBG, SBG CAN)"
     )
     chunk_pulses: int = _key(256, "Pulses per chunk of the echo arrays", gt=0)
+    echo_compression: str = _key(
+        "none",
+        "Lossless compression of the raw echoes: 'lz4-bitshuffle' stores noise-like int16 "
+        "echoes in about 10 % less space (README, recording) for about a quarter of a core "
+        "at 330 MB/s; 'none' stores them as they are",
+        choices=tuple(ECHO_COMPRESSION),
+    )
     fsync_interval_s: float = _key(1.0, "Interval between fsyncs of committed data", unit="s", gt=0)
     writer_queue: int = _key(
         0,
@@ -473,7 +519,8 @@ def check_channels(radar: RadarConfig, array: ArrayConfig) -> None:
     ------
     ConfigError
         Single mode with ``radar.channels`` > 1; array mode with ``radar.channels`` other
-        than ``array.n_tx * array.n_rx``.
+        than ``array.n_tx * array.n_rx``, or ``array.stream_ids`` not one distinct ID per
+        pair.
     """
     if radar.mode == "array":
         pairs = array.n_tx * array.n_rx
@@ -483,13 +530,31 @@ def check_channels(radar: RadarConfig, array: ArrayConfig) -> None:
                 f"{array.n_tx} * {array.n_rx} = {pairs} (array mode takes one stream ID per "
                 "Tx/Rx pair)"
             )
+        ids = array.stream_ids
+        if ids and len(ids) != pairs:
+            raise ConfigError(
+                f"array.stream_ids: {len(ids)} stream IDs for array.n_tx * array.n_rx = "
+                f"{pairs} Tx/Rx pairs (one per pair, or none for 0 .. {pairs - 1})"
+            )
+        if len(set(ids)) != len(ids):
+            twice = sorted({i for i in ids if ids.count(i) > 1})
+            raise ConfigError(
+                f"array.stream_ids: stream IDs {', '.join(map(str, twice))} name more than "
+                "one Tx/Rx pair"
+            )
     elif radar.channels > 1:
         raise ConfigError(
             f"radar.channels: {radar.channels}: single mode focuses one channel (each channel "
             "would need its own aperture and image set); set radar.channels = 1: the daemon "
-            "focuses VITA stream ID 0 and counts and skips the packets of other stream IDs; "
+            "focuses the VITA stream radar.stream_id and counts and skips the packets of other "
+            "stream IDs; "
             'or radar.mode = "array" for a MIMO array (channels = array.n_tx * array.n_rx)'
         )
+
+
+def array_stream_ids(cfg: Config) -> tuple[int, ...]:
+    """VITA stream ID of each Tx/Rx pair of an array, in pair order (``array.stream_ids``)."""
+    return cfg.array.stream_ids or tuple(range(cfg.array.n_tx * cfg.array.n_rx))
 
 
 def check_array(cfg: Config) -> None:
@@ -599,12 +664,20 @@ def _build(cls: type, table: Any, prefix: str) -> Any:
 def _coerce(tp: Any, value: Any, path: str, meta: Mapping[str, Any]) -> Any:
     if dataclasses.is_dataclass(tp):
         return _build(typing.cast(type, tp), value, path)
+    for bad, reason in meta.get("refused", {}).items():
+        if value == bad and type(value) is type(bad):
+            raise ConfigError(f"{path}: {value!r} is refused: {reason}")
     origin = typing.get_origin(tp)
     if origin is Literal:
         allowed = typing.get_args(tp)
         if value not in allowed or type(value) is not type(allowed[0]):
             raise ConfigError(f"{path}: {value!r} is not one of {', '.join(map(repr, allowed))}")
         return value
+    if origin is tuple and typing.get_args(tp)[1:] == (Ellipsis,):
+        if not isinstance(value, list):
+            raise ConfigError(f"{path}: {value!r} is not a list")
+        item = typing.get_args(tp)[0]
+        return tuple(_coerce(item, v, f"{path}[{i}]", meta) for i, v in enumerate(value))
     if origin is tuple:
         args = typing.get_args(tp)
         if not isinstance(value, list) or len(value) != len(args):
@@ -614,10 +687,10 @@ def _coerce(tp: Any, value: Any, path: str, meta: Mapping[str, Any]) -> Any:
             for i, (a, v) in enumerate(zip(args, value, strict=True))
         )
     if origin in (typing.Union, types.UnionType):
-        args = [a for a in typing.get_args(tp) if a is not type(None)]
-        if len(args) != 1 or len(typing.get_args(tp)) != 2:
+        members = [a for a in typing.get_args(tp) if a is not type(None)]
+        if len(members) != 1 or len(typing.get_args(tp)) != 2:
             raise TypeError(f"{path}: only `T | None` unions are supported in config sections")
-        return None if value is None else _coerce(args[0], value, path, meta)
+        return None if value is None else _coerce(members[0], value, path, meta)
     return _scalar(tp, value, path, meta)
 
 
@@ -701,6 +774,8 @@ def _type_text(tp: Any) -> str:
         return _type_text(next(a for a in typing.get_args(tp) if a is not type(None)))
     if origin is Literal:
         return "string" if isinstance(typing.get_args(tp)[0], str) else "integer"
+    if origin is tuple and typing.get_args(tp)[1:] == (Ellipsis,):
+        return f"array of {_type_text(typing.get_args(tp)[0])}s"
     if origin is tuple:
         return f"array of {len(typing.get_args(tp))} numbers"
     return {bool: "boolean", int: "integer", float: "number", str: "string"}[tp]

@@ -11,8 +11,9 @@ from __future__ import annotations
 import enum
 
 import numpy as np
+import numpy.typing as npt
 
-from sarmoco.drivers.samples import EchoPacket
+from sarmoco.drivers.samples import EchoPackets
 
 FLAG_DTYPE = np.dtype(np.uint32)
 """Storage type of the flags in the ring and in the store."""
@@ -53,31 +54,29 @@ class PulseFlag(enum.IntFlag):
     rate, bandwidth or RF frequency (VITA 49 context): the pulse was recorded, not focused."""
 
     @classmethod
-    def from_packet(cls, packet: EchoPacket) -> PulseFlag:
-        """The receiver and link flags of a decoded radar packet.
+    def of_packets(cls, packets: EchoPackets) -> npt.NDArray[np.uint32]:
+        """The receiver and link flags of decoded radar packets.
 
         Parameters
         ----------
-        packet : EchoPacket
+        packets : EchoPackets
             Metadata returned by the radar decoder.
 
         Returns
         -------
-        PulseFlag
+        ndarray of uint32 (:data:`FLAG_DTYPE`), shape (P,)
             ``INVALID_DATA``, ``SAMPLE_LOSS``, ``OVER_RANGE``, ``LOST_BEFORE`` and
-            ``CONTEXT_MISMATCH`` as they apply.
+            ``CONTEXT_MISMATCH`` as they apply to each packet.
         """
-        flags = cls.NONE
-        if not packet.valid_data:
-            flags |= cls.INVALID_DATA
-        if packet.sample_loss:
-            flags |= cls.SAMPLE_LOSS
-        if packet.over_range:
-            flags |= cls.OVER_RANGE
-        if packet.lost_before:
-            flags |= cls.LOST_BEFORE
-        if packet.context_mismatch:
-            flags |= cls.CONTEXT_MISMATCH
+        flags = np.zeros(len(packets), FLAG_DTYPE)
+        for flag, on in (
+            (cls.INVALID_DATA, ~packets.valid_data),
+            (cls.SAMPLE_LOSS, packets.sample_loss),
+            (cls.OVER_RANGE, packets.over_range),
+            (cls.LOST_BEFORE, packets.lost_before != 0),
+            (cls.CONTEXT_MISMATCH, packets.context_mismatch),
+        ):
+            flags[on] |= FLAG_DTYPE.type(flag)
         return flags
 
 

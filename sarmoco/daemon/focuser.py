@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, fields, replace
 from typing import Protocol
@@ -39,6 +40,7 @@ from typing import Protocol
 import numpy as np
 
 from sarmoco.daemon.config import Config
+from sarmoco.daemon.livelevel import LiveLevel
 from sarmoco.processing import rangecomp
 from sarmoco.processing.autofocus import (
     AutofocusGeometry,
@@ -46,6 +48,7 @@ from sarmoco.processing.autofocus import (
 )
 from sarmoco.processing.geometry import ReferenceTrack, vector_to_imaging
 from sarmoco.processing.imaging.presum import AzimuthPrefilter, fill_slots, slot_steps
+from sarmoco.processing.imaging.rda_tiles import RdaTileImager
 from sarmoco.processing.imaging.tile_pga import StripPga, TilePga
 from sarmoco.processing.imaging.tiles import Tile, TileImager, TileLayout
 from sarmoco.processing.mocomp import (
@@ -125,7 +128,10 @@ class TileSink(Protocol):
         """End of the segment: the tiles still open."""
 
 
-SinkFactory = Callable[[TileImager, ReferenceTrack], TileSink]
+TileFormer = TileImager | RdaTileImager
+"""A segment's tile imager: backprojection (direct or FFBP) or range-Doppler."""
+
+SinkFactory = Callable[[TileFormer, ReferenceTrack], TileSink]
 """Makes a segment's sink from the imager it would use and its reference track."""
 
 
@@ -143,16 +149,21 @@ def tile_layout(cfg: Config) -> TileLayout:
     )
 
 
-def tile_imaging(cfg: Config, radar: RadarParams) -> tuple[TileImager, TilePga | None]:
-    """A segment's tile imager and tile PGA (None when ``autofocus.pga`` is off)."""
+def tile_imaging(cfg: Config, radar: RadarParams) -> tuple[TileFormer, TilePga | None]:
+    """A segment's tile imager (``imaging.method``) and tile PGA (None when
+    ``autofocus.pga`` is off)."""
     geo, im, af = cfg.geometry, cfg.imaging, cfg.autofocus
     beam_rad = imaged_beam_rad(cfg)
-    imager = TileImager(
-        tile_layout(cfg),
-        rangecomp.range_axis_m(radar),
-        radar.wavelength_m,
-        ffbp_budget_rad=im.ffbp_max_phase_error_rad if im.method == "ffbp" else None,
-    )
+    imager: TileFormer
+    if im.method == "rda":
+        imager = RdaTileImager(tile_layout(cfg), rangecomp.range_axis_m(radar), radar.wavelength_m)
+    else:
+        imager = TileImager(
+            tile_layout(cfg),
+            rangecomp.range_axis_m(radar),
+            radar.wavelength_m,
+            ffbp_budget_rad=im.ffbp_max_phase_error_rad if im.method == "ffbp" else None,
+        )
     tile_pga = (
         TilePga(
             StripPga(
@@ -204,7 +215,7 @@ class _Segment:
             else None
         )
         self._last_tau_ns: int | None = None
-        self._eq29 = cfg.mocomp.order == 2 and not af.enabled
+        self._eq29 = not af.enabled
         """Whether the imager removes each pixel's squint residual (eq. 29) of the compensation.
 
         Not with the autofocus on: it measures that residual as a Doppler-rate error
@@ -233,7 +244,7 @@ class _Segment:
         beam_rad = imaged_beam_rad(cfg)
         imager, self.tile_pga = tile_imaging(cfg, radar)
         self.imager: TileSink = imager
-        self._tiles = imager
+        self.tiles = imager
         """The tile imager whose layout says which tiles and pixels the segment forms (its
         sink's too)."""
         self.held: list[Tile] = []
@@ -262,8 +273,8 @@ class _Segment:
 
     def keep(self, a: float, b: float, c: float) -> None:
         """Image only the ground where ``a x + b y < c`` (imaging x, y, m) from now on."""
-        layout = self._tiles.layout
-        self._tiles.layout = replace(layout, keep=(*layout.keep, (a, b, c)))
+        layout = self.tiles.layout
+        self.tiles.layout = replace(layout, keep=(*layout.keep, (a, b, c)))
 
     def push(
         self, pulses: ComplexArray, t_ns: IntArray, vel_ned: FloatArray
@@ -514,6 +525,16 @@ class Focuser:
         self._recent: list[tuple[ComplexArray, IntArray, FloatArray]] = []
         """Pulses (as pushed), times (GPS ns) and velocities (NED, m/s) the current segment
         took within the overlap (what a segment starting at a deviation cut takes first)."""
+        im = cfg.imaging
+        self.live = (
+            LiveLevel(im.live_budget, im.live_window_s)
+            if im.method == "rda" and im.live_degrade
+            else None
+        )
+        """The degraded level of the live image (:mod:`sarmoco.daemon.livelevel`); None:
+        tiles always at the configured pixels and swath."""
+        self._last_t_ns = t0_ns
+        """Time of the last pulse pushed, GPS ns."""
 
     @property
     def track(self) -> ReferenceTrack:
@@ -552,6 +573,26 @@ class Focuser:
             Pulses with navigation (false: zeroed echoes with a placeholder velocity
             across a navigation gap, which never sets a segment's track); all when omitted.
         """
+        start = time.perf_counter()
+        out = self._push(raw, t_ns, vel_ned, known)
+        if self.live is not None and t_ns.shape[0]:
+            data_s = (int(t_ns[-1]) - self._last_t_ns) * 1e-9
+            level = self.live.update(data_s, time.perf_counter() - start)
+            for seg in (self.segment, *(tail for tail, _ in self._tails)):
+                if seg is not None and isinstance(seg.tiles, RdaTileImager):
+                    seg.tiles.level = level
+        if t_ns.shape[0]:
+            self._last_t_ns = int(t_ns[-1])
+        return out
+
+    def _push(
+        self,
+        raw: ComplexArray,
+        t_ns: IntArray,
+        vel_ned: FloatArray,
+        known: BoolArray | None,
+    ) -> FocusOutput:
+        """:meth:`push` without the live level's accounting."""
         # range compression here, or after the pre-filter (imaging.presum_first)
         rc = raw if self._last.presum_first else rangecomp.compress(self.radar, raw, self.window)
         n = t_ns.shape[0]

@@ -76,6 +76,18 @@ class Georeference:
         """Run-frame points (..., 3), m → latitude, longitude (deg), height (m)."""
         return ecef_to_geodetic(self.ecef(pos_run_m))
 
+    def parameters(self) -> tuple[tuple[str, str], ...]:
+        """The frame and origin as name-value pairs, for an export's metadata."""
+        lat, lon, alt = self.origin.lla
+        return (
+            ("geodetic_origin", f"{lat:.9f} deg, {lon:.9f} deg, {alt:.3f} m"),
+            ("geodetic_origin_source", self.origin.source),
+            ("geodetic_origin_height", schema.HEIGHT_NOTE),
+            ("run_frame_offset_ned_m", ",".join(f"{v:.4f}" for v in self.offset_ned_m)),
+            ("georeference_fit_rms_m", f"{self.fit_rms_m:.4f}"),
+            ("georeference_fixes", str(self.n_fixes)),
+        )
+
 
 def run_track(store: RunStore) -> tuple[IntArray, FloatArray, FloatArray]:
     """The integrated APC track of the focused pulses in the run frame.

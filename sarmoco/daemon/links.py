@@ -34,7 +34,9 @@ def vita_decoder(cfg: Config) -> VitaDecoder:
         r.n_samples,
         r.sample_format,
         leap_s=cfg.ins.gps_minus_utc_s,
-        expect=ContextExpectation(r.bandwidth_hz, r.carrier_hz, r.sample_rate_hz),
+        expect=ContextExpectation.for_receiver(
+            r.receive, r.bandwidth_hz, r.carrier_hz, r.sample_rate_hz
+        ),
         link=r.link,
         # single mode: radar.stream_id, or the first signal stream seen; array mode: every
         # stream (the pulses are grouped by channel, sarmoco.daemon.channelgroup)

@@ -32,13 +32,14 @@ from sarmoco.daemon import schema
 from sarmoco.daemon.aligner import AlignedBlock, Aligner
 from sarmoco.daemon.config import Config
 from sarmoco.daemon.echoring import Block, EchoRing, SampleFormat, sample_dtype, sample_shape
-from sarmoco.daemon.flags import FLAG_DTYPE, NAV_UNUSABLE, UNFOCUSABLE, PulseFlag
+from sarmoco.daemon.flags import NAV_UNUSABLE, UNFOCUSABLE, PulseFlag
 from sarmoco.daemon.focuser import Focuser, FocusOutput, SinkFactory
 from sarmoco.daemon.navbuffer import NavBuffer
+from sarmoco.daemon.navframe import StoreFrame
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.status import Counters
 from sarmoco.drivers.radar import UDP_BATCH_PACKETS
-from sarmoco.drivers.samples import AttitudeSample, EchoPacket, Sample, VelocitySample
+from sarmoco.drivers.samples import AttitudeSample, EchoPackets, Sample, VelocitySample
 from sarmoco.processing.imaging.tiles import Tile
 from sarmoco.processing.metrics import image_contrast, image_entropy
 from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, IntArray
@@ -65,7 +66,7 @@ class PulseSource(Protocol):
     (:class:`~sarmoco.drivers.radar.RadarSource`), or a recording's pulses (a replay,
     :class:`~sarmoco.daemon.store.StorePulses`)."""
 
-    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = ...) -> list[EchoPacket]:
+    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = ...) -> EchoPackets:
         """Write the pulses available within ``timeout_s`` into ``out[0], out[1], ...``."""
 
 
@@ -226,6 +227,8 @@ class Pipeline:
         counters.add_source("pipeline", self.totals)
         self._nav_rows: queue.SimpleQueue[schema.NavRow] = queue.SimpleQueue()
         self._geodetic_origin: schema.GeodeticOrigin | None = None
+        self.frame = StoreFrame()
+        """The frame of the store's positions."""
         self._ins_raw: queue.SimpleQueue[tuple[bytes, int | None]] = queue.SimpleQueue()
         self._ins_recorded_mono = -math.inf
         self._id_lock = threading.Lock()
@@ -288,12 +291,12 @@ class Pipeline:
                 break  # the source has nothing more now
         return n
 
-    def _commit(self, block: Block, packets: list[EchoPacket]) -> None:
+    def _commit(self, block: Block, packets: EchoPackets) -> None:
         """Publish the pulses decoded into ``block`` with running ids (gives back the rest)."""
         k = len(packets)
-        t_ns = np.fromiter((p.t_gps_ns for p in packets), np.int64, k)
-        channel = np.fromiter((p.stream_id for p in packets), np.int32, k)
-        flags = np.fromiter((PulseFlag.from_packet(p) for p in packets), FLAG_DTYPE, k)
+        t_ns = packets.t_gps_ns
+        channel = packets.stream_id.astype(np.int32)
+        flags = PulseFlag.of_packets(packets)
         if self._refuse_jumps and k:
             keep = self._not_jumped(t_ns)
             if not keep.all():
@@ -345,6 +348,8 @@ class Pipeline:
     def add_nav(self, samples: list[Sample], rx_ns: int | None) -> None:
         """Offer INS samples to the nav buffer and queue them for the recorder."""
         for s in samples:
+            if isinstance(s, VelocitySample):
+                s = self.frame.express(s)
             if isinstance(s, VelocitySample | AttitudeSample):
                 result = self.nav.push_sample(s, rx_ns)
                 self._nav_rows.put((s, rx_ns, result))
@@ -580,6 +585,10 @@ class Pipeline:
 
     def _update_counters(self) -> None:
         self.counters.set("echo_backlog_pulses", len(self.ring))
+        live = self.focuser.live if self.focuser is not None else None
+        if live is not None:  # the live image's degraded level (sarmoco.daemon.livelevel)
+            self.counters.set("live_image_level", live.level)
+            self.counters.set("live_image_load", live.load)
 
 
 def tile_metrics(data: ComplexArray) -> dict[str, float]:

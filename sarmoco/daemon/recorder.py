@@ -22,12 +22,15 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import datetime
+import errno
 import importlib.metadata
 import json
+import mmap
 import os
 import platform
 import threading
 import time
+import uuid
 from collections.abc import Awaitable, Callable, Coroutine, Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -51,6 +54,13 @@ from sarmoco.processing.types import Image
 _VERSION_PACKAGES = ("sarmoco", "numpy", "scipy", "zarr", "xarray", "pymavlink", "python-can")
 
 
+DIRECT_MIN_BYTES = 1 << 20
+"""Files at least this large (chunks of raw echoes) are written with ``O_DIRECT``, bytes."""
+_DIRECT_ALIGN = 4096
+"""Alignment of the address and length of an ``O_DIRECT`` write, bytes (a page: what every
+Linux block device and file system accepts)."""
+
+
 class _SyncingStore(LocalStore):
     """A zarr local store that remembers which files it wrote, for fsync.
 
@@ -58,6 +68,12 @@ class _SyncingStore(LocalStore):
     :class:`~sarmoco.errors.RecorderError` naming the store, the file and the reason;
     so does a write after the store's directory was removed (zarr would silently
     recreate the chunk's folders without the store's metadata).
+
+    Files of :data:`DIRECT_MIN_BYTES` or more are written with ``O_DIRECT`` where the file
+    system takes it: the bytes go from an aligned buffer to the disk without being copied
+    into the page cache, which on a buffered write costs about as much CPU as the rest of
+    the recorder (and a radar's echoes are not read back). Like zarr's own writes, each goes
+    to a temporary name first and is renamed into place.
     """
 
     def __init__(self, root: Path) -> None:
@@ -68,6 +84,10 @@ class _SyncingStore(LocalStore):
         self._dirty_lock = threading.Lock()
         self._rooted = False
         """The root ``zarr.json`` was written: from then on, its absence means removed."""
+        self._direct = hasattr(os, "O_DIRECT")
+        """Large files are written with O_DIRECT (until the file system refuses it)."""
+        self._buffers = threading.local()
+        """Each writing thread's aligned buffer for O_DIRECT writes."""
 
     def _removed(self) -> RecorderError | None:
         """The error of a store whose directory is gone (its root ``zarr.json`` missing)."""
@@ -84,7 +104,46 @@ class _SyncingStore(LocalStore):
         return RecorderError(f"recorder: {self._root}: cannot write {key!r}: {exc.strerror}")
 
     async def set(self, key: str, value: Buffer) -> None:
-        await self._set_checked(key, value, super().set)
+        large = self._direct and len(value) >= DIRECT_MIN_BYTES
+        await self._set_checked(key, value, self._set_direct if large else super().set)
+
+    async def _set_direct(self, key: str, value: Buffer) -> None:
+        await asyncio.to_thread(self._put_direct, self._root / key, value.as_buffer_like())
+
+    def _put_direct(self, path: Path, data: Any) -> None:
+        """Write ``data`` to ``path`` (through a temporary name) with O_DIRECT: copied into
+        this thread's aligned buffer, written padded to the alignment, cut to its length.
+        A file system that refuses O_DIRECT gets a plain write, and no O_DIRECT after."""
+        view = memoryview(data).cast("B")
+        n = view.nbytes
+        padded = -(-n // _DIRECT_ALIGN) * _DIRECT_ALIGN
+        buf: mmap.mmap | None = getattr(self._buffers, "buf", None)
+        if buf is None or len(buf) < padded:
+            buf = self._buffers.buf = mmap.mmap(-1, padded)  # anonymous: page-aligned
+        buf[:n] = view
+        buf[n:padded] = bytes(padded - n)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{uuid.uuid4().hex}.partial")
+        try:
+            try:
+                fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_DIRECT, 0o644)
+            except OSError as exc:
+                if exc.errno != errno.EINVAL:
+                    raise
+                self._direct = False  # e.g. tmpfs
+                fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+            try:
+                done = 0
+                with memoryview(buf) as aligned:
+                    while done < padded:
+                        done += os.write(fd, aligned[done:padded])
+                os.ftruncate(fd, n)
+            finally:
+                os.close(fd)
+            os.replace(tmp, path)
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
 
     async def set_if_not_exists(self, key: str, value: Buffer) -> None:
         await self._set_checked(key, value, super().set_if_not_exists)
@@ -256,6 +315,16 @@ class Table:
         The table's name, row dimension and columns.
     chunk_rows : int
         Rows per chunk (unless the spec fixes it).
+
+    Notes
+    -----
+    A column whose chunks hold :data:`DIRECT_MIN_BYTES` or more (raw echoes) is written a
+    whole chunk at a time: the rows of its last, partial chunk wait in memory until the
+    chunk is full (or :meth:`trim` writes them), and ``committed`` stays at the chunk
+    boundary until then. Zarr would otherwise write the partial chunk, then read it back
+    (from the disk: it was written with O_DIRECT) to write it again whole with the next
+    rows; blocks of pulses rarely end on a chunk boundary. A crash loses the rows waiting,
+    fewer than a chunk's.
     """
 
     def __init__(self, root: zarr.Group, spec: TableSpec, chunk_rows: int) -> None:
@@ -264,6 +333,8 @@ class Table:
         self.grow_rows = rows * 16  # a multiple of the chunk keeps metadata writes rare
         self.committed = 0
         """Rows written and counted in the store's ``committed`` attribute."""
+        self._handed = 0
+        """Rows handed to :meth:`write` (written, or waiting in a whole-chunk column)."""
         self.rows = 0
         """Rows handed to :meth:`prepare` (the caller's count: ``committed`` once written)."""
         self.arrays: dict[str, zarr.Array] = {}
@@ -275,10 +346,17 @@ class Table:
                 dtype=col.dtype,
                 dimension_names=(spec.row_dim, *col.dims),
                 fill_value=np.nan if col.dtype.kind == "f" else 0,
-                compressors=None if name in spec.uncompressed else "auto",
+                compressors=spec.compressors.get(name, "auto"),
                 attributes=spec.column_attrs(name),
             )
         self.group.update_attributes({COMMITTED_ATTR: 0})
+        self._waiting: dict[str, npt.NDArray[Any]] = {
+            name: np.zeros((0, *col.shape), col.dtype)
+            for name, col in spec.columns.items()
+            if rows * col.dtype.itemsize * int(np.prod(col.shape)) >= DIRECT_MIN_BYTES
+        }
+        """Columns written a whole chunk at a time (class notes): their rows waiting for
+        the chunk to fill."""
 
     def append(self, **columns: npt.ArrayLike) -> int:
         """Write rows to every column, then advance ``committed``; returns the new count.
@@ -325,10 +403,11 @@ class Table:
 
     def write(self, rows: Mapping[str, npt.NDArray[Any]], start: int) -> int:
         """Write rows :meth:`prepare` placed at ``start``, then advance ``committed`` to
-        their end; returns it. Rows are written in the order they were prepared."""
-        if start != self.committed:
+        their end (in a table with a whole-chunk column, to its last whole chunk: class
+        notes); returns it. Rows are written in the order they were prepared."""
+        if start != self._handed:
             raise RecorderError(
-                f"table {self.group.path!r}: rows from {start} written after {self.committed}"
+                f"table {self.group.path!r}: rows from {start} written after {self._handed}"
             )
         stop = start + next(iter(rows.values())).shape[0]
         try:
@@ -336,21 +415,57 @@ class Table:
                 if arr.shape[0] < stop:
                     grow = -(-(stop - arr.shape[0]) // self.grow_rows) * self.grow_rows
                     arr.resize((arr.shape[0] + grow, *arr.shape[1:]))
-            writes = [
-                a.async_array.setitem(slice(start, stop), rows[k]) for k, a in self.arrays.items()
-            ]
-            zarr_sync(_gather(writes))  # one trip to zarr's event loop for all columns
-            self.group.update_attributes({COMMITTED_ATTR: stop})
+            regions = {k: (slice(start, stop), v) for k, v in rows.items()}
+            waiting = {}
+            for name in self._waiting:
+                regions[name], waiting[name] = self._whole_chunks(name, rows[name], stop)
+            committed = min([stop, *(region.stop for region, _ in regions.values())])
+            self._write_regions(regions, committed)
         except BaseException:
             # not committed: the next rows take their place (a writer thread runs no
             # write after a failed one, so none was placed after these)
             self.rows = start
             raise
-        self.committed = stop
-        return stop
+        self._waiting.update(waiting)
+        self._handed = stop
+        self.committed = committed
+        return committed
+
+    def _whole_chunks(
+        self, name: str, rows: npt.NDArray[Any], stop: int
+    ) -> tuple[tuple[slice, npt.NDArray[Any]], npt.NDArray[Any]]:
+        """Of the rows waiting in column ``name`` and ``rows`` after them (up to row
+        ``stop``): the whole chunks to write (region and rows; maybe none), and the rows
+        left waiting (a copy: the caller may reuse ``rows``)."""
+        waiting = self._waiting[name]
+        both = np.concatenate([waiting, rows]) if waiting.shape[0] else rows
+        first = stop - both.shape[0]
+        whole = stop // self.arrays[name].chunks[0] * self.arrays[name].chunks[0] - first
+        return (slice(first, first + whole), both[:whole]), both[whole:].copy()
+
+    def _write_regions(
+        self, regions: Mapping[str, tuple[slice, npt.NDArray[Any]]], committed: int
+    ) -> None:
+        """Write each column's rows into its region (none when empty), then set
+        ``committed``."""
+        writes = [
+            self.arrays[k].async_array.setitem(region, data)
+            for k, (region, data) in regions.items()
+            if data.shape[0]
+        ]
+        zarr_sync(_gather(writes))  # one trip to zarr's event loop for all columns
+        self.group.update_attributes({COMMITTED_ATTR: committed})
 
     def trim(self) -> None:
-        """Shrink every array to the committed rows (at the end of a run)."""
+        """Write the rows still waiting (class notes), then shrink every array to the
+        committed rows (at the end of a run)."""
+        if any(w.shape[0] for w in self._waiting.values()):
+            h = self._handed
+            self._write_regions(
+                {k: (slice(h - w.shape[0], h), w) for k, w in self._waiting.items()}, h
+            )
+            self._waiting = {k: w[:0] for k, w in self._waiting.items()}
+            self.committed = self._handed
         for arr in self.arrays.values():
             if arr.shape[0] != self.committed:
                 arr.resize((self.committed, *arr.shape[1:]))
@@ -377,6 +492,9 @@ class Recorder(Closing):
         Interval between fsyncs of the files written, s (0: after every append).
     chunk_rows : int
         Rows per chunk of the other tables.
+    echo_compression : str
+        Lossless compressor of the raw echoes, a key of
+        :data:`~sarmoco.daemon.schema.ECHO_COMPRESSION` (``"none"``: stored as they are).
     live : LiveFeed, optional
         The live page's feed: each tile and autofocus row recorded is handed to it in
         memory, so that the page never opens the store.
@@ -399,6 +517,7 @@ class Recorder(Closing):
         chunk_pulses: int = 256,
         fsync_interval_s: float = 1.0,
         chunk_rows: int = 1024,
+        echo_compression: str = "none",
         live: LiveFeed | None = None,
         writer_queue: int = 0,
     ) -> None:
@@ -431,7 +550,9 @@ class Recorder(Closing):
                 schema.GEODETIC_ORIGIN_ATTR: schema.encode_geodetic_origin(None),
             }
         )
-        self.pulses = self._create(schema.pulses_table(n_samples, sample_format, raw_echoes))
+        self.pulses = self._create(
+            schema.pulses_table(n_samples, sample_format, raw_echoes, echo_compression)
+        )
         self.nav = self._create(schema.NAV)
         self.ins_raw = self._create(schema.INS_RAW)
         self.ins_bytes = self._create(schema.INS_BYTES)

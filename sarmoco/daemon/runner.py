@@ -11,7 +11,7 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import FrameType
 
@@ -64,6 +64,7 @@ def open_recorder(cfg: Config, path: Path, live: LiveFeed | None = None) -> Reco
         config=config_to_dict(cfg),
         raw_echoes=cfg.recorder.raw_echoes,
         chunk_pulses=cfg.recorder.chunk_pulses,
+        echo_compression=cfg.recorder.echo_compression,
         fsync_interval_s=cfg.recorder.fsync_interval_s,
         live=live,
         writer_queue=cfg.recorder.writer_queue,
@@ -243,6 +244,8 @@ class _LiveRun:
         """The recorder's writer thread failed and that was counted and logged."""
         record_ins_format(self.recorder, ins)
         self.counters.add_source("radar", radar.decoder.counters.snapshot)
+        self.decoder = radar.decoder
+        """The radar's decoder (the same across reconnections): the streams it skipped."""
         self.counters.add_source("ins", ins.counters.snapshot)
         self.threads = [
             self._reader(
@@ -481,7 +484,29 @@ class _LiveRun:
             ins_detail = f"{st.ins_bus_fault}, {ins_detail}"
         fresh = nav_age < INS_STALE_S or "ins" in ended
         self.health.set("ins", fresh and not st.ins_bus_fault, ins_detail)
+        self._radar_streams()
         return ok
+
+    def _radar_streams(self) -> None:
+        """Set the ``radar`` health check once signal packets of other VITA streams than the
+        decoded one arrived: unhealthy while none of the decoded stream came (the detail
+        names the streams that arrived and ``radar.stream_id``), healthy after."""
+        skipped = sorted(self.decoder.skipped_streams)  # one C call: no lock needed
+        if not skipped:
+            return
+        sid = self.decoder.stream_id
+        arrived = ", ".join(f"{s} (0x{s:08x})" for s in skipped)
+        if self.pipe.summary.pulses_received == 0:
+            self.health.set(
+                "radar",
+                False,
+                f"no signal packet of VITA stream {sid} (radar.stream_id); signal packets of "
+                f"streams {arrived} arrived and are skipped: set radar.stream_id to one of them",
+            )
+        else:
+            self.health.set(
+                "radar", True, f"decoding VITA stream {sid} (radar.stream_id); skipping {arrived}"
+            )
 
     def _publish_status(self, now: float) -> None:
         """The systemd ``STATUS=`` line."""
@@ -586,6 +611,7 @@ def _replay(
         When no pulse was focused (the store is still closed complete): the message
         gives the time span each stream covered and what was rejected, and how often.
     """
+    cfg = replace(cfg, imaging=replace(cfg.imaging, live_degrade=False))  # full image
     lead_ns = round(cfg.ins.max_gap_s * 1e9)
     ins_span = _Span()
     with open_recorder(cfg, out) as recorder:

@@ -12,7 +12,8 @@ dimension, plus a ``committed`` attribute counting the rows that are complete)::
 
     <run>.zarr/   attrs: sarmoco_store (layout version), created_utc, config, versions,
                          metrics, complete, reference_track, ins_raw (format of ins_bytes),
-                         geodetic_origin (:func:`encode_geodetic_origin`)
+                         geodetic_origin (:func:`encode_geodetic_origin`: the tangent
+                         point of the NED frame of nav/pos_ned and motion/pos_ned)
       pulses/     t_ns, pulse_id (pulse) int64    transmit time GPS ns, running number
                   channel (pulse) int32, flags (pulse) uint32 (PulseFlag bits)
                   echo (pulse, sample[, iq])      raw echoes, int16 I/Q or complex64 (optional)
@@ -46,6 +47,7 @@ docstrings.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -53,11 +55,18 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from zarr.codecs import BloscCodec
 
 from sarmoco.daemon.echoring import SampleFormat, sample_dtype, sample_shape
 from sarmoco.daemon.flags import FLAG_DTYPE, PulseFlag
 from sarmoco.daemon.navbuffer import PushResult
-from sarmoco.drivers.samples import AttitudeSample, EchoPacket, Validity, VelocitySample
+from sarmoco.drivers.samples import (
+    AttitudeSample,
+    EchoPackets,
+    TangentFrame,
+    Validity,
+    VelocitySample,
+)
 from sarmoco.errors import RecorderError
 from sarmoco.processing.array.imaging3d import DemProduct
 from sarmoco.processing.autofocus.report import SubapertureReport
@@ -130,9 +139,9 @@ class TableSpec:
         Rows are pulses (chunked like the pulses) rather than other records.
     chunk_rows : int or None
         Rows per chunk when fixed by the layout (None: the recorder's setting).
-    uncompressed : tuple of str
-        Columns stored without compression (raw echoes: noise does not compress, and
-        the CPU is needed for focusing).
+    compressors : mapping of str to codec or None
+        Columns not stored with zarr's default compression: their compressor (a zarr
+        codec), or None for none (:func:`pulses_table`'s raw echoes).
     coords : tuple of str
         Columns that are coordinates of the others (times along the row dimension): every
         other column names them in its ``coordinates`` attribute (CF and xarray
@@ -144,7 +153,7 @@ class TableSpec:
     columns: Mapping[str, Column]
     per_pulse: bool = False
     chunk_rows: int | None = None
-    uncompressed: tuple[str, ...] = ()
+    compressors: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     coords: tuple[str, ...] = ()
 
     def column_attrs(self, name: str) -> dict[str, Any]:
@@ -154,8 +163,31 @@ class TableSpec:
         return {"coordinates": " ".join(self.coords)}
 
 
-def pulses_table(n_samples: int, sample_format: SampleFormat, raw_echoes: bool) -> TableSpec:
-    """The ``pulses`` table for echoes of ``n_samples`` complex samples in ``sample_format``."""
+ECHO_COMPRESSION: Mapping[str, Any] = {
+    "none": None,
+    "lz4-bitshuffle": BloscCodec(cname="lz4", clevel=5, shuffle="bitshuffle"),
+}
+"""Lossless compressors of the raw echoes, by name (``recorder.echo_compression``). Echoes
+are mostly receiver noise, whose low bits are random: a byte compressor (zstd) finds little
+in them; a bit shuffle gathers the high bits of the samples, which a signal using part of
+the ADC's range leaves alike, and lz4 packs those fast."""
+
+
+def pulses_table(
+    n_samples: int, sample_format: SampleFormat, raw_echoes: bool, echo_compression: str = "none"
+) -> TableSpec:
+    """The ``pulses`` table for echoes of ``n_samples`` complex samples in ``sample_format``,
+    compressed with :data:`ECHO_COMPRESSION` ``[echo_compression]``.
+
+    Raises
+    ------
+    RecorderError
+        ``echo_compression`` is not a key of :data:`ECHO_COMPRESSION`.
+    """
+    if echo_compression not in ECHO_COMPRESSION:
+        raise RecorderError(
+            f"echo compression {echo_compression!r} is not one of {sorted(ECHO_COMPRESSION)}"
+        )
     columns = {
         "t_ns": _col(np.int64),
         "pulse_id": _col(np.int64),
@@ -167,7 +199,12 @@ def pulses_table(n_samples: int, sample_format: SampleFormat, raw_echoes: bool) 
         shape = sample_shape(n_samples, sample_format)
         columns["echo"] = _col(sample_dtype(sample_format), shape, dims)
     return TableSpec(
-        "pulses", "pulse", columns, per_pulse=True, uncompressed=("echo",), coords=("t_ns",)
+        "pulses",
+        "pulse",
+        columns,
+        per_pulse=True,
+        compressors={"echo": ECHO_COMPRESSION[echo_compression]},
+        coords=("t_ns",),
     )
 
 
@@ -364,7 +401,11 @@ def encode_nav(rows: Sequence[NavRow]) -> dict[str, npt.NDArray[Any]]:
     return cols
 
 
-def decode_nav(cols: Mapping[str, npt.NDArray[Any]], source: str = "store.nav") -> list[NavSample]:
+def decode_nav(
+    cols: Mapping[str, npt.NDArray[Any]],
+    source: str = "store.nav",
+    frame: TangentFrame | None = None,
+) -> list[NavSample]:
     """INS samples back from rows of the ``nav`` table (:func:`encode_nav` inverted).
 
     Parameters
@@ -373,6 +414,9 @@ def decode_nav(cols: Mapping[str, npt.NDArray[Any]], source: str = "store.nav") 
         Columns ``t_ns``, ``kind``, ``vel_ned``, ``pos_ned``, ``quat``, ``lla`` of some rows.
     source : str
         ``source`` of the samples made.
+    frame : TangentFrame or None
+        The frame of the rows' ``pos_ned`` (the store's ``geodetic_origin``), given to
+        the samples with a position.
 
     Returns
     -------
@@ -404,17 +448,26 @@ def decode_nav(cols: Mapping[str, npt.NDArray[Any]], source: str = "store.nav") 
             lla = None if any(map(math.isnan, g)) else (g[0], g[1], g[2])
             valid = Validity.VELOCITY | (Validity.POSITION if pos or lla else Validity.NONE)
             out.append(
-                VelocitySample(t, (v[0], v[1], v[2]), valid, source, t, pos, lat_lon_alt=lla)
+                VelocitySample(
+                    t,
+                    (v[0], v[1], v[2]),
+                    valid,
+                    source,
+                    t,
+                    pos,
+                    lat_lon_alt=lla,
+                    pos_frame=frame if pos else None,
+                )
             )
         else:
             raise RecorderError(f"nav/kind: {kind} is not a sample kind (0 velocity, 1 attitude)")
     return out
 
 
-def decode_pulses(cols: Mapping[str, npt.NDArray[Any]], n_samples: int) -> list[EchoPacket]:
+def decode_pulses(cols: Mapping[str, npt.NDArray[Any]], n_samples: int) -> EchoPackets:
     """The radar packet metadata of recorded pulses (for a replay through the radar path).
 
-    The receiver and link bits of ``flags`` (:meth:`PulseFlag.from_packet`) become the
+    The receiver and link bits of ``flags`` (:meth:`PulseFlag.of_packets`) become the
     packet's indicators again; the packet count is not recorded (0).
 
     Parameters
@@ -424,22 +477,18 @@ def decode_pulses(cols: Mapping[str, npt.NDArray[Any]], n_samples: int) -> list[
     n_samples : int
         Complex samples per pulse.
     """
-    return [
-        EchoPacket(
-            channel,
-            t,
-            0,
-            n_samples,
-            not flags & PulseFlag.INVALID_DATA,
-            bool(flags & PulseFlag.SAMPLE_LOSS),
-            bool(flags & PulseFlag.OVER_RANGE),
-            int(bool(flags & PulseFlag.LOST_BEFORE)),
-            bool(flags & PulseFlag.CONTEXT_MISMATCH),
-        )
-        for t, channel, flags in zip(
-            cols["t_ns"].tolist(), cols["channel"].tolist(), cols["flags"].tolist(), strict=True
-        )
-    ]
+    flags = np.asarray(cols["flags"])
+    return EchoPackets(
+        n_samples,
+        stream_id=np.asarray(cols["channel"], np.int64),
+        t_gps_ns=np.asarray(cols["t_ns"], np.int64),
+        packet_count=np.zeros(flags.shape, np.uint8),
+        valid_data=(flags & PulseFlag.INVALID_DATA) == 0,
+        sample_loss=(flags & PulseFlag.SAMPLE_LOSS) != 0,
+        over_range=(flags & PulseFlag.OVER_RANGE) != 0,
+        lost_before=((flags & PulseFlag.LOST_BEFORE) != 0).astype(np.int64),
+        context_mismatch=(flags & PulseFlag.CONTEXT_MISMATCH) != 0,
+    )
 
 
 def encode_autofocus(subapertures: Sequence[SubapertureReport]) -> dict[str, npt.NDArray[Any]]:
@@ -564,16 +613,18 @@ def decode_dem(
 
 @dataclass(frozen=True)
 class GeodeticOrigin:
-    """Where a run is on Earth: the first valid geodetic position its INS gave.
+    """Where a run is on Earth: the tangent point of the local NED frame of the store's
+    positions (``nav/pos_ned``, ``motion/pos_ned``; :mod:`sarmoco.daemon.navframe`).
 
     Attributes
     ----------
     t_ns : int
-        GPS time of that INS sample, ns.
+        GPS time of the first INS sample recorded in that frame, ns.
     lla : tuple of 3 float
-        Latitude, longitude (deg, WGS-84) and altitude (m) as the INS reported it.
+        Latitude, longitude (deg, WGS-84) and altitude (m) as the INS gave them.
     source : str
-        The INS message (e.g. ``"sbg.EKF_NAV"``, ``"mavlink.GLOBAL_POSITION_INT"``).
+        What set the frame (e.g. ``"mavlink.GPS_GLOBAL_ORIGIN"``, the autopilot's EKF
+        origin; ``"sbg.EKF_NAV"``, its first valid position).
     """
 
     t_ns: int
@@ -583,14 +634,25 @@ class GeodeticOrigin:
 
 HEIGHT_NOTE = "INS altitude (MSL) used as WGS-84 ellipsoid height: geoid undulation not applied"
 """How the altitude of :class:`GeodeticOrigin` is used as a height (stored beside it)."""
+FRAME_STATED = (
+    "nav/pos_ned (INS point) and motion/pos_ned (antenna phase centre): NED, m, in the tangent "
+    "frame at this point"
+)
+"""``geodetic_origin.frame`` of a store whose INS named the frame of its positions."""
+FRAME_UNSTATED = (
+    "nav/pos_ned (INS point) and motion/pos_ned (antenna phase centre): NED, m, in the INS's "
+    "own local frame, whose origin it did not state"
+)
+"""``geodetic_origin.frame`` of a store whose INS gave no absolute position."""
 
 
 def encode_geodetic_origin(origin: GeodeticOrigin | None) -> dict[str, Any]:
     """The root attribute :data:`GEODETIC_ORIGIN_ATTR`: ``{"absent": why}`` while the INS
     gave no absolute position, else ``t_ns``, ``lat_deg``, ``lon_deg``, ``alt_m``,
-    ``source`` and ``height`` (:data:`HEIGHT_NOTE`)."""
+    ``source`` and ``height`` (:data:`HEIGHT_NOTE`); ``frame`` says what the store's
+    positions are in (:data:`FRAME_STATED` or :data:`FRAME_UNSTATED`)."""
     if origin is None:
-        return {"absent": NO_ABSOLUTE_POSITION}
+        return {"absent": NO_ABSOLUTE_POSITION, "frame": FRAME_UNSTATED}
     lat, lon, alt = origin.lla
     return {
         "t_ns": origin.t_ns,
@@ -599,6 +661,7 @@ def encode_geodetic_origin(origin: GeodeticOrigin | None) -> dict[str, Any]:
         "alt_m": alt,
         "source": origin.source,
         "height": HEIGHT_NOTE,
+        "frame": FRAME_STATED,
     }
 
 
@@ -627,14 +690,9 @@ def decode_geodetic_origin(attrs: Mapping[str, Any], where: str) -> GeodeticOrig
 
 
 def first_geodetic_origin(rows: Sequence[NavRow]) -> GeodeticOrigin | None:
-    """The origin a run takes from INS rows: the first accepted velocity sample with a
-    valid geodetic position (None when there is none)."""
+    """The origin a run takes from INS rows: the frame of the first accepted velocity
+    sample whose position names one (None when there is none)."""
     for s, _, result in rows:
-        if (
-            result == PushResult.ACCEPTED
-            and isinstance(s, VelocitySample)
-            and s.lat_lon_alt is not None
-            and s.valid & Validity.POSITION
-        ):
-            return GeodeticOrigin(s.t_gps_ns, s.lat_lon_alt, s.source)
+        if result == PushResult.ACCEPTED and isinstance(s, VelocitySample) and s.pos_frame:
+            return GeodeticOrigin(s.t_gps_ns, s.pos_frame.lat_lon_alt, s.pos_frame.source)
     return None

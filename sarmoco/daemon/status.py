@@ -38,6 +38,7 @@ import numpy as np
 import numpy.typing as npt
 
 from sarmoco.daemon.livefeed import LIVE_TILES, LiveFeed
+from sarmoco.daemon.livelevel import level_names
 from sarmoco.daemon.quicklook import gray_of, peak_blocks, png_gray
 from sarmoco.errors import ConfigError
 
@@ -263,6 +264,7 @@ svg{background:#000}
 <script>
 "use strict";
 let last = null;
+const LEVELS = __LIVE_LEVELS__;
 function row(k, v, cls) {
   return "<tr><td>" + k + "</td><td class='" + (cls || "") + "'>" + v + "</td></tr>";
 }
@@ -287,6 +289,9 @@ async function status() {
     row("pulse rate", rate.toFixed(0) + " /s") +
     row("pulses", n) + row("dropped", drops, drops ? "bad" : "") +
     row("backlog", (g.echo_backlog_pulses ?? 0) + " pulses") +
+    (g.live_image_level === undefined ? "" :
+      row("live image", LEVELS[g.live_image_level] + ", load " +
+          g.live_image_load.toFixed(2), g.live_image_level ? "bad" : "")) +
     row("tiles", l.tiles) +
     row("disk left", l.disk_free_bytes === null ? "?" :
         (l.disk_free_bytes / 1e9).toFixed(1) + " GB");
@@ -311,8 +316,9 @@ function tick() {
 tick();
 setInterval(tick, 2000);
 </script></body></html>
-"""
-"""``GET /``: the operator's live page (no external assets; data from /status, /live.json)."""
+""".replace("__LIVE_LEVELS__", json.dumps(level_names()))
+"""``GET /``: the operator's live page (no external assets; data from /status, /live.json;
+the live image's degraded level, :mod:`sarmoco.daemon.livelevel`, in words)."""
 
 
 class StatusServer:

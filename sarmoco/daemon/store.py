@@ -28,7 +28,7 @@ from sarmoco.closing import Closing
 from sarmoco.daemon import schema
 from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.daemon.schema import COMMITTED_ATTR
-from sarmoco.drivers.samples import EchoPacket, Sample
+from sarmoco.drivers.samples import EchoPackets, Sample, TangentFrame
 from sarmoco.drivers.source import Source
 from sarmoco.errors import RecorderError
 from sarmoco.processing.array.imaging3d import DemProduct
@@ -267,7 +267,7 @@ class StorePulses(Closing):
         """Pulses recorded."""
         self.eof = self.total == 0
 
-    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.0) -> list[EchoPacket]:
+    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.0) -> EchoPackets:
         """Copy the next recorded echoes into ``out[0], out[1], ...``; their packet metadata.
 
         Parameters
@@ -325,7 +325,12 @@ class StoreNav(Source):
         cols = store.read(schema.NAV.name, [*schema.NAV_SAMPLE_COLUMNS, "result"])
         keep = np.flatnonzero(cols["result"] == int(PushResult.ACCEPTED))
         keep = keep[np.argsort(cols["t_ns"][keep], kind="stable")]
-        self._samples = schema.decode_nav({k: v[keep] for k, v in cols.items()})
+        try:
+            origin = schema.decode_geodetic_origin(store.attrs, str(store.path))
+            frame = TangentFrame(origin.lla, origin.source)
+        except RecorderError:  # no absolute position: the positions are in the INS's frame
+            frame = None
+        self._samples = schema.decode_nav({k: v[keep] for k, v in cols.items()}, frame=frame)
         self._next = 0
         self._chunk = chunk
         self._raw_store: RunStore | None = store

@@ -19,7 +19,7 @@ from collections.abc import Callable
 from sarmoco.daemon.config import Config
 from sarmoco.daemon.sdnotify import Notifier
 from sarmoco.processing.autofocus import splice
-from sarmoco.processing.imaging import backprojection, ffbp, presum
+from sarmoco.processing.imaging import backprojection, ffbp, interp, presum
 
 log = logging.getLogger(__name__)
 
@@ -34,7 +34,8 @@ def kernel_warm_ups(cfg: Config) -> list[Callable[[], None]]:
     """The warm-up of each numba kernel that the configured processing calls.
 
     The direct backprojection always (FFBP falls back to it when it plans no stage); the
-    FFBP kernels with ``imaging.method = "ffbp"``; the pre-filter's with
+    FFBP kernels with ``imaging.method = "ffbp"``; the interpolation kernel with
+    ``imaging.method = "rda"``; the pre-filter's with
     ``imaging.prefilter``; the autofocus phase removal's with ``autofocus.enabled``.
     None in array mode (``radar.mode = "array"``: numpy and scipy only).
     """
@@ -43,6 +44,8 @@ def kernel_warm_ups(cfg: Config) -> list[Callable[[], None]]:
     warm_ups = [backprojection.warm_up]
     if cfg.imaging.method == "ffbp":
         warm_ups.append(ffbp.warm_up)
+    if cfg.imaging.method == "rda":
+        warm_ups.append(interp.warm_up)
     if cfg.imaging.prefilter:
         warm_ups.append(presum.warm_up)
     if cfg.autofocus.enabled:

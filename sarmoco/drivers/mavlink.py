@@ -1,8 +1,23 @@
 """MAVLink autopilots through pymavlink: live links (UDP, TCP, serial) and ``.tlog`` replay.
 
 Velocity from LOCAL_POSITION_NED (also GLOBAL_POSITION_INT and ODOMETRY),
-attitude from ATTITUDE_QUATERNION (or ATTITUDE). Autopilot boot time is mapped
-onto GPS time by :class:`BootClockModel`:
+attitude from ATTITUDE_QUATERNION (or ATTITUDE). An autopilot streams GLOBAL_POSITION_INT
+and ATTITUDE by default beside what the daemon asks for; while LOCAL_POSITION_NED
+(ATTITUDE_QUATERNION) arrives, GLOBAL_POSITION_INT (ATTITUDE) gives no sample, so that the
+coarser message (cm/s velocities) never takes the place of the finer one at the same
+instant; after :data:`FINER_HOLD_MS` without the finer one it does.
+
+Positions (:class:`~sarmoco.drivers.posframe.LocalPositions`): GPS_GLOBAL_ORIGIN states the
+EKF origin, the point LOCAL_POSITION_NED (and ODOMETRY in the local NED frame) is about;
+with it those positions also get their latitude, longitude and altitude. An autopilot
+that has not sent GPS_GLOBAL_ORIGIN (it does so when the origin is set, perhaps before the
+log began) still sends GLOBAL_POSITION_INT at the instants of some LOCAL_POSITION_NED:
+the first such pair (with a valid position) gives the EKF origin, forgotten when the boot
+time goes back (a reboot). GLOBAL_POSITION_INT positions become NED about the EKF origin,
+or about the first of them while none is known. Every sample names its frame
+(``pos_frame``).
+
+Autopilot boot time is mapped onto GPS time by :class:`BootClockModel`:
 
 * TIMESYNC (live links): the source sends a request every ``timesync_period_s``;
   :class:`~sarmoco.drivers.timesync.TimesyncEstimator` fits boot time → host
@@ -39,6 +54,7 @@ from typing import Any
 
 os.environ.setdefault("MAVLINK20", "1")
 
+import numpy as np
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
@@ -48,6 +64,7 @@ from sarmoco.drivers.clock import (
     unix_ns_to_gps_ns,
 )
 from sarmoco.drivers.devclock import DeviceClock
+from sarmoco.drivers.posframe import LocalPositions
 from sarmoco.drivers.samples import (
     AttitudeSample,
     Sample,
@@ -61,6 +78,7 @@ from sarmoco.drivers.timesync import (
     TimesyncExchange,
 )
 from sarmoco.errors import ClockError, ConfigError, DriverError
+from sarmoco.geodesy import tangent_origin
 
 log = logging.getLogger(__name__)
 
@@ -70,6 +88,14 @@ DEFAULT_RATES_HZ: dict[str, float] = {
     "SYSTEM_TIME": 2.0,
 }
 """Message rates the source asks for, Hz."""
+FINER: dict[str, str] = {
+    "GLOBAL_POSITION_INT": "LOCAL_POSITION_NED",
+    "ATTITUDE": "ATTITUDE_QUATERNION",
+}
+"""Message → the finer message of the same quantity that takes precedence over it."""
+FINER_HOLD_MS = 1000
+"""Autopilot boot time after the last finer message during which the coarser one gives no
+sample, ms."""
 UNIX_USEC_THRESHOLD = 10**15
 """MAVLink ``time_usec`` above this is UNIX time, below it time since boot, µs."""
 MAX_UNIX_USEC = (2**63 - 1) // 1000 - 10**9
@@ -149,6 +175,14 @@ class MavlinkDecoder:
         self.model = BootClockModel(leap_s, use_timesync)
         self.clock = DeviceClock(link, self.counters, model=self.model, tick_ns=1_000_000)
         self.valid = _ALL_VALID
+        self.positions = LocalPositions("mavlink.GLOBAL_POSITION_INT")
+        """The EKF origin (stated by GPS_GLOBAL_ORIGIN) and the frame of the positions."""
+        self._local: tuple[int, tuple[float, float, float]] | None = None
+        """Boot time (ms) and position (NED m) of the last LOCAL_POSITION_NED."""
+        self._global: tuple[int, tuple[float, float, float]] | None = None
+        """Boot time (ms) and valid position (deg, deg, m) of the last GLOBAL_POSITION_INT."""
+        self._finer_ms: dict[str, int] = {}
+        """Boot time of the last message of each finer kind (:data:`FINER`), ms."""
         self._handlers: dict[str, Callable[[Any, list[Sample]], None]] = {
             "LOCAL_POSITION_NED": self._local_position,
             "GLOBAL_POSITION_INT": self._global_position,
@@ -157,15 +191,52 @@ class MavlinkDecoder:
             "ATTITUDE": self._attitude,
             "SYSTEM_TIME": self._system_time,
             "EKF_STATUS_REPORT": self._ekf_status,
+            "GPS_GLOBAL_ORIGIN": self._origin,
         }
 
     def handle(self, msg: Any) -> list[Sample]:
         """Samples completed by one pymavlink message (others are ignored)."""
         out: list[Sample] = []
-        handler = self._handlers.get(msg.get_type())
-        if handler is not None:
+        name = msg.get_type()
+        handler = self._handlers.get(name)
+        if handler is None:
+            return out
+        if name == "LOCAL_POSITION_NED":
+            if self._local is not None and msg.time_boot_ms < self._local[0]:
+                self.positions.stated = None  # rebooted: the EKF sets a new origin
+            self._local = (msg.time_boot_ms, (msg.x, msg.y, msg.z))
+        elif name == "GLOBAL_POSITION_INT" and self.valid & Validity.POSITION:
+            lla = self._geodetic(msg.lat, msg.lon, msg.alt)
+            self._global = None if lla is None else (msg.time_boot_ms, lla)
+        if name in ("LOCAL_POSITION_NED", "GLOBAL_POSITION_INT"):
+            self._origin_from_pair()
+        if not self._superseded(name, msg):
             handler(msg, out)
         return out
+
+    def _origin_from_pair(self) -> None:
+        """The EKF origin from a GLOBAL_POSITION_INT and a LOCAL_POSITION_NED of the same
+        instant, while the autopilot has stated none."""
+        if self.positions.stated is not None or self._local is None or self._global is None:
+            return
+        (boot_local, ned), (boot_global, lla) = self._local, self._global
+        if boot_local != boot_global or not all(map(math.isfinite, ned)):
+            return
+        lat, lon, alt = tangent_origin(np.asarray(lla), np.asarray(ned)).tolist()
+        self.positions.state((lat, lon, alt), "mavlink.GLOBAL_POSITION_INT - LOCAL_POSITION_NED")
+
+    def _superseded(self, name: str, msg: Any) -> bool:
+        """Whether ``msg`` is the coarser of two messages of a quantity (:data:`FINER`) and
+        the finer one arrived within :data:`FINER_HOLD_MS` before it; notes finer ones."""
+        boot_ms = getattr(msg, "time_boot_ms", None)
+        if boot_ms is None:
+            return False
+        if name in FINER.values():
+            self._finer_ms[name] = boot_ms
+            return False
+        finer = FINER.get(name)
+        last = self._finer_ms.get(finer, None) if finer is not None else None
+        return last is not None and 0 <= boot_ms - last <= FINER_HOLD_MS
 
     def _boot(self, time_boot_ms: int) -> int:
         return self.clock.device_ns(time_boot_ms)
@@ -179,13 +250,20 @@ class MavlinkDecoder:
         pos: tuple[float, float, float] | None = None,
         lla: tuple[float, float, float] | None = None,
     ) -> None:
+        """Stamp one velocity sample; ``pos`` is NED about the EKF origin, ``lla`` a
+        geodetic position (either may be None)."""
         if not all(map(math.isfinite, vel)):  # would reach the motion compensation as NaN
             self.counters.parse_errors += 1
             return
         pos = pos if pos is not None and all(map(math.isfinite, pos)) else None
+        frame = self.positions.stated if pos is not None else None
+        if lla is not None:
+            pos, frame = self.positions.local(lla)
+        elif pos is not None:
+            lla = self.positions.geodetic(pos)
         sample = VelocitySample(
             0, vel, self.valid & ~Validity.ATTITUDE & ~Validity.HEADING, source, dev_ns,
-            pos_ned=pos, lat_lon_alt=lla,
+            pos_ned=pos, lat_lon_alt=lla, pos_frame=frame,
         )  # fmt: skip
         self.clock.stamp(sample, out)
 
@@ -197,8 +275,27 @@ class MavlinkDecoder:
 
     def _global_position(self, m: Any, out: list[Sample]) -> None:
         vel = (m.vx / 100.0, m.vy / 100.0, m.vz / 100.0)
-        lla = (m.lat * 1e-7, m.lon * 1e-7, m.alt / 1000.0)
-        self._velocity(out, self._boot(m.time_boot_ms), vel, "mavlink.GLOBAL_POSITION_INT", lla=lla)
+        lla = self._geodetic(m.lat, m.lon, m.alt)
+        if lla is not None and not self.valid & Validity.POSITION:
+            lla = None
+        dev_ns = self._boot(m.time_boot_ms)
+        self._velocity(out, dev_ns, vel, "mavlink.GLOBAL_POSITION_INT", lla=lla)
+
+    def _origin(self, m: Any, out: list[Sample]) -> None:
+        lla = self._geodetic(m.latitude, m.longitude, m.altitude)
+        if lla is not None:
+            self.positions.state(lla, "mavlink.GPS_GLOBAL_ORIGIN")
+
+    def _geodetic(self, lat_e7: int, lon_e7: int, alt_mm: int) -> tuple[float, float, float] | None:
+        """A MAVLink position (degE7, degE7, mm) in deg, deg, m; None for none (both zero,
+        as an autopilot without a fix sends) or out of range (counted as a parse error)."""
+        if lat_e7 == 0 and lon_e7 == 0:
+            return None
+        lla = (lat_e7 / 1e7, lon_e7 / 1e7, alt_mm / 1000.0)
+        if not (-90.0 <= lla[0] <= 90.0 and -180.0 <= lla[1] <= 180.0):
+            self.counters.parse_errors += 1
+            return None
+        return lla
 
     def _odometry(self, m: Any, out: list[Sample]) -> None:
         if m.frame_id != mavlink2.MAV_FRAME_LOCAL_NED:
@@ -217,7 +314,13 @@ class MavlinkDecoder:
             return
         if m.time_usec >= UNIX_USEC_THRESHOLD:
             t = unix_ns_to_gps_ns(m.time_usec * 1000, self.model.leap_s)
-            out.append(VelocitySample(t, vel, self.valid, "mavlink.ODOMETRY", t, (m.x, m.y, m.z)))
+            pos = (m.x, m.y, m.z)
+            out.append(
+                VelocitySample(
+                    t, vel, self.valid, "mavlink.ODOMETRY", t, pos,
+                    lat_lon_alt=self.positions.geodetic(pos), pos_frame=self.positions.stated,
+                )
+            )  # fmt: skip
             return
         dev_ns = self._boot(m.time_usec // 1000) + (m.time_usec % 1000) * 1000
         self._velocity(out, dev_ns, vel, "mavlink.ODOMETRY", pos=(m.x, m.y, m.z))

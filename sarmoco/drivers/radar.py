@@ -2,8 +2,8 @@
 
 All three share one call, :meth:`RadarSource.read_into`, which decodes the
 packets available within a timeout straight into the rows of a caller-provided
-array (the daemon's echo ring buffer) and returns one :class:`EchoPacket` per
-row written.
+array (the daemon's echo ring buffer) and returns their metadata as arrays
+(:class:`~sarmoco.drivers.samples.EchoPackets`), one element per row written.
 """
 
 from __future__ import annotations
@@ -20,7 +20,8 @@ import numpy as np
 import numpy.typing as npt
 
 from sarmoco.closing import Closing
-from sarmoco.drivers.samples import EchoPacket
+from sarmoco.drivers.samples import EchoPacket, EchoPackets
+from sarmoco.drivers.udpbatch import DatagramReceiver
 from sarmoco.drivers.vita49 import BATCH_MIN_PACKETS, VitaDecoder, VitaStreamFramer
 from sarmoco.errors import DriverError
 
@@ -54,7 +55,7 @@ class RadarSource(Closing):
         self.eof = False
 
     @abstractmethod
-    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.1) -> list[EchoPacket]:
+    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.1) -> EchoPackets:
         """Decode the pulses available within ``timeout_s`` into ``out[0], out[1], ...``.
 
         Parameters
@@ -68,7 +69,7 @@ class RadarSource(Closing):
 
         Returns
         -------
-        list of EchoPacket
+        EchoPackets
             Metadata of the pulses written, in row order.
         """
 
@@ -87,10 +88,19 @@ class RadarUdpSource(RadarSource):
         is descheduled. Asked with SO_RCVBUFFORCE first (honoured with
         CAP_NET_ADMIN), else SO_RCVBUF (capped at net.core.rmem_max); a smaller
         grant is logged once.
+    batch_receive : bool
+        Receive up to :data:`UDP_BATCH_PACKETS` datagrams per system call (``recvmmsg``,
+        where the C library has it); False: one call per datagram. Either way the
+        datagrams of a batch are decoded together (:meth:`VitaDecoder.decode_batch`).
     """
 
     def __init__(
-        self, host: str, port: int, decoder: VitaDecoder, rcvbuf_bytes: int = DEFAULT_RCVBUF_BYTES
+        self,
+        host: str,
+        port: int,
+        decoder: VitaDecoder,
+        rcvbuf_bytes: int = DEFAULT_RCVBUF_BYTES,
+        batch_receive: bool = True,
     ) -> None:
         super().__init__(decoder)
         try:
@@ -111,35 +121,46 @@ class RadarUdpSource(RadarSource):
                 "or give the daemon CAP_NET_ADMIN, or pulses are lost whenever it stalls",
                 self.address, self.rcvbuf_bytes, rcvbuf_bytes,
             )  # fmt: skip
-        self._stage = np.empty((UDP_BATCH_PACKETS, decoder.max_packet_bytes + 4), np.uint8)
-        self._rows = [row.data for row in self._stage]
+        self.stage = np.empty((UDP_BATCH_PACKETS, decoder.max_packet_bytes + 4), np.uint8)
+        """Where datagrams land, one per row (:meth:`receive`), before they are decoded."""
+        self.receiver = DatagramReceiver(self._sock, self.stage, batch_receive)
 
-    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.1) -> list[EchoPacket]:
-        got: list[EchoPacket] = []
-        rows = out.shape[0]
-        if rows == 0 or not select.select([self._sock], [], [], timeout_s)[0]:
-            return got
-        recv_into = self._sock.recv_into
+    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.1) -> EchoPackets:
+        parts: list[EchoPackets] = []
+        got, rows = 0, out.shape[0]
+        if rows == 0 or not select.select([self], [], [], timeout_s)[0]:
+            return EchoPackets.concat(parts, self.decoder.n_samples)
         gathered = rows < BATCH_MIN_PACKETS
-        while len(got) < rows:
-            want = min(rows - len(got), UDP_BATCH_PACKETS)
-            lengths: list[int] = []
-            while True:
-                try:
-                    for view in self._rows[len(lengths) : want]:
-                        lengths.append(recv_into(view))
-                except BlockingIOError:
-                    if not gathered and len(lengths) < BATCH_MIN_PACKETS:
-                        gathered = True
-                        time.sleep(UDP_GATHER_S)
-                        continue
-                except OSError as exc:
-                    raise DriverError(f"radar udp {self.address}: {exc}") from exc
+        while got < rows:
+            want = min(rows - got, UDP_BATCH_PACKETS)
+            lengths = self.receive(0, want)
+            if not gathered and lengths.size < BATCH_MIN_PACKETS:
+                gathered = True
+                time.sleep(UDP_GATHER_S)
+                lengths = np.concatenate([lengths, self.receive(lengths.size, want)])
+            parts.append(self.decoder.decode_batch(self.stage, lengths, out[got:]))
+            got += len(parts[-1])
+            if lengths.size < want:  # the socket is drained
                 break
-            got += self.decoder.decode_batch(self._stage, lengths, out[len(got) :])
-            if len(lengths) < want:  # the socket is drained
-                break
-        return got
+        return EchoPackets.concat(parts, self.decoder.n_samples)
+
+    def receive(self, first: int, stop: int) -> npt.NDArray[np.int64]:
+        """Receive the datagrams waiting now into rows ``first .. stop - 1`` of :attr:`stage`
+        (no decoding); their lengths, bytes.
+
+        Raises
+        ------
+        DriverError
+            The socket failed.
+        """
+        try:
+            return self.receiver.receive(first, stop)
+        except OSError as exc:
+            raise DriverError(f"radar udp {self.address}: {exc}") from exc
+
+    def fileno(self) -> int:
+        """The socket's file descriptor (to wait for datagrams with :func:`select.select`)."""
+        return self._sock.fileno()
 
     def close(self) -> None:
         self._sock.close()
@@ -158,7 +179,7 @@ class _StreamRadarSource(RadarSource):
     def _read_chunk(self, timeout_s: float) -> bytes | None:
         """Bytes read (b"" at end of stream) or None if nothing arrived in time."""
 
-    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.1) -> list[EchoPacket]:
+    def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.1) -> EchoPackets:
         got: list[EchoPacket] = []
         rows = out.shape[0]
         waited = False
@@ -180,7 +201,7 @@ class _StreamRadarSource(RadarSource):
             self._framer.consume(packet, self.decoder.last_ok)
             if pkt is not None:
                 got.append(pkt)
-        return got
+        return EchoPackets.of(got, self.decoder.n_samples)
 
 
 class RadarTcpSource(_StreamRadarSource):

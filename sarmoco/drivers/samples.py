@@ -10,7 +10,11 @@ rotating body-frame vectors into NED, times in GPS ns since 1980-01-06
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass, fields
+
+import numpy as np
+import numpy.typing as npt
 
 
 class Validity(enum.IntFlag):
@@ -30,6 +34,25 @@ class Validity(enum.IntFlag):
 
 
 @dataclass(frozen=True, slots=True)
+class TangentFrame:
+    """A local NED frame on the Earth: north, east, down axes at a geodetic point, origin there.
+
+    Attributes
+    ----------
+    lat_lon_alt : tuple of 3 float
+        The point: latitude, longitude (deg, WGS 84) and altitude (m, as the INS gives it;
+        used as the ellipsoid height).
+    source : str
+        What set it: the INS's own statement of its frame (``"mavlink.GPS_GLOBAL_ORIGIN"``,
+        the autopilot's EKF origin) or the first valid position a driver received
+        (``"sbg.EKF_NAV"``, ``"mavlink.GLOBAL_POSITION_INT"``).
+    """
+
+    lat_lon_alt: tuple[float, float, float]
+    source: str
+
+
+@dataclass(frozen=True, slots=True)
 class VelocitySample:
     """Velocity (and position when the message has one) of the INS.
 
@@ -46,12 +69,16 @@ class VelocitySample:
     device_time_ns : int
         The same instant on the device's own clock (boot time), ns.
     pos_ned : tuple of 3 float or None
-        Local NED position, m, when the message carries one.
+        Local NED position, m, when the message carries one (or its driver derives it
+        from a geodetic one), in the frame ``pos_frame``.
     vel_std_mps : tuple of 3 float or None
         1-sigma velocity accuracy, m/s, when the message carries one.
     lat_lon_alt : tuple of 3 float or None
         Latitude, longitude (deg, WGS 84) and altitude above mean sea level (m),
-        when the message carries a global position.
+        when the message carries a global position (or its driver derives it from a
+        local one in a stated frame).
+    pos_frame : TangentFrame or None
+        The frame of ``pos_ned``; None when the INS does not state where its local frame is.
     """
 
     t_gps_ns: int
@@ -62,6 +89,7 @@ class VelocitySample:
     pos_ned: tuple[float, float, float] | None = None
     vel_std_mps: tuple[float, float, float] | None = None
     lat_lon_alt: tuple[float, float, float] | None = None
+    pos_frame: TangentFrame | None = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -178,3 +206,89 @@ class EchoPacket:
     over_range: bool
     lost_before: int
     context_mismatch: bool = False
+
+
+@dataclass(frozen=True)
+class EchoPackets:
+    """Metadata of radar pulses decoded into consecutive rows of a caller's array, as arrays.
+
+    What the radar sources return: row ``i`` of the caller's array holds pulse ``i``. The
+    fields are those of :class:`EchoPacket`, one array element per pulse, so that a batch
+    of pulses is handed on with a few array operations and no object per pulse.
+
+    Attributes
+    ----------
+    n_samples : int
+        Complex samples written per pulse.
+    stream_id : ndarray of int64, shape (P,)
+        VITA 49 stream ID (32-bit, unsigned) = receive channel.
+    t_gps_ns : ndarray of int64, shape (P,)
+        Transmit time of each pulse, GPS ns.
+    packet_count : ndarray of uint8, shape (P,)
+        The 4-bit VITA 49 packet count (0..15).
+    valid_data, sample_loss, over_range : ndarray of bool, shape (P,)
+        Trailer indicators (``valid_data`` True when the trailer does not enable it).
+    lost_before : ndarray of int64, shape (P,)
+        Packets missing between the previous packet of the pulse's stream and it
+        (modulo 16).
+    context_mismatch : ndarray of bool, shape (P,)
+        The stream's last context packet disagreed with the configured radar parameters.
+    """
+
+    n_samples: int
+    stream_id: npt.NDArray[np.int64]
+    t_gps_ns: npt.NDArray[np.int64]
+    packet_count: npt.NDArray[np.uint8]
+    valid_data: npt.NDArray[np.bool_]
+    sample_loss: npt.NDArray[np.bool_]
+    over_range: npt.NDArray[np.bool_]
+    lost_before: npt.NDArray[np.int64]
+    context_mismatch: npt.NDArray[np.bool_]
+
+    def __len__(self) -> int:
+        return int(self.t_gps_ns.shape[0])
+
+    def __iter__(self) -> Iterator[EchoPacket]:
+        """One :class:`EchoPacket` per pulse, in row order."""
+        columns = [getattr(self, f.name).tolist() for f in fields(self)[1:]]
+        for sid, t, count, valid, loss, over, lost, mismatch in zip(*columns, strict=True):
+            yield EchoPacket(sid, t, count, self.n_samples, valid, loss, over, lost, mismatch)
+
+    @classmethod
+    def of(cls, packets: Sequence[EchoPacket], n_samples: int) -> EchoPackets:
+        """The pulses of ``packets`` (one-packet decodes) as arrays."""
+        return cls(
+            n_samples,
+            *(
+                np.array([getattr(p, f.name) for p in packets], dtype=_DTYPES[f.name])
+                for f in fields(cls)[1:]
+            ),
+        )
+
+    @classmethod
+    def concat(cls, parts: Sequence[EchoPackets], n_samples: int) -> EchoPackets:
+        """The pulses of ``parts``, one after the other (none: no pulse)."""
+        if not parts:
+            return cls.of([], n_samples)
+        if len(parts) == 1:
+            return parts[0]
+        return cls(
+            n_samples,
+            *(
+                np.concatenate([getattr(p, f.name) for p in parts], dtype=_DTYPES[f.name])
+                for f in fields(cls)[1:]
+            ),
+        )
+
+
+_DTYPES: dict[str, npt.DTypeLike] = {
+    "stream_id": np.int64,
+    "t_gps_ns": np.int64,
+    "packet_count": np.uint8,
+    "valid_data": np.bool_,
+    "sample_loss": np.bool_,
+    "over_range": np.bool_,
+    "lost_before": np.int64,
+    "context_mismatch": np.bool_,
+}
+"""Element type of each array of :class:`EchoPackets`."""

@@ -19,7 +19,6 @@ import math
 from pathlib import Path
 from typing import BinaryIO
 
-import numpy as np
 import serial
 
 from sarmoco.drivers import sbg_codec as codec
@@ -32,6 +31,7 @@ from sarmoco.drivers.clock import (
     utc_calendar_to_unix_ns,
 )
 from sarmoco.drivers.devclock import DeviceClock
+from sarmoco.drivers.posframe import LocalPositions
 from sarmoco.drivers.samples import (
     AttitudeSample,
     EventSample,
@@ -42,7 +42,6 @@ from sarmoco.drivers.samples import (
 from sarmoco.drivers.source import Source
 from sarmoco.drivers.timesync import LinearClockFit
 from sarmoco.errors import ClockError, DriverError
-from sarmoco.geodesy import geodetic_to_ned
 
 log = logging.getLogger(__name__)
 
@@ -76,14 +75,14 @@ class SbgDecoder:
 
     Attributes
     ----------
-    geodetic_origin : tuple of 3 float or None
-        Latitude, longitude (deg) and altitude (m) of the first EKF_NAV with a valid
-        position: the origin of the local NED positions (``pos_ned``) of the samples.
+    positions : LocalPositions
+        The frame of the samples' local NED positions (``pos_ned``): the tangent plane
+        at the first EKF_NAV with a valid position (``positions.frame``).
     """
 
     def __init__(self, leap_s: int = GPS_LEAP_SECONDS_DEFAULT, link: str = "sbg") -> None:
         self.leap_s = leap_s
-        self.geodetic_origin: tuple[float, float, float] | None = None
+        self.positions = LocalPositions("sbg.EKF_NAV")
         self.sniffer, self.counters = codec.new_sniffer(link)
         fit = LinearClockFit(window=16, outlier_ns=1_000_000, min_pairs=2, ready_pairs=2)
         self.clock = DeviceClock(link, self.counters, model=fit)
@@ -112,9 +111,10 @@ class SbgDecoder:
             lla = (
                 msg.lat_lon_alt if valid & Validity.POSITION and _finite(msg.lat_lon_alt) else None
             )
+            pos, frame = self.positions.local(lla) if lla is not None else (None, None)
             sample = VelocitySample(
-                0, msg.vel_ned, valid, "sbg.EKF_NAV", dev_ns, pos_ned=self._local(lla),
-                vel_std_mps=msg.vel_std_mps, lat_lon_alt=lla,
+                0, msg.vel_ned, valid, "sbg.EKF_NAV", dev_ns, pos_ned=pos,
+                vel_std_mps=msg.vel_std_mps, lat_lon_alt=lla, pos_frame=frame,
             )  # fmt: skip
             self.clock.stamp(sample, out)
         elif isinstance(msg, codec.EkfQuat | codec.EkfEuler):
@@ -133,15 +133,6 @@ class SbgDecoder:
             for ev_us in msg.event_times_us:
                 ev_ns = dev_ns + (ev_us - msg.time_us) * 1000
                 self.clock.stamp(EventSample(0, "A", Validity.NONE, "sbg.EVENT_A", ev_ns), out)
-
-    def _local(self, lla: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
-        """A valid position as NED (m) about :attr:`geodetic_origin` (set by the first one)."""
-        if lla is None:
-            return None
-        if self.geodetic_origin is None:
-            self.geodetic_origin = lla
-        n, e, d = geodetic_to_ned(np.asarray(lla), self.geodetic_origin).tolist()
-        return (n, e, d)
 
     def _utc(self, msg: codec.UtcTime, dev_ns: int, out: list[Sample]) -> None:
         if msg.clock_state not in (codec.CLOCK_STEERING, codec.CLOCK_VALID) or not msg.utc_status:

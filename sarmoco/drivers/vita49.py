@@ -11,9 +11,10 @@ Profile (what sarmoco reads and what its simulator writes; README "Radar wire fo
 * Payload: interleaved I/Q, signed 16-bit or IEEE-754 float32, big-endian.
 * Trailer: valid-data (enable bit 30 / indicator bit 18), over-range (25 / 13) and
   sample-loss (24 / 12) indicators are read when enabled.
-* Context packets (type 4) with CIF0 bandwidth (bit 29), RF reference frequency
-  (bit 27) and sample rate (bit 21), each 64-bit two's complement with 20
-  fractional bits, Hz; checked against configuration when expectations are given.
+* Context packets (type 4) with CIF0 bandwidth (bit 29: the usable band of the digitised
+  signal, :class:`ContextExpectation`), RF reference frequency (bit 27) and sample rate
+  (bit 21), each 64-bit two's complement with 20 fractional bits, Hz; checked against
+  configuration when expectations are given.
   A context packet that disagrees marks its stream: the signal packets after it carry
   ``context_mismatch`` until a context packet agrees again (counted, logged).
 
@@ -34,7 +35,7 @@ import numpy.typing as npt
 
 from sarmoco.drivers.clock import NS_PER_S, gps_ns_to_unix_ns, unix_ns_to_gps_ns
 from sarmoco.drivers.counters import BurstLog, DriverCounters
-from sarmoco.drivers.samples import EchoPacket
+from sarmoco.drivers.samples import EchoPacket, EchoPackets
 from sarmoco.errors import ConfigError
 
 log = logging.getLogger(__name__)
@@ -245,18 +246,55 @@ def encode_context_packet(
 class ContextExpectation:
     """Radar parameters from configuration that context packets must agree with.
 
+    VITA 49.2 describes, in a context packet, the signal digitised in its stream: the
+    Bandwidth field (CIF0 bit 29) is the usable band of that digitised signal, the RF
+    Reference Frequency (bit 27) the RF frequency translated to it, the Sample Rate (bit 21)
+    the rate of its samples. So the bandwidth a digitiser reports is not the chirp's in
+    general: a pulsed-LFM receiver that samples the whole chirp reports a band that holds
+    the chirp (its bandwidth up to the sample rate, e.g. its anti-alias filter's); a dechirp
+    (stretch) receiver digitises the beat band, its IF, a small part of the chirp's. Either
+    way complex (I/Q) samples at the rate ``f_s`` hold at most a band ``f_s``. The bandwidth
+    agrees with configuration when it lies in ``bandwidth_hz`` (:meth:`for_receiver`).
+
     Attributes
     ----------
-    bandwidth_hz, rf_reference_hz, sample_rate_hz : float
+    bandwidth_hz : tuple of float
+        Lowest and highest digitised bandwidth that agree, Hz.
+    rf_reference_hz, sample_rate_hz : float
         Expected values, Hz.
     rel_tol : float
-        Allowed relative difference.
+        Allowed relative difference (for the bandwidth: beyond its two bounds).
     """
 
-    bandwidth_hz: float
+    bandwidth_hz: tuple[float, float]
     rf_reference_hz: float
     sample_rate_hz: float
     rel_tol: float = 1e-6
+
+    @classmethod
+    def for_receiver(
+        cls,
+        receive: Literal["matched", "dechirp"],
+        chirp_bandwidth_hz: float,
+        rf_reference_hz: float,
+        sample_rate_hz: float,
+    ) -> ContextExpectation:
+        """The expectation for a configured receiver (class notes).
+
+        Parameters
+        ----------
+        receive : {"matched", "dechirp"}
+            ``matched``: the digitised band must hold the chirp (as much of it as the sample
+            rate can) and fit in the sample rate, ``[min(chirp_bandwidth_hz,
+            sample_rate_hz), sample_rate_hz]``; ``dechirp``: the beat band, anything
+            up to the sample rate, ``(0, sample_rate_hz]`` (the range gate of a dechirp
+            receiver spans the beat band ``f_s`` over the chirp rate; a narrower IF filter
+            darkens the far ranges but leaves the pulses right).
+        chirp_bandwidth_hz, rf_reference_hz, sample_rate_hz : float
+            Transmitted chirp bandwidth, carrier and complex sample rate, Hz.
+        """
+        low = min(chirp_bandwidth_hz, sample_rate_hz) if receive == "matched" else 0.0
+        return cls((low, sample_rate_hz), rf_reference_hz, sample_rate_hz)
 
 
 @dataclass
@@ -407,9 +445,12 @@ class VitaDecoder:
         self.counters.parse_errors += 1
         self._burst.error(kind, detail)
 
-    def _time(self, tsi: int, seconds: int, ps: int) -> int:
+    def _time(self, tsi: Any, seconds: Any, ps: Any) -> Any:
+        """GPS ns of timestamps: TSI, integer seconds and picoseconds (ints, or int64 arrays
+        elementwise)."""
+        utc_to_gps_ns = unix_ns_to_gps_ns(0, self.leap_s)
         t = seconds * NS_PER_S + (ps + PS_PER_NS // 2) // PS_PER_NS
-        return unix_ns_to_gps_ns(t, self.leap_s) if tsi == TSI_UTC else t
+        return t + (tsi == TSI_UTC) * utc_to_gps_ns
 
     def _count(self, ptype: int, stream_id: int, count: int) -> int:
         key = (ptype, stream_id)
@@ -417,7 +458,7 @@ class VitaDecoder:
         self._last_count[key] = count
         if last is None:
             return 0
-        lost = (count - last - 1) & 0xF
+        lost = _lost(count, last)
         if lost:
             self.counters.gaps += 1
             self.counters.drops += lost
@@ -543,16 +584,16 @@ class VitaDecoder:
     def decode_batch(
         self,
         stage: npt.NDArray[np.uint8],
-        lengths: Sequence[int],
+        lengths: Sequence[int] | npt.NDArray[np.integer],
         out: npt.NDArray[np.generic],
-    ) -> list[EchoPacket]:
+    ) -> EchoPackets:
         """Decode packets received into the rows of ``stage``; same result as :meth:`decode_into`.
 
         Parameters
         ----------
         stage : ndarray of uint8, shape (>= len(lengths), row_bytes)
             Packet ``i`` is ``stage[i, :lengths[i]]``.
-        lengths : sequence of int
+        lengths : sequence or ndarray of int
             Length of each packet, bytes.
         out : ndarray
             Destination rows (as for :meth:`decode_into`), at least ``len(lengths)``;
@@ -560,71 +601,91 @@ class VitaDecoder:
 
         Returns
         -------
-        list of EchoPacket
+        EchoPackets
             Metadata of the pulses written, in row order.
 
         Notes
         -----
         From :data:`BATCH_MIN_PACKETS` packets on, runs of signal packets of the
         full profile (class ID and trailer present, the configured size) have
-        their headers checked and their payloads converted with a few numpy calls
-        per batch instead of per packet (about half the cost per packet when a
-        backlog is drained); anything else (context packets, damage) goes through
-        :meth:`decode_into` in its place in the order.
+        their headers checked, their payloads converted and their metadata and
+        counters worked out with a few numpy calls per run, whatever its length;
+        anything else (context packets, damage) goes through :meth:`decode_into`
+        in its place in the order.
         """
         k = len(lengths)
         end = _FULL_HEADER.itemsize + self._payload_bytes
+        got = _Gathered(self.n_samples)
         slow = k < BATCH_MIN_PACKETS or self.first_stream  # the stream is chosen packet by packet
         if slow or not out.flags.c_contiguous or stage.shape[1] < end + 4:
-            got: list[EchoPacket] = []
             for i in range(k):
-                pkt = self.decode_into(memoryview(stage[i])[: lengths[i]], out[len(got)])
-                if pkt is not None:
-                    got.append(pkt)
-            return got
+                got.add(self.decode_into(memoryview(stage[i])[: lengths[i]], out[got.rows]))
+            return got.packets()
         flat_dtype = self.check_row(out[0]).dtype
         hdr = stage[:k, : _FULL_HEADER.itemsize].view(_FULL_HEADER)[:, 0]
-        w0, n = hdr["w0"], np.asarray(lengths)
+        w0, n = hdr["w0"], np.asarray(lengths)[:k]
         # the checks decode_into makes, on every header at once; then what makes a packet
         # one of the full profile's signal packets (type, class ID and trailer, size)
         fast = np.logical_and.reduce([ok for _, ok in _header_checks(w0, n)])
         fast &= _fraction_ok(hdr["ps"]) & self._accepts(hdr["sid"])
         fast &= ((w0 >> 28) == TYPE_SIGNAL_SID) & (((w0 >> 26) & 3) == 3) & (n == end + 4)
-        fields = (w0.tolist(), hdr["sid"].tolist(), hdr["sec"].tolist(), hdr["ps"].tolist(),
-                  stage[:k, end : end + 4].view(">u4")[:, 0].tolist())  # fmt: skip
+        trailer = stage[:k, end : end + 4].view(">u4")[:, 0]
         dest = out.reshape(out.shape[0], -1).view(flat_dtype)
-        got = []
         i = 0
         for j in [*np.flatnonzero(~fast).tolist(), k]:  # a slow packet ends a fast run
             if j > i:
-                row = len(got)
                 src = stage[i:j, _FULL_HEADER.itemsize : end].view(self._src_dtype)
-                np.copyto(dest[row : row + j - i], src, casting="same_kind")
-                got += self._run_metadata(*(f[i:j] for f in fields))
+                np.copyto(dest[got.rows : got.rows + j - i], src, casting="same_kind")
+                got.add_run(self._run_metadata(hdr[i:j], trailer[i:j]))
             if j < k:
-                pkt = self.decode_into(memoryview(stage[j])[: lengths[j]], out[len(got)])
-                if pkt is not None:
-                    got.append(pkt)
+                got.add(self.decode_into(memoryview(stage[j])[: lengths[j]], out[got.rows]))
             i = j + 1
-        return got
+        return got.packets()
 
     def _run_metadata(
-        self, w0s: list[int], sids: list[int], secs: list[int], pss: list[int], trs: list[int]
-    ) -> list[EchoPacket]:
-        """Counters and metadata of a run of full-profile signal packets (already checked)."""
-        got = []
-        n = self.n_samples
-        for w0, sid, sec, ps, tr in zip(w0s, sids, secs, pss, trs, strict=True):
-            count = (w0 >> 16) & 0xF
-            got.append(EchoPacket(
-                sid, self._time((w0 >> 22) & 3, sec, ps), count, n, _indicator(tr, _TR_VALID, True),
-                _indicator(tr, _TR_SAMPLE_LOSS, False), _indicator(tr, _TR_OVER_RANGE, False),
-                self._count(TYPE_SIGNAL_SID, sid, count), self._mismatched(sid),
-            ))  # fmt: skip
-        self.counters.bytes += len(got) * (_FULL_HEADER.itemsize + self._payload_bytes + 4)
-        self.counters.frames += len(got)
+        self, hdr: npt.NDArray[np.void], trailer: npt.NDArray[np.uint32]
+    ) -> EchoPackets:
+        """Counters and metadata of a run of full-profile signal packets (already checked).
+
+        Parameters
+        ----------
+        hdr : ndarray of :data:`_FULL_HEADER`, shape (R,)
+            Their headers, in arrival order.
+        trailer : ndarray of uint32, shape (R,)
+            Their trailer words.
+        """
+        w0 = hdr["w0"].astype(np.int64)
+        sid = hdr["sid"].astype(np.int64)
+        ps = hdr["ps"].astype(np.int64)
+        t_ns = self._time((w0 >> 22) & 3, hdr["sec"].astype(np.int64), ps)
+        count = ((w0 >> 16) & 0xF).astype(np.uint8)
+        lost = np.zeros(w0.shape, np.int64)
+        streams = np.unique(sid)
+        for stream in streams.tolist():
+            mine = sid == stream if streams.size > 1 else slice(None)
+            lost[mine] = self._count_run(stream, count[mine])
+        mismatch = np.isin(sid, list(self.mismatch)) if self.mismatch else np.zeros(sid.shape, bool)
+        self.counters.context_mismatch += int(np.count_nonzero(mismatch))
+        self.counters.bytes += sid.size * (_FULL_HEADER.itemsize + self._payload_bytes + 4)
+        self.counters.frames += sid.size
         self._burst.ok()
-        return got
+        return EchoPackets(
+            self.n_samples, sid, t_ns, count,
+            _indicator(trailer, _TR_VALID, True), _indicator(trailer, _TR_SAMPLE_LOSS, False),
+            _indicator(trailer, _TR_OVER_RANGE, False), lost, mismatch,
+        )  # fmt: skip
+
+    def _count_run(self, stream_id: int, count: npt.NDArray[np.uint8]) -> npt.NDArray[np.int64]:
+        """:meth:`_count` of consecutive signal packets of one stream: packets lost before
+        each (from the 4-bit counts, modulo 16; 0 for the stream's first packet)."""
+        key = (TYPE_SIGNAL_SID, stream_id)
+        c = count.astype(np.int64)
+        last = self._last_count.get(key)
+        self._last_count[key] = int(c[-1])
+        lost = _lost(c, np.concatenate([[c[0] - 1 if last is None else last], c[:-1]]))
+        self.counters.gaps += int(np.count_nonzero(lost))
+        self.counters.drops += int(lost.sum())
+        return lost
 
     def _context(self, packet: bytes | bytearray | memoryview, pos: int, sid: int, t: int) -> bool:
         n = len(packet)
@@ -664,11 +725,21 @@ class VitaDecoder:
     def _check_context(self, ctx: ContextValues) -> None:
         """Mark or clear the stream's mismatch (class notes); log each change once."""
         assert self.expect is not None
+        tol = self.expect.rel_tol
         wrong = []
-        for name in ("bandwidth_hz", "rf_reference_hz", "sample_rate_hz"):
+        low, high = self.expect.bandwidth_hz
+        band = ctx.bandwidth_hz
+        inside = band is not None and band > 0.0 and low * (1 - tol) <= band <= high * (1 + tol)
+        if band is not None and not inside:
+            wrong.append(
+                f"radar.bandwidth_hz: the radar says its digitised band is {band!r} Hz, "
+                f"outside {low!r} .. {high!r} Hz that radar.receive, radar.bandwidth_hz and "
+                "radar.sample_rate_hz allow"
+            )
+        for name in ("rf_reference_hz", "sample_rate_hz"):
             got = getattr(ctx, name)
             want = getattr(self.expect, name)
-            if got is not None and abs(got - want) > self.expect.rel_tol * abs(want):
+            if got is not None and abs(got - want) > tol * abs(want):
                 wrong.append(f"radar.{name}: configured {want!r} Hz, the radar says {got!r} Hz")
         sid, before = ctx.stream_id, self.mismatch.get(ctx.stream_id)
         if not wrong:
@@ -690,11 +761,52 @@ class VitaDecoder:
             )  # fmt: skip
 
 
-def _indicator(trailer: int, bits: tuple[int, int], default: bool) -> bool:
+class _Gathered:
+    """The metadata of a batch's pulses as they are decoded, in row order: runs decoded
+    together (arrays) and single packets (objects, made arrays once per stretch of them)."""
+
+    def __init__(self, n_samples: int) -> None:
+        self.n_samples = n_samples
+        self.rows = 0
+        """Rows written so far (the next pulse's row)."""
+        self._parts: list[EchoPackets] = []
+        self._singles: list[EchoPacket] = []
+
+    def add(self, packet: EchoPacket | None) -> None:
+        """A packet decoded on its own (None: nothing written)."""
+        if packet is not None:
+            self._singles.append(packet)
+            self.rows += 1
+
+    def add_run(self, run: EchoPackets) -> None:
+        """Pulses decoded together, after the ones added so far."""
+        self._flush()
+        self._parts.append(run)
+        self.rows += len(run)
+
+    def packets(self) -> EchoPackets:
+        """Every pulse added, in row order."""
+        self._flush()
+        return EchoPackets.concat(self._parts, self.n_samples)
+
+    def _flush(self) -> None:
+        if self._singles:
+            self._parts.append(EchoPackets.of(self._singles, self.n_samples))
+            self._singles = []
+
+
+def _lost(count: Any, before: Any) -> Any:
+    """Packets missing between packet counts ``before`` and ``count`` of one stream (ints, or
+    arrays elementwise): the 4-bit count steps by one per packet."""
+    return (count - before - 1) & 0xF
+
+
+def _indicator(trailer: Any, bits: tuple[int, int], default: bool) -> Any:
+    """A trailer indicator: its bit when its enable bit is set, else ``default`` (one trailer
+    word as an int, or an array of them elementwise)."""
     enable, indicator = bits
-    if not (trailer >> enable) & 1:
-        return default
-    return bool((trailer >> indicator) & 1)
+    d = int(default)
+    return d ^ ((trailer >> enable) & ((trailer >> indicator) ^ d) & 1) == 1
 
 
 class VitaStreamFramer:

@@ -66,7 +66,7 @@ def scene_echo(
     )
     if scn.clutter is not None:
         half_beam = scn.integration_angle_rad / 2.0 if scn.mode == "stripmap" else None
-        echo += clutter_echo(scn.radar, apc_ned, scn.clutter, scn.track_to_ned[:, 0], half_beam)
+        echo += clutter_echo(scn.radar, apc_ned, scn.clutter, scn.beam_axis_ned, half_beam)
     return echo
 
 

@@ -1,12 +1,16 @@
 """The simulated autopilot: MAVLink 2 over UDP, TCP, a pseudo-terminal, or into a ``.tlog``.
 
-What it sends (system 1, component 1, ArduPilot-like):
+What it sends (system 1, component 1, what ArduPilot and PX4 send by default):
 
 * HEARTBEAT at 1 Hz, also while waiting for the daemon (so a ``udpin:`` peer learns
-  where we are);
-* LOCAL_POSITION_NED (velocity NED, position NED: the INS position, or the velocity
-  integrated from the first sample for grades without one) and ATTITUDE_QUATERNION
-  at the INS sample epochs, decimated to the rate asked for;
+  where we are), and with it, for INS grades with a position, GPS_GLOBAL_ORIGIN (the EKF
+  origin: :data:`~sarmoco.sim.insfeed.GEODETIC_ORIGIN`, the scenario frame's tangent
+  point) and HOME_POSITION (there too);
+* LOCAL_POSITION_NED (velocity NED, position NED about the EKF origin: the INS position,
+  or the velocity integrated from the first sample for grades without one),
+  GLOBAL_POSITION_INT (the same position as latitude, longitude and altitude, velocity in
+  cm/s; grades with a position), ATTITUDE_QUATERNION and ATTITUDE at the INS sample
+  epochs, decimated to the rate asked for;
 * SYSTEM_TIME (GPS-derived UNIX time and ``time_boot_ms`` of the same instant);
 * EKF_STATUS_REPORT at 1 Hz (position flags only when the INS has a position).
 
@@ -22,6 +26,7 @@ receive time (UNIX µs, big-endian u64); here the wire GPS time of sending.
 
 from __future__ import annotations
 
+import math
 import os
 import struct
 import time
@@ -35,12 +40,14 @@ os.environ.setdefault("MAVLINK20", "1")
 
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
+from sarmoco.drivers.attitude import quat_to_euler
 from sarmoco.drivers.clock import NS_PER_S
 from sarmoco.errors import ConfigError
+from sarmoco.geodesy import ned_to_geodetic
 from sarmoco.processing.types import FloatArray
 from sarmoco.sim.emitter import Emitter
 from sarmoco.sim.faults import PacketFaults
-from sarmoco.sim.insfeed import InsFeed
+from sarmoco.sim.insfeed import GEODETIC_ORIGIN, InsFeed
 from sarmoco.sim.links import FileLink, Link
 from sarmoco.sim.pacing import Event
 
@@ -48,11 +55,19 @@ SYSTEM_ID = 1
 COMPONENT_ID = mavlink2.MAV_COMP_ID_AUTOPILOT1
 HEARTBEAT_PERIOD_S = 1.0
 STATUS_PERIOD_S = 1.0
-STREAMS = ("LOCAL_POSITION_NED", "ATTITUDE_QUATERNION", "SYSTEM_TIME")
+STREAMS = (
+    "LOCAL_POSITION_NED",
+    "GLOBAL_POSITION_INT",
+    "ATTITUDE_QUATERNION",
+    "ATTITUDE",
+    "SYSTEM_TIME",
+)
 """Messages whose rate MAV_CMD_SET_MESSAGE_INTERVAL sets."""
 DEFAULT_RATES_HZ: dict[str, float] = {
     "LOCAL_POSITION_NED": 4.0,
+    "GLOBAL_POSITION_INT": 4.0,
     "ATTITUDE_QUATERNION": 4.0,
+    "ATTITUDE": 4.0,
     "SYSTEM_TIME": 1.0,
 }
 """Rates before the daemon asks (ArduPilot streams slowly until told otherwise), Hz."""
@@ -61,6 +76,11 @@ _EKF_FLAGS_POSITION = (
     mavlink2.EKF_POS_HORIZ_REL | mavlink2.EKF_POS_HORIZ_ABS | mavlink2.EKF_POS_VERT_ABS
 )
 _MSG_IDS = {getattr(mavlink2, f"MAVLINK_MSG_ID_{name}"): name for name in STREAMS}
+
+
+def _int_position(lla: FloatArray | tuple[float, float, float]) -> tuple[int, int, int]:
+    """Latitude, longitude (deg) and altitude (m) as MAVLink sends them: degE7, degE7, mm."""
+    return round(float(lla[0]) * 1e7), round(float(lla[1]) * 1e7), round(float(lla[2]) * 1e3)
 
 
 def dead_reckoned(t_ns: np.ndarray, vel_ned: FloatArray) -> FloatArray:
@@ -138,6 +158,10 @@ class MavlinkEmitter(Emitter):
         self.pos_ned = (
             feed.pos_ned if feed.pos_ned is not None else dead_reckoned(feed.t_ns, feed.vel_ned)
         )
+        self.geodetic = (
+            None if feed.pos_ned is None else ned_to_geodetic(feed.pos_ned, GEODETIC_ORIGIN)
+        )
+        """Latitude, longitude (deg) and altitude (m) of each sample (grades with a position)."""
         self._tx = mavlink2.MAVLink(
             _PacketSink(self), srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID
         )
@@ -207,6 +231,14 @@ class MavlinkEmitter(Emitter):
         flags = _EKF_FLAGS_BASE | (_EKF_FLAGS_POSITION if self.feed.pos_ned is not None else 0)
         self._tx.ekf_status_report_send(flags, 0.0, 0.0, 0.0, 0.0, 0.0)
         self._count("EKF_STATUS_REPORT")
+        if self.geodetic is not None:
+            lat, lon, alt = _int_position(GEODETIC_ORIGIN)
+            usec = self.wire.unix_ns(t_ns) // 1000
+            self._tx.gps_global_origin_send(lat, lon, alt, usec)
+            self._count("GPS_GLOBAL_ORIGIN")
+            q = [1.0, 0.0, 0.0, 0.0]
+            self._tx.home_position_send(lat, lon, alt, 0.0, 0.0, 0.0, q, 0.0, 0.0, 0.0, usec)
+            self._count("HOME_POSITION")
         if self._rogue is not None:
             self._rogue.heartbeat_send(
                 mavlink2.MAV_TYPE_QUADROTOR, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0,
@@ -230,10 +262,22 @@ class MavlinkEmitter(Emitter):
             vx, vy, vz = (float(v) for v in f.vel_ned[i])
             self._tx.local_position_ned_send(boot_ms, x, y, z, vx, vy, vz)
             self._count("LOCAL_POSITION_NED")
+        if self.geodetic is not None and self._due("GLOBAL_POSITION_INT", k):
+            lat, lon, alt = _int_position(self.geodetic[i])
+            vx, vy, vz = (round(float(v) * 100.0) for v in f.vel_ned[i])
+            relative_mm = round(-float(self.pos_ned[i][2]) * 1000.0)
+            yaw = quat_to_euler(tuple(float(v) for v in f.quat[i]))[2]  # type: ignore[arg-type]
+            hdg = round(math.degrees(yaw) * 100.0) % 36000
+            self._tx.global_position_int_send(boot_ms, lat, lon, alt, relative_mm, vx, vy, vz, hdg)
+            self._count("GLOBAL_POSITION_INT")
         if self._due("ATTITUDE_QUATERNION", k):
             w, qx, qy, qz = (float(v) for v in f.quat[i])
             self._tx.attitude_quaternion_send(boot_ms, w, qx, qy, qz, 0.0, 0.0, 0.0)
             self._count("ATTITUDE_QUATERNION")
+        if self._due("ATTITUDE", k):
+            roll, pitch, yaw = quat_to_euler(tuple(float(v) for v in f.quat[i]))  # type: ignore[arg-type]
+            self._tx.attitude_send(boot_ms, roll, pitch, yaw, 0.0, 0.0, 0.0)
+            self._count("ATTITUDE")
         if self._rogue is not None:
             self._rogue_sample(i, boot_ms + ROGUE_BOOT_AHEAD_MS, up_ns)
 

@@ -55,7 +55,8 @@ class RadarEmitter(Emitter):
     link : Link
         UDP (one packet per datagram), TCP or file (packets back to back).
     radar : RadarParams
-        Waveform and receiver (context packet values, receive window).
+        Waveform and receiver (context packet values, receive window). The context's
+        bandwidth is the digitised band: the chirp's (matched), the sample rate (dechirp).
     t_ns : ndarray of int64, shape (P,)
         Pulse transmit times, scenario GPS ns.
     echo : ndarray of complex64, shape (P, S), or EchoStream
@@ -95,6 +96,11 @@ class RadarEmitter(Emitter):
         self.payload: PayloadFormat = payload
         self.stream_id = stream_id
         self.context_period_ns = round(context_period_s * 1e9)
+        # the context's Bandwidth is that of the digitised signal (VITA 49.2 CIF0 bit 29):
+        # the chirp for a matched receiver, the beat band its I/Q samples hold for dechirp
+        self.digitised_band_hz = (
+            radar.bandwidth_hz if radar.receive == "matched" else radar.sample_rate_hz
+        )
         self.iq_scale = int16_scale(echo) if payload == "int16" else 1.0
         packet_bytes = 32 + 2 * echo.shape[1] * (2 if payload == "int16" else 4)
         if isinstance(link, UdpOutLink) and packet_bytes > UDP_MAX_PAYLOAD:
@@ -123,7 +129,7 @@ class RadarEmitter(Emitter):
             self.stream_id,
             self.wire.gps_ns(t),
             self.contexts_sent,
-            bandwidth_hz=self.radar.bandwidth_hz,
+            bandwidth_hz=self.digitised_band_hz,
             rf_reference_hz=self.radar.carrier_hz,
             sample_rate_hz=self.radar.sample_rate_hz,
             oui=OUI_SIM,

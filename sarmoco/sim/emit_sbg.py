@@ -23,11 +23,12 @@ import numpy as np
 from sarmoco.drivers import sbg_codec as codec
 from sarmoco.drivers.attitude import quat_to_euler
 from sarmoco.drivers.clock import NS_PER_S, SECONDS_PER_WEEK
+from sarmoco.geodesy import ned_to_geodetic
 from sarmoco.processing.types import FloatArray
 from sarmoco.sim.emit_mavlink import dead_reckoned
 from sarmoco.sim.emitter import Emitter
 from sarmoco.sim.faults import PacketFaults
-from sarmoco.sim.insfeed import GEODETIC_ORIGIN, InsFeed, ned_to_geodetic
+from sarmoco.sim.insfeed import GEODETIC_ORIGIN, InsFeed
 from sarmoco.sim.links import Link
 from sarmoco.sim.pacing import Event, merge
 
@@ -143,7 +144,7 @@ class SbgEmitter(SbgDevice):
             if feed.pos_ned is not None
             else feed.start_pos_ned + dead_reckoned(feed.t_ns, feed.vel_ned)
         )
-        self.geodetic = ned_to_geodetic(pos_ned)
+        self.geodetic = ned_to_geodetic(pos_ned, GEODETIC_ORIGIN)
         g = feed.grade
         self.vel_std = vec3(np.full(3, max(g.vel_std_mps, MIN_STD)))
         self.att_std = vec3(np.full(3, max(g.att_std_rad, MIN_STD)))

@@ -211,7 +211,8 @@ def clutter_echo(
     clutter : Clutter
         The scatterers.
     x_hat_ned : ndarray of float64, shape (3,)
-        Nominal track direction (the stripmap beam's broadside is normal to it), NED.
+        Axis of the stripmap beam's cone (``Scenario.beam_axis_ned``: the track direction
+        when nothing squints the beam), NED unit vector.
     half_beam_rad : float or None
         Half the stripmap beam (as ``Scenario.illumination``); None: every scatterer lit.
     batch : int

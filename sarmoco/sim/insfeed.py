@@ -7,7 +7,6 @@ carries the same samples on the same clock.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -22,26 +21,8 @@ from sarmoco.sim.trajectory import true_trajectory
 OUTPUT_LATENCY_S = 0.001
 """Time from an INS sample's epoch to its message leaving the device, s."""
 GEODETIC_ORIGIN = (47.3769, 8.5417, 408.0)
-"""Latitude (deg), longitude (deg) and altitude above MSL (m) of the local NED origin."""
-WGS84_A_M = 6_378_137.0
-WGS84_E2 = 6.694_379_990_14e-3
-
-
-def ned_to_geodetic(
-    pos_ned: FloatArray, origin: tuple[float, float, float] = GEODETIC_ORIGIN
-) -> FloatArray:
-    """Local NED positions (N, 3) → latitude, longitude (deg) and altitude (m), shape (N, 3).
-
-    Tangent-plane approximation about ``origin`` with the WGS-84 meridian and
-    prime-vertical radii of curvature there (error below 1 mm within 1 km).
-    """
-    lat0 = math.radians(origin[0])
-    s2 = math.sin(lat0) ** 2
-    r_n = WGS84_A_M / math.sqrt(1.0 - WGS84_E2 * s2)
-    r_m = r_n * (1.0 - WGS84_E2) / (1.0 - WGS84_E2 * s2)
-    lat = origin[0] + np.degrees(pos_ned[:, 0] / (r_m + origin[2]))
-    lon = origin[1] + np.degrees(pos_ned[:, 1] / ((r_n + origin[2]) * math.cos(lat0)))
-    return np.stack([lat, lon, origin[2] - pos_ned[:, 2]], axis=1)
+"""Latitude (deg), longitude (deg) and altitude above MSL (m) of the local NED origin
+(the scenario frame's tangent point; the altitude is used as the ellipsoid height)."""
 
 
 @dataclass(frozen=True)

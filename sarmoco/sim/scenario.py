@@ -11,7 +11,28 @@ side (``look_side``: the track frame's y is the right of the track for "right", 
 frames coincide. Target positions and ``scene_center_ned`` are stored in NED; target
 overrides given to :func:`load_preset` are in the track frame. The antenna phase centre sits
 ``lever_arm_m`` (body frame: forward, right, down) from the INS point that the trajectory
-describes. Simulation time ``t_s`` counts seconds from the first pulse, whose GPS
+describes.
+
+Wind: a platform in a crosswind flies *crabbed*: its body is yawed against the ground track by
+``crab_rad`` (body yaw minus track heading, rad, positive clockwise seen from above, i.e. from
+north toward east; a crosswind ``w`` across an airspeed ``V_a`` gives ``|crab| = asin(w / V_a)``,
+the nose turned into the wind). The platform still flies the nominal track (the ground
+velocity is along it); its steady attitude is level at yaw ``heading_rad + crab_rad``
+(:attr:`Scenario.body_to_ned`), and the INS reports that yaw.
+
+Antenna: fixed to the body. Its boresight lies in the body's horizontal plane at the look
+side's broadside (body +y looking right, -y looking left), turned toward the body's nose
+(+x) by the mount's squint ``antenna_squint_rad`` (rad, positive forward). The stripmap beam
+is an ideal rectangular fan beam: a cone about the antenna's array axis (the body-horizontal
+axis normal to the boresight; body x when unsquinted) that lights a target while its
+direction makes an angle of at most half the integration angle with the plane normal to that
+axis (:meth:`Scenario.illumination`). A rotation of the antenna about its array axis (a
+depression) leaves such a beam unchanged. The beam follows the platform's steady attitude:
+the crab and the mount squint it, the attitude's fast motion (turbulence, a logged flight's
+wander) does not steer it. Its squint from the track's broadside, positive forward, is
+``antenna_squint_rad - crab_rad`` looking right and ``antenna_squint_rad + crab_rad`` looking
+left (:attr:`Scenario.beam_squint_rad`); the aperture is placed so that every target crosses
+the squinted beam. Simulation time ``t_s`` counts seconds from the first pulse, whose GPS
 time is ``t0_ns``.
 
 Presets (``sarmoco/sim/presets/*.toml``) hold the papers' numbers (docs/methods.md §6) and say in
@@ -139,6 +160,11 @@ class Scenario:
         Side of the track the antenna looks to.
     lever_arm_m : tuple of 3 float
         INS point to antenna phase centre, body frame (forward, right, down), m.
+    crab_rad : float
+        Body yaw minus track heading (a crosswind's crab), rad, positive clockwise from above.
+    antenna_squint_rad : float
+        The antenna mount's boresight yaw from the look side's body broadside toward the
+        body's nose, rad (positive forward).
     clutter : Clutter or None
         Distributed scatterers besides ``targets`` (the extended scene), or None.
     """
@@ -161,6 +187,8 @@ class Scenario:
     heading_rad: float = 0.0
     look_side: Literal["right", "left"] = "right"
     lever_arm_m: tuple[float, float, float] = DEFAULT_LEVER_ARM_M
+    crab_rad: float = 0.0
+    antenna_squint_rad: float = 0.0
     notes: dict[str, float] = field(default_factory=dict, compare=False)
     clutter: Clutter | None = field(default=None, compare=False)
 
@@ -173,6 +201,37 @@ class Scenario:
     def heading_to_ned(self) -> FloatArray:
         """Rotation by the heading alone (the platform's forward/right/down axes), (3, 3)."""
         return _track_to_ned(self.heading_rad, "right")
+
+    @property
+    def body_to_ned(self) -> FloatArray:
+        """Rotation from the body's forward/right/down axes to NED at the steady attitude
+        (level, yaw ``heading_rad + crab_rad``), (3, 3)."""
+        return _track_to_ned(self.heading_rad + self.crab_rad, "right")
+
+    @property
+    def beam_squint_rad(self) -> float:
+        """Squint of the beam centre from the track's broadside, rad, positive forward."""
+        return _beam_squint(self.antenna_squint_rad, self.crab_rad, self.look_side)
+
+    @property
+    def beam_axis_ned(self) -> FloatArray:
+        """The antenna's array axis at the steady attitude, NED unit vector, (3,): the axis of
+        the stripmap beam's cone (the track direction when nothing squints the beam)."""
+        s = self.antenna_squint_rad
+        toward_look = 1.0 if self.look_side == "right" else -1.0
+        return self.body_to_ned @ np.array([math.cos(s), -toward_look * math.sin(s), 0.0])
+
+    @property
+    def doppler_centroid_hz(self) -> float:
+        """Doppler frequency of the scene centre as it crosses the beam centre, Hz.
+
+        ``2 v sin(angle from broadside) / lambda`` for the nominal track (positive: the
+        scene centre approaches); 0 unless the beam is squinted.
+        """
+        ground = math.sqrt(self.center_slant_range_m**2 - self.altitude_m**2)
+        along = ground * math.tan(self.beam_squint_rad)
+        sin_off = along / math.hypot(along, self.center_slant_range_m)
+        return 2.0 * self.speed_mps * sin_off / self.radar.wavelength_m
 
     @property
     def n_pulses(self) -> int:
@@ -215,9 +274,10 @@ class Scenario:
     def illumination(self, apc_ned: FloatArray, targets_ned: FloatArray) -> FloatArray:
         """Two-way antenna weight of each target at each pulse (rect beam).
 
-        Stripmap: 1 where the target's squint from the nominal broadside direction,
-        ``asin(d_along / R)``, is within half the integration angle, else 0. The beam is fixed
-        to the nominal heading (attitude errors do not steer it). Spotlight: 1 everywhere.
+        Stripmap: 1 where the target's angle from the plane normal to the antenna's array
+        axis :attr:`beam_axis_ned`, ``asin(d . a / R)``, is within half the integration angle,
+        else 0: the beam of the antenna fixed to the body at its steady attitude, squinted by
+        the crab and the mount (see the module docstring). Spotlight: 1 everywhere.
 
         Parameters
         ----------
@@ -233,8 +293,8 @@ class Scenario:
         if self.mode == "spotlight":
             return np.ones((apc_ned.shape[0], targets_ned.shape[0]))
         d = targets_ned[None, :, :] - apc_ned[:, None, :]
-        sin_squint = (d @ self.track_to_ned[:, 0]) / np.linalg.norm(d, axis=-1)
-        return (np.abs(sin_squint) <= math.sin(self.integration_angle_rad / 2.0)).astype(float)
+        sin_off = (d @ self.beam_axis_ned) / np.linalg.norm(d, axis=-1)
+        return (np.abs(sin_off) <= math.sin(self.integration_angle_rad / 2.0)).astype(float)
 
 
 def scene_targets(scn: Scenario, n: int, rng: np.random.Generator) -> tuple[Target, ...]:
@@ -336,19 +396,56 @@ def _integration_angle(raw: dict[str, Any], wavelength_m: float) -> float:
 
 
 def _aperture_s(p: dict[str, Any], targets_ned: FloatArray, ground_centre_m: float) -> float:
-    half = math.tan(p["integration_angle_rad"] / 2.0)
-    slant = np.hypot(targets_ned[:, 1], targets_ned[:, 2] + p["altitude_m"])
     if p["mode"] == "spotlight":
+        half = math.tan(p["integration_angle_rad"] / 2.0)
         r_c = math.hypot(ground_centre_m, p["altitude_m"])
         return 2.0 * r_c * half / p["speed_mps"]
-    north = targets_ned[:, 0]
-    length = float(np.max(north + slant * half) - np.min(north - slant * half))
-    return 1.02 * length / p["speed_mps"]
+    lo, hi = _lit_track_interval(p, targets_ned)
+    return 1.02 * float(np.max(hi) - np.min(lo)) / p["speed_mps"]
 
 
 def _track_start(p: dict[str, Any], targets_ned: FloatArray) -> float:
-    mid = 0.5 * float(np.min(targets_ned[:, 0]) + np.max(targets_ned[:, 0]))
+    if p["mode"] == "spotlight":
+        centre = targets_ned[:, 0]
+    else:
+        centre = targets_ned[:, 0] - _beam_geometry(p, targets_ned)[0]
+    mid = 0.5 * float(np.min(centre) + np.max(centre))
     return mid - 0.5 * p["speed_mps"] * p["aperture_s"]
+
+
+def _beam_squint(antenna_squint_rad: float, crab_rad: float, look_side: str) -> float:
+    """The beam's squint from the track's broadside, rad, positive forward."""
+    return antenna_squint_rad - (crab_rad if look_side == "right" else -crab_rad)
+
+
+def _beam_geometry(p: dict[str, Any], targets_ned: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Per target (track frame), the along-track offset from the platform to the target at
+    the beam centre crossing, and the half-length of the track that lights it, m.
+
+    For a level straight track at ``-altitude_m`` and a beam cone about the array axis
+    ``(cos psi, -sin psi, 0)`` (``psi`` the beam squint), a target at (x, y, z) is lit from
+    the platform at ``x - u`` while ``(u cos psi - y sin psi)**2 <= S**2 (u**2 + rho**2)``
+    (``S`` the sine of half the integration angle, ``rho`` the target's broadside range):
+    ``u`` between ``c -+ w`` with ``c = y sin psi cos psi / (cos**2 psi - S**2)`` and
+    ``w = S sqrt(rho**2 (cos**2 psi - S**2) + y**2 sin**2 psi) / (cos**2 psi - S**2)``.
+    """
+    psi = _beam_squint(p["antenna_squint_rad"], p["crab_rad"], p["look_side"])
+    sin_half = math.sin(p["integration_angle_rad"] / 2.0)
+    cos2 = math.cos(psi) ** 2 - sin_half**2
+    y = targets_ned[:, 1]
+    rho = np.hypot(y, targets_ned[:, 2] + p["altitude_m"])
+    centre = y * (math.sin(psi) * math.cos(psi) / cos2)
+    half = sin_half * np.sqrt(rho**2 * cos2 + (y * math.sin(psi)) ** 2) / cos2
+    return centre, half
+
+
+def _lit_track_interval(
+    p: dict[str, Any], targets_ned: FloatArray
+) -> tuple[FloatArray, FloatArray]:
+    """Along-track platform positions [first, last] that light each target (stripmap), m."""
+    centre, half = _beam_geometry(p, targets_ned)
+    x = targets_ned[:, 0] - centre
+    return x - half, x + half
 
 
 def _doppler_bandwidth_hz(p: dict[str, Any], targets_ned: FloatArray, wavelength_m: float) -> float:
@@ -430,7 +527,8 @@ def load_preset(
     **overrides
         Any :class:`RadarParams` field (e.g. ``prf_hz``, ``receive``, ``n_samples``,
         ``chirp_direction``, ``iq_conjugate``) or
-        :class:`Scenario` field (e.g. ``snr_db``, ``targets``, ``aperture_s``, ``mode``),
+        :class:`Scenario` field (e.g. ``snr_db``, ``targets``, ``aperture_s``, ``mode``,
+        ``crab_rad``, ``antenna_squint_rad``),
         applied after scaling; derived values (range gate, samples, aperture) follow them
         unless given themselves.
 
@@ -456,6 +554,7 @@ def load_preset(
             f"{p['altitude_m']}"
         )
     ground_c = math.sqrt(p["center_slant_range_m"] ** 2 - p["altitude_m"] ** 2)
+    look_side, heading, lever = _orientation(p)
     targets = _targets(p, raw.get("targets", {}), ground_c)
     t_ned = np.array([t.pos_ned for t in targets], dtype=np.float64).reshape(-1, 3)
     p.setdefault("aperture_s", _aperture_s(p, t_ned, ground_c))
@@ -465,7 +564,6 @@ def load_preset(
         raise ConfigError(f"scenario.approach_s: {approach_s!r} is not >= 0")
     p["track_start_north_m"] -= approach_s * p["speed_mps"]
     p["aperture_s"] += approach_s
-    look_side, heading, lever = _orientation(p)
     rot = _track_to_ned(heading, look_side)
     notes = {k: float(raw[k]) for k in _PRESET_KEYS if k in raw}
     notes["slant_window_near_m"], notes["slant_window_far_m"] = near, far
@@ -488,6 +586,8 @@ def load_preset(
         heading_rad=heading,
         look_side=look_side,
         lever_arm_m=lever,
+        crab_rad=p["crab_rad"],
+        antenna_squint_rad=p["antenna_squint_rad"],
         notes=notes,
     )
 
@@ -570,11 +670,25 @@ def _radar(
 def _orientation(
     p: dict[str, Any],
 ) -> tuple[Literal["right", "left"], float, tuple[float, float, float]]:
-    """Look side, heading (rad from north) and lever arm (body frame, m) of the overrides."""
+    """Look side, heading (rad from north) and lever arm (body frame, m) of the overrides.
+
+    Also sets ``p["look_side"]``, ``p["crab_rad"]`` and ``p["antenna_squint_rad"]``
+    (default 0), the latter two checked so that the beam's squint plus half the integration
+    angle stays below 90 degrees.
+    """
     look_side = p.get("look_side", "right")
     if look_side not in ("right", "left"):
         raise ConfigError(f"scenario.look_side: {look_side!r} is not 'right' or 'left'")
     lever = tuple(float(v) for v in p.get("lever_arm_m", DEFAULT_LEVER_ARM_M))
     if len(lever) != 3:
         raise ConfigError(f"scenario.lever_arm_m: {p.get('lever_arm_m')!r} is not 3 numbers")
+    p["look_side"] = look_side
+    p["crab_rad"] = float(p.get("crab_rad", 0.0))
+    p["antenna_squint_rad"] = float(p.get("antenna_squint_rad", 0.0))
+    psi = _beam_squint(p["antenna_squint_rad"], p["crab_rad"], look_side)
+    if not abs(psi) + p["integration_angle_rad"] / 2.0 < math.pi / 2.0:
+        raise ConfigError(
+            f"scenario.crab_rad/antenna_squint_rad: {p['crab_rad']!r}/{p['antenna_squint_rad']!r} "
+            f"squint the beam by {math.degrees(psi):.1f} deg, past the horizon"
+        )
     return look_side, float(p.get("heading_rad", 0.0)), _point(np.asarray(lever))

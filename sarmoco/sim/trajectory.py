@@ -3,7 +3,8 @@
 :func:`true_trajectory` gives the kinematics of the INS point (what the INS measures);
 :func:`apc_trajectory` moves it by the scenario's lever arm, rotated by the attitude, to the
 antenna phase centre (APC: where the echoes come from). Deviations are generated about a
-track heading north and then rotated by the scenario's heading (yaw gains the heading).
+track heading north and then rotated by the scenario's heading (yaw gains the heading and
+the crab).
 
 Three kinds (:class:`MotionSpec`):
 
@@ -417,10 +418,12 @@ def _deviation(scn: Scenario, spec: MotionSpec) -> Deviation | None:
 def true_trajectory(scn: Scenario, t_s: npt.ArrayLike, spec: MotionSpec) -> Trajectory:
     """True kinematics of the INS point at ``t_s`` (seconds since the first pulse).
 
-    The scenario's nominal line is the antenna phase centre's at level attitude: the INS
-    point flies it offset by minus the lever arm turned by the heading, so that the APC
-    (:func:`apc_trajectory`) is on the nominal line whenever the attitude is level, and the
-    scenario's altitude and slant ranges stay those of the antenna.
+    The scenario's nominal line is the antenna phase centre's at the steady attitude (level,
+    yawed by the heading and the crab: :attr:`Scenario.body_to_ned`): the INS point flies it
+    offset by minus the lever arm turned by that attitude, so that the APC
+    (:func:`apc_trajectory`) is on the nominal line whenever the attitude is steady, and the
+    scenario's altitude and slant ranges stay those of the antenna. The attitude's yaw is the
+    heading plus the crab plus the deviation's yaw; the velocity stays along the track.
 
     The same ``spec`` gives the same continuous trajectory for any choice of ``t_s``.
 
@@ -430,7 +433,7 @@ def true_trajectory(scn: Scenario, t_s: npt.ArrayLike, spec: MotionSpec) -> Traj
     """
     t = np.asarray(t_s, dtype=np.float64).reshape(-1)
     pos, vel = scn.ideal_track(t)
-    pos = pos - scn.heading_to_ned @ np.asarray(scn.lever_arm_m, dtype=np.float64)
+    pos = pos - scn.body_to_ned @ np.asarray(scn.lever_arm_m, dtype=np.float64)
     acc = np.zeros_like(pos)
     euler = np.zeros_like(pos)
     dev = _deviation(scn, spec)
@@ -438,7 +441,7 @@ def true_trajectory(scn: Scenario, t_s: npt.ArrayLike, spec: MotionSpec) -> Traj
         dp, dv, da, euler = dev(t)
         rot = scn.heading_to_ned
         pos, vel, acc = pos + dp @ rot.T, vel + dv @ rot.T, da @ rot.T
-    euler = euler + np.array([0.0, 0.0, scn.heading_rad])
+    euler = euler + np.array([0.0, 0.0, scn.heading_rad + scn.crab_rad])
     return Trajectory(t_s=t, pos_ned=pos, vel_ned=vel, acc_ned=acc, quat=euler_to_quat(euler))
 
 

@@ -133,3 +133,46 @@ def test_live_run_and_store_replay_refuse_array_mode(
     argv = ["replay", "--config", str(config), "--recording", "x.zarr", "--out", "y.zarr"]
     assert main(argv) == 2
     assert "array mode replays files" in capsys.readouterr().err
+
+
+def _renumber_streams(vrt: bytes, new_id: dict[int, int]) -> bytes:
+    """``vrt`` with every packet's stream ID replaced by ``new_id[old]`` (packets with a
+    stream ID: signal type 1 and context type 4; the size field counts 32-bit words)."""
+    out, pos = bytearray(vrt), 0
+    while pos < len(out):
+        word0 = int.from_bytes(out[pos : pos + 4], "big")
+        assert word0 >> 28 in (1, 4), f"packet type {word0 >> 28} at byte {pos}"
+        old = int.from_bytes(out[pos + 4 : pos + 8], "big")
+        out[pos + 4 : pos + 8] = new_id[old].to_bytes(4, "big")
+        pos += 4 * (word0 & 0xFFFF)
+    return bytes(out)
+
+
+def test_digitiser_stream_ids_map_to_pairs_by_array_stream_ids(
+    constant_roll: tuple[Path, Path, dict[str, Any]], tmp_path: Path
+) -> None:
+    """The same run with the digitiser's own stream IDs, numbered against the pair order
+    (pair c on 0x50000000 + 159 - c): with ``array.stream_ids`` listing them the replay
+    images the same DEM, bit for bit, as with the pair numbers; without it the replay
+    images nothing and names the streams that came and the key."""
+    sim, store_path, _ = constant_roll
+    ids = [0x5000_0000 + 159 - c for c in range(160)]
+    vrt = tmp_path / "radar.vrt"
+    vrt.write_bytes(_renumber_streams((sim / "radar.vrt").read_bytes(), dict(enumerate(ids))))
+    table = (sim / "sarmoco.toml").read_text()
+    assert "[array]\n" in table
+    config = tmp_path / "sarmoco.toml"
+    config.write_text(table.replace("[array]\n", f"[array]\nstream_ids = {ids}\n"))
+    argv = ["replay", "--config", str(config), "--radar", str(vrt), "--nav", str(sim / "nav.tlog")]
+    _run([*argv, "--out", str(tmp_path / "run.zarr")])
+    for name in ("compensated", "uncompensated"):
+        want, _ = open_store(store_path).dem(name)
+        got, _ = open_store(tmp_path / "run.zarr").dem(name)
+        np.testing.assert_array_equal(got.height_m, want.height_m)
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        status = main(["replay", "--config", str(sim / "sarmoco.toml"), *argv[3:],
+                       "--out", str(tmp_path / "default.zarr")])  # fmt: skip
+    assert status != 0
+    assert "packets of VITA streams [1342177280, 1342177281," in err.getvalue()
+    assert "no Tx/Rx pair of array.stream_ids [0, 1, 2," in err.getvalue()

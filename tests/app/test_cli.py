@@ -9,11 +9,13 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from sarmoco import __version__
 from sarmoco.app.cli import main
 from sarmoco.daemon.config import describe_keys, load_config
+from sarmoco.daemon.links import open_radar
 
 
 def run_cli(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str, str]:
@@ -133,3 +135,12 @@ def test_sim_out_writes_a_configuration_the_daemon_accepts(
     assert cfg.radar.link == str(out_dir / "radar.vrt") and Path(cfg.radar.link).is_file()
     status, out, _ = run_cli(["config", "check", str(out_dir / "sarmoco.toml")], capsys)
     assert status == 0 and "INS over mavlink" in out
+    # a dechirp radar: its context packets give the digitised (beat) band, which the
+    # daemon's radar link takes as agreeing with the configuration
+    assert cfg.radar.receive == "dechirp"
+    rows = np.zeros((16, cfg.radar.n_samples), np.complex64)
+    with open_radar(cfg) as src:
+        got = src.read_into(rows)
+        (context,) = src.decoder.context.values()
+    assert got and not any(p.context_mismatch for p in got)
+    assert context.bandwidth_hz == pytest.approx(cfg.radar.sample_rate_hz)

@@ -18,12 +18,13 @@ from pathlib import Path
 import lxml.etree
 import numpy as np
 import pytest
+import sarkit.cphd as sksicd_cphd
 import sarkit.sicd as sksicd
 import sarkit.verification as skver
 import tifffile
 
 from sarmoco.app.cli import main
-from sarmoco.app.cphd import focus, read_cphd
+from sarmoco.app.cphd import read_cphd
 from sarmoco.app.export import failures
 from sarmoco.app.sicd import sicd_product, write_sicd
 from sarmoco.daemon import schema
@@ -33,9 +34,16 @@ from sarmoco.daemon.geotiff import write_geotiffs
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.runner import replay_files
 from sarmoco.daemon.store import RunStore, open_store
-from sarmoco.geodesy import geodetic_to_ecef, geodetic_to_ned
-from sarmoco.processing.imaging import PlaneGrid, facing_heading
-from sarmoco.sim.insfeed import GEODETIC_ORIGIN, ned_to_geodetic
+from sarmoco.drivers.mavlink import mavutil, tlog_record
+from sarmoco.geodesy import geodetic_to_ned, ned_to_ecef
+from sarmoco.processing.imaging import (
+    PlaneGrid,
+    backproject,
+    compressed_from_phase_history,
+    facing_heading,
+)
+from sarmoco.processing.types import C_MPS
+from sarmoco.sim.insfeed import GEODETIC_ORIGIN
 
 PIXEL_M = 0.1
 """Grid spacing of the scene's tiles (``imaging.pixel_m``), m."""
@@ -162,36 +170,136 @@ def test_sicd_export_passes_the_consistency_check_and_holds_our_pixels(
     assert start.year == 2024  # GPS 1.4e18 ns, as UTC
     procs = [p.findtext("{*}Type") for p in xml.findall("./{*}ImageFormation/{*}Processing")]
     assert any("INS motion compensation" in p for p in procs)
+    # the frame and origin the geometry went through are stated
+    stated = {
+        p.get("name"): p.text for p in xml.findall("./{*}ImageFormation/{*}Processing/{*}Parameter")
+    }
+    origin = schema.decode_geodetic_origin(scene.store.attrs, "run")
+    assert stated["geodetic_origin_source"] == origin.source == "sbg.EKF_NAV"
+    lat, lon, _ = (float(v.split()[0]) for v in stated["geodetic_origin"].split(","))
+    assert (lat, lon) == pytest.approx(origin.lla[:2], abs=1e-9)
     # the scene centre point is the pixel at SCPPixel, on the ground below the track
     graze = helper.load("./{*}SCPCOA/{*}GrazeAng")
     assert graze == pytest.approx(np.degrees(np.arctan2(100.0, 894.43)), abs=0.1)
 
 
-def test_cphd_of_the_recorded_echoes_passes_its_check_and_refocuses_the_targets(
+def _peak_m(mag: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """Position (3,) of the brightest pixel of ``mag`` (pixel positions ``pos``, (n0, n1, 3)),
+    refined by a parabola through it and its neighbours along each axis, m."""
+    k = np.unravel_index(np.argmax(mag), mag.shape)
+    out = pos[k].astype(np.float64)
+    for axis in (0, 1):
+        step = np.zeros(2, dtype=int)
+        step[axis] = 1
+        lo, hi = tuple(np.subtract(k, step)), tuple(np.add(k, step))
+        a, b, c = mag[lo], mag[k], mag[hi]
+        out += 0.5 * (a - c) / (a - 2 * b + c) * (pos[hi] - pos[k])
+    return out
+
+
+def test_cphd_of_the_recorded_echoes_passes_its_check_and_keeps_the_geometry(
     scene: Scene, capsys: pytest.CaptureFixture[str]
 ) -> None:
     """``export --cphd``: the echoes compensated to the scene centre by the INS pass
-    ``CphdConsistency``; read back and backprojected on a 0.1 m ground grid about the SRP,
-    each target peaks within 0.15 m of where the simulator put it (half the 0.2 m
-    resolution cell plus half a pixel; measured 0.02 .. 0.11 m)."""
+    ``CphdConsistency``; read back and backprojected on a 1 cm ground grid about each
+    target, every target peaks within 1 cm of where the simulator put it and of where the
+    store's own image has it (through its georeference): the export moves no target."""
     out = scene.out / "scene.cphd"
     assert main(["export", str(scene.store.path), "--cphd", str(out)]) == 0, capsys.readouterr()
     assert failures(skver.CphdConsistency.from_file, out, warnings=True) == []
+    with out.open("rb") as f, sksicd_cphd.Reader(f) as reader:
+        params = reader.metadata.xmltree.findall("./{*}CollectionID/{*}Parameter")
+    stated = {p.get("name"): p.text for p in params}
+    assert stated["geodetic_origin_source"] == "sbg.EKF_NAV"
     ph = read_cphd(out)
-    image = focus(ph, 200, 0.1)
-    grid = PlaneGrid.centred(
-        (0.0, 0.0, 0.0), 200, 200, 0.1, 0.1, facing_heading(ph.scene(ph.apc_ecef_m), (0, 0, 0))
-    )
-    pix, mag = grid.positions(), np.abs(image.data)
-    misses = []
+    rc, r_axis, fc = compressed_from_phase_history(ph.signal, ph.freq_hz)
+    apc = ph.scene(ph.apc_ecef_m)
+    heading = facing_heading(apc, (0, 0, 0))
+    geo = georeference(scene.store)
+    cfg = load_config(scene.out / "sbg.toml")
+    seg = segment_images(scene.store)[0]
+    own = ph.scene(geo.ecef(grid_points(seg.image, seg.track, cfg.geometry.height_m)))
+    own_mag = np.abs(seg.image.data)
+    to_truth, to_own = [], []
     for target in scene.truth["targets"]:
-        lla = ned_to_geodetic(np.asarray([target["pos_ned"]]))[0]
-        at = ph.scene(geodetic_to_ecef(lla))
-        near = np.linalg.norm(pix[..., :2] - at[:2], axis=-1) < 1.0
-        k = np.unravel_index(np.argmax(np.where(near, mag, 0.0)), mag.shape)
-        misses.append(float(np.linalg.norm(pix[k][:2] - at[:2])))
-    print(f"CPHD refocused targets: {np.round(misses, 3).tolist()} m off")
-    assert max(misses) < 0.15
+        at = ph.scene(ned_to_ecef(np.asarray(target["pos_ned"]), GEODETIC_ORIGIN))
+        grid = PlaneGrid.centred(tuple(at), 41, 41, 0.01, 0.01, heading)
+        image = backproject(rc, r_axis, apc, C_MPS / fc, grid, ref_range_m=ph.ref_range_m)
+        peak = _peak_m(np.abs(image.data), grid.positions())
+        near = np.linalg.norm(own[..., :2] - at[:2], axis=-1) < 1.0
+        own_peak = _peak_m(np.where(near, own_mag, 0.0), own)
+        to_truth.append(float(np.linalg.norm(peak[:2] - at[:2])))
+        to_own.append(float(np.linalg.norm(peak[:2] - own_peak[:2])))
+    print(
+        f"CPHD refocused targets: {np.round(to_truth, 4).tolist()} m from the simulator's, "
+        f"{np.round(to_own, 4).tolist()} m from the store's image"
+    )
+    assert max(to_truth) < 0.01 and max(to_own) < 0.01
+
+
+def test_a_mavlink_run_states_the_ekf_origin_and_exports_to_sicd(
+    scene: Scene, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The simulated autopilot's log (``nav.tlog``: ArduPilot's default streams, with
+    GPS_GLOBAL_ORIGIN) replayed: the store's frame is the EKF origin, its positions are
+    NED about it (the INS positions of the scenario frame, to the float32 of the wire),
+    the targets are georeferenced within half a pixel and the SICD passes its check."""
+    cfg = load_config(scene.out / "sim" / "sarmoco.toml")
+    path = scene.out / "mavlink.zarr"
+    replay_files(cfg, scene.out / "sim" / "radar.vrt", scene.out / "sim" / "nav.tlog", path, False)
+    store = open_store(path)
+    origin = schema.decode_geodetic_origin(store.attrs, "run")
+    assert origin.source == "mavlink.GPS_GLOBAL_ORIGIN"
+    assert geodetic_to_ned(np.asarray(origin.lla), GEODETIC_ORIGIN) == pytest.approx(
+        np.zeros(3), abs=0.01
+    )
+    nav = store.read("nav")
+    vel = (nav["kind"] == schema.NAV_KIND_VELOCITY) & (nav["result"] == 0)
+    apc = np.asarray(scene.truth["pulses"]["apc_ned"])
+    ins = np.asarray(scene.truth["pulses"]["apc_ned"]) - scene.truth["scenario"]["lever_arm_m"]
+    assert np.isfinite(nav["pos_ned"][vel]).all()
+    span = np.ptp(apc, axis=0)
+    assert np.all(np.ptp(nav["pos_ned"][vel], axis=0) >= 0.9 * span)  # the flown track
+    assert np.linalg.norm(nav["pos_ned"][vel][0] - ins[0]) < 20.0  # scenario frame, not the run's
+    motion = store.read("motion", ["t_ns", "pos_ned"])
+    rows = np.searchsorted(np.asarray(scene.truth["pulses"]["t_ns"]), motion["t_ns"])
+    ok = np.isfinite(motion["pos_ned"]).all(axis=1)
+    assert ok.mean() > 0.9
+    assert np.abs(motion["pos_ned"][ok] - apc[rows[ok]]).max() < 1e-3  # ideal INS: the true APC
+    errors = _target_errors_m(Scene(store, scene.truth, scene.out))
+    assert max(errors) < PIXEL_M / 2
+    out = scene.out / "mavlink.nitf"
+    assert main(["export", str(path), "--sicd", str(out)]) == 0, capsys.readouterr().err
+    assert failures(skver.SicdConsistency.from_file, out, warnings=True) == []
+
+
+def test_ardupilot_default_streams_alone_give_positions_about_the_ekf_origin(
+    scene: Scene,
+) -> None:
+    """The simulated autopilot's log cut to what ArduPilot streams unasked
+    (GLOBAL_POSITION_INT, ATTITUDE, GPS_GLOBAL_ORIGIN, SYSTEM_TIME; 4 Hz): every focused
+    pulse's ``motion/pos_ned`` is the true antenna position in the EKF origin's frame, to
+    the 1 cm of the wire's degE7, and the SICD export takes it."""
+    src = mavutil.mavlink_connection(str(scene.out / "sim" / "nav.tlog"))
+    keep = {"HEARTBEAT", "GLOBAL_POSITION_INT", "ATTITUDE", "GPS_GLOBAL_ORIGIN", "SYSTEM_TIME"}
+    records = []
+    while (m := src.recv_match(type=list(keep))) is not None:
+        records.append(tlog_record(m))
+    (scene.out / "global.tlog").write_bytes(b"".join(records))
+    cfg = load_config(scene.out / "sim" / "sarmoco.toml")
+    path = scene.out / "global.zarr"
+    replay_files(cfg, scene.out / "sim" / "radar.vrt", scene.out / "global.tlog", path, False)
+    store = open_store(path)
+    assert schema.decode_geodetic_origin(store.attrs, "run").source == "mavlink.GPS_GLOBAL_ORIGIN"
+    motion = store.read("motion", ["t_ns", "pos_ned"])
+    ok = np.isfinite(motion["pos_ned"]).all(axis=1)
+    apc = np.asarray(scene.truth["pulses"]["apc_ned"])
+    rows = np.searchsorted(np.asarray(scene.truth["pulses"]["t_ns"]), motion["t_ns"][ok])
+    err = np.linalg.norm(motion["pos_ned"][ok] - apc[rows], axis=1)
+    print(f"GLOBAL_POSITION_INT only: {ok.sum()} of {ok.size} pulses with a position, "
+          f"max {err.max():.4f} m from the true APC")  # fmt: skip
+    assert ok.mean() > 0.9 and err.max() < 0.02
+    assert main(["export", str(path), "--sicd", str(scene.out / "global.nitf")]) == 0
 
 
 def test_the_checker_fails_a_sicd_whose_geometry_is_wrong(scene: Scene) -> None:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from sarmoco.daemon.config import parse_config
+from sarmoco.daemon.config import array_stream_ids, parse_config
 from tests.daemon.refusals import assert_refused
 
 ARRAY_RADAR = {"mode": "array", "channels": 160, "range_gate_delay_s": 1.0e-6}
@@ -27,6 +27,12 @@ def test_array_mode_takes_one_channel_per_pair() -> None:
     assert cfg.array.sub_blocks == (1, 8)
     small = parse_config({**_array_table(n_tx=2, n_rx=8), "radar": ARRAY_RADAR | {"channels": 16}})
     assert small.array.n_rx == 8
+    assert array_stream_ids(small) == tuple(range(16))  # unset: the pair numbers
+    ids = [0x4000_0000 + 16 * c for c in range(16)]
+    digitiser = parse_config(
+        {**_array_table(n_tx=2, n_rx=8, stream_ids=ids), "radar": ARRAY_RADAR | {"channels": 16}}
+    )
+    assert array_stream_ids(digitiser) == tuple(ids)
 
 
 @pytest.mark.parametrize(
@@ -56,6 +62,16 @@ def test_array_mode_takes_one_channel_per_pair() -> None:
         (_array_table(dem_spacing_m=-1), "array.dem_spacing_m: -1 is not > 0"),
         (_array_table(epc_spacing_m=0), "array.epc_spacing_m: 0 is not > 0"),
         ({"radar": {"mode": "mimo"}}, "radar.mode: 'mimo' is not one of 'single', 'array'"),
+        (
+            _array_table(stream_ids=[1, 2, 3]),
+            "array.stream_ids: 3 stream IDs for array.n_tx * array.n_rx = 160 Tx/Rx pairs",
+        ),
+        (
+            _array_table(stream_ids=[*range(159), 7]),
+            "array.stream_ids: stream IDs 7 name more than one Tx/Rx pair",
+        ),
+        (_array_table(stream_ids=[-1]), "array.stream_ids[0]: -1 is not >= 0"),
+        (_array_table(stream_ids=7), "array.stream_ids: 7 is not a list"),
     ],
     ids=[
         "single-many",
@@ -70,6 +86,10 @@ def test_array_mode_takes_one_channel_per_pair() -> None:
         "spacing",
         "epc-spacing",
         "mode",
+        "stream-ids-count",
+        "stream-ids-twice",
+        "stream-ids-negative",
+        "stream-ids-not-a-list",
     ],
 )
 def test_bad_array_settings_name_the_key(table: dict[str, object], message: str) -> None:

@@ -71,7 +71,12 @@ def test_int_accepted_for_float_key() -> None:
             {"radar": {"receive": "fmcw"}},
             "radar.receive: 'fmcw' is not one of 'matched', 'dechirp'",
         ),
-        ({"mocomp": {"order": 3}}, "mocomp.order: 3 is not one of 1, 2"),
+        ({"mocomp": {"order": 3}}, "mocomp.order: 3 is not one of 2"),
+        (
+            {"mocomp": {"order": 1}},
+            "mocomp.order: 1 is refused: the scene-centre look angle for every bin leaves a "
+            "look-angle error across the swath",
+        ),
         ({"ins": {"lever_arm_m": [1, 2]}}, "ins.lever_arm_m: [1, 2] is not a list of 3 numbers"),
         ({"ins": {"lever_arm_m": [1, 2, "x"]}}, "ins.lever_arm_m[2]: 'x' is not a number"),
         ({"autofocus": {"enabled": 1}}, "autofocus.enabled: 1 is not true or false"),
@@ -171,9 +176,9 @@ def test_readme_table_is_generated_from_the_code(repo_root: Path) -> None:
         (
             {"radar": {"channels": 2}},
             "radar.channels: 2: single mode focuses one channel (each channel would need its "
-            "own aperture and image set); set radar.channels = 1: the daemon focuses VITA stream "
-            "ID 0 and counts and skips the packets of other stream IDs; or radar.mode = "
-            '"array" for a MIMO array (channels = array.n_tx * array.n_rx)',
+            "own aperture and image set); set radar.channels = 1: the daemon focuses the VITA "
+            "stream radar.stream_id and counts and skips the packets of other stream IDs; or "
+            'radar.mode = "array" for a MIMO array (channels = array.n_tx * array.n_rx)',
         ),
     ],
     ids=[

@@ -116,7 +116,8 @@ def loop_ext4(path: Path, size_mb: int) -> Iterator[Path]:
 
 
 class UdpRun:
-    """A daemon with the radar on UDP (sent by :meth:`send`) and the INS from the ``.tlog``."""
+    """A daemon with the radar on UDP (sent by :meth:`send`) and the INS from the ``.tlog``;
+    ``radar``: radar keys of its configuration besides the link."""
 
     def __init__(
         self,
@@ -125,13 +126,14 @@ class UdpRun:
         store: Path,
         env: dict[str, str] | None = None,
         writer_queue: int = 0,
+        radar: dict[str, Any] | None = None,
     ):
         self.sim = sim
         self.radar_port = free_port(socket.SOCK_DGRAM)
         self.port = free_port(socket.SOCK_STREAM)
         config = daemon_config(
             sim, tmp / "host.toml",
-            radar={"link": f"udp://127.0.0.1:{self.radar_port}"},
+            radar={"link": f"udp://127.0.0.1:{self.radar_port}", **(radar or {})},
             status={"http_port": self.port},
             recorder={"fsync_interval_s": 0.05, "writer_queue": writer_queue},
         )  # fmt: skip

@@ -278,3 +278,32 @@ def test_stalled_and_restarted_tcp_peer(sim_files: SimFiles, tmp_path: Path) -> 
         f"{got['t_ns'].size} pulses recorded (all whole ones sent); SIGTERM during the "
         f"second stall: exit 0 in {stop_s:.1f} s"
     )
+
+
+OTHER_STREAM = 0x0A00_0005
+"""A stream ID the simulator does not send (it sends stream 0)."""
+
+
+def test_only_other_streams_arriving_name_them_and_the_key(
+    sim_files: SimFiles, tmp_path: Path
+) -> None:
+    """A live run configured for a stream the radar does not send, over UDP: the radar
+    health turns bad naming the stream IDs that arrived and ``radar.stream_id``, the log
+    says the same; nothing of those streams is recorded as pulses."""
+    run = UdpRun(sim_files, tmp_path, tmp_path / "other.zarr", radar={"stream_id": OTHER_STREAM})
+    try:
+        run.daemon.started()
+        run.send(len(sim_files.packets) // 4)
+        status = run.wait_unhealthy("radar")
+        detail = status["components"]["radar"]["detail"]
+        assert not status["healthy"]
+        assert f"no signal packet of VITA stream {OTHER_STREAM} (radar.stream_id)" in detail
+        assert "streams 0 (0x00000000) arrived" in detail and "set radar.stream_id" in detail
+        assert status["counters"]["radar_rejected"] > 0
+        assert status["counters"].get("pipeline_pulses_received", 0) == 0
+        run.daemon.stop()
+    finally:
+        run.daemon.kill_if_running()
+    print(f"radar health: {detail}")
+    warned = [r["msg"] for r in run.log() if "skipping the signal packets" in r["msg"]]
+    assert len(warned) == 1 and "radar.stream_id" in warned[0], warned

@@ -16,10 +16,11 @@ from sarkit import wgs84
 
 from sarmoco.daemon import schema
 from sarmoco.daemon.navbuffer import PushResult
+from sarmoco.daemon.navframe import StoreFrame
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.store import open_store
 from sarmoco.drivers import sbg_codec as codec
-from sarmoco.drivers.samples import AttitudeSample, Validity, VelocitySample
+from sarmoco.drivers.samples import AttitudeSample, TangentFrame, Validity, VelocitySample
 from sarmoco.drivers.sbg import SbgDecoder
 from sarmoco.errors import RecorderError
 from sarmoco.geodesy import (
@@ -28,6 +29,7 @@ from sarmoco.geodesy import (
     geodetic_to_ned,
     ned_rotation,
     ned_to_ecef,
+    ned_to_geodetic,
 )
 from tests.drivers.test_sbg import LEAP, OK_STATUS, utc_msg
 
@@ -58,6 +60,18 @@ def test_ned_axes_and_round_trip() -> None:
     assert north[1] == pytest.approx(origin[1], abs=1e-9)
 
 
+def test_ned_to_geodetic_is_exact_far_from_the_tangent_point() -> None:
+    """900 m east of a point at 47° N (a scene's range from the track): back through
+    geodetic_to_ned to 1 µm; the point lies 6.4 cm above the ellipsoid, and a flat-Earth
+    mapping (latitude from north only) would put it 6.8 cm north of where it is."""
+    origin = (47.3769, 8.5417, 408.0)
+    ned = np.array([[0.0, 900.0, 0.0], [-1500.0, 2500.0, 120.0]])
+    lla = ned_to_geodetic(ned, origin)
+    assert np.allclose(geodetic_to_ned(lla, origin), ned, atol=1e-6)
+    assert lla[0, 2] - origin[2] == pytest.approx(900.0**2 / (2 * 6_378_000.0), rel=0.01)
+    assert lla[0, 0] < origin[0] - 0.06 / 111_190.0
+
+
 def _rows() -> list[schema.NavRow]:
     lla = (47.0, 8.0, 500.0)
     return [
@@ -68,7 +82,9 @@ def _rows() -> list[schema.NavRow]:
         (VelocitySample(30, (1.0, 2.0, 3.0), Validity.VELOCITY, "x", 30, lat_lon_alt=lla),
          6, PushResult.ACCEPTED),
         (VelocitySample(40, (1.0, 2.0, 3.0), Validity.VELOCITY | Validity.POSITION, "sbg", 40,
-                        (1.0, 2.0, 3.0), lat_lon_alt=(47.5, 8.5, 510.0)), 7, PushResult.ACCEPTED),
+                        (1.0, 2.0, 3.0), lat_lon_alt=(47.5, 8.5, 510.0),
+                        pos_frame=TangentFrame((47.4, 8.4, 500.0), "sbg")), 7,
+         PushResult.ACCEPTED),
     ]  # fmt: skip
 
 
@@ -89,14 +105,18 @@ def test_the_nav_table_keeps_valid_positions_and_the_origin_is_the_first_accepte
     assert isinstance(decoded[3], VelocitySample) and decoded[3].lat_lon_alt == (47.5, 8.5, 510.0)
     assert decoded[3].valid & Validity.POSITION and decoded[2].lat_lon_alt is None
     got = schema.decode_geodetic_origin(store.attrs, "s")
-    assert got == schema.GeodeticOrigin(40, (47.5, 8.5, 510.0), "sbg")
+    assert got == schema.GeodeticOrigin(40, (47.4, 8.4, 500.0), "sbg")  # its position's frame
+    assert store.attrs[schema.GEODETIC_ORIGIN_ATTR]["frame"] == schema.FRAME_STATED
 
 
 def test_a_store_without_position_says_so(tmp_path: Path) -> None:
     path = tmp_path / "s.zarr"
     Recorder(path, n_samples=4).close()
     attrs = open_store(path).attrs
-    assert attrs[schema.GEODETIC_ORIGIN_ATTR] == {"absent": schema.NO_ABSOLUTE_POSITION}
+    assert attrs[schema.GEODETIC_ORIGIN_ATTR] == {
+        "absent": schema.NO_ABSOLUTE_POSITION,
+        "frame": schema.FRAME_UNSTATED,
+    }
     with pytest.raises(RecorderError, match=r"s\.geodetic_origin: no absolute position"):
         schema.decode_geodetic_origin(attrs, "s")
 
@@ -135,4 +155,26 @@ def test_sbg_positions_are_ned_about_the_first_valid_fix() -> None:
     assert vel[0].pos_ned is None and vel[0].lat_lon_alt is None  # position not valid
     assert vel[1].pos_ned == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
     assert vel[2].pos_ned == pytest.approx((12.0, -3.0, -5.0), abs=1e-6)
-    assert dec.geodetic_origin == origin
+    assert dec.positions.frame == TangentFrame(origin, "sbg.EKF_NAV")
+    assert vel[1].pos_frame == vel[2].pos_frame == dec.positions.frame
+
+
+def test_a_store_keeps_its_positions_in_the_first_frame_named() -> None:
+    """Positions named in a later frame (an EKF origin stated after the first fixes) are
+    re-expressed in the store's, to 1 µm; positions that name no frame pass unchanged."""
+    first = TangentFrame((47.3769, 8.5417, 408.0), "mavlink.GLOBAL_POSITION_INT")
+    ekf = TangentFrame((47.3700, 8.5500, 400.0), "mavlink.GPS_GLOBAL_ORIGIN")
+    point = np.array([47.3800, 8.5450, 510.0])
+    frame = StoreFrame()
+
+    def sample(t: int, where: TangentFrame | None) -> VelocitySample:
+        pos = None if where is None else geodetic_to_ned(point, where.lat_lon_alt).tolist()
+        return VelocitySample(t, (1.0, 0.0, 0.0), Validity.VELOCITY, "x", t, pos, pos_frame=where)
+
+    assert frame.express(sample(0, None)).pos_ned is None and frame.frame is None
+    a = frame.express(sample(1, first))
+    b = frame.express(sample(2, ekf))
+    assert frame.frame == first and a.pos_frame == b.pos_frame == first
+    assert a.pos_ned is not None and b.pos_ned is not None
+    assert np.allclose(b.pos_ned, a.pos_ned, atol=1e-6)
+    assert np.linalg.norm(geodetic_to_ned(point, ekf.lat_lon_alt) - a.pos_ned) > 100.0

@@ -20,11 +20,12 @@ import numpy as np
 import pytest
 
 from sarmoco.daemon.config import Config, InsConfig, describe_keys, parse_config
-from sarmoco.daemon.links import INS_OPENERS, open_ins
+from sarmoco.daemon.links import INS_OPENERS, open_ins, open_radar
 from sarmoco.drivers.can_source import CanLogSource, CanSource
 from sarmoco.drivers.samples import Sample, VelocitySample
 from sarmoco.drivers.sbg import SbgSerialSource
 from sarmoco.drivers.source import Source
+from sarmoco.drivers.vita49 import encode_context_packet, encode_signal_packet
 from sarmoco.errors import ConfigError
 from sarmoco.sim.faults import Faults
 from sarmoco.sim.insemitters import INS_EMITTERS
@@ -160,3 +161,58 @@ def test_sbg_can_opens_a_python_can_bus(recordings: tuple[Path, dict[str, Any]])
 def test_a_can_link_that_does_not_parse_names_ins_link(link: str, reason: str) -> None:
     with pytest.raises(ConfigError, match=rf"^ins\.link: '{link}' {reason}$"):
         open_ins(ins_config("sbg-can"), link)
+
+
+DECHIRP_RADAR = {
+    "receive": "dechirp",
+    "bandwidth_hz": 1.1e9,
+    "sample_rate_hz": 40e6,
+    "n_samples": 64,
+    "pulse_width_s": 1e-4,
+    "range_gate_delay_s": 6e-6,
+}
+"""A dechirp radar: a 1.1 GHz chirp, its beat band digitised as I/Q at 40 MHz."""
+
+MATCHED_RADAR = {"bandwidth_hz": 750e6, "sample_rate_hz": 1e9, "range_gate_delay_s": 5.98e-6}
+"""A pulsed-LFM radar: a 750 MHz chirp sampled as I/Q at 1 GHz."""
+
+
+@pytest.mark.parametrize(
+    ("radar", "reported_hz", "agrees"),
+    [
+        (DECHIRP_RADAR, 32e6, True),  # the digitiser's IF (beat) band
+        (DECHIRP_RADAR, 1.1e9, False),  # the chirp's: no 40 MHz I/Q stream holds it
+        (MATCHED_RADAR, 900e6, True),  # anti-alias band
+        (MATCHED_RADAR, 600e6, False),  # cuts the chirp
+    ],
+)
+def test_radar_context_is_checked_against_the_digitised_band(
+    tmp_path: Path, radar: dict[str, Any], reported_hz: float, agrees: bool
+) -> None:
+    """The radar link of a configuration reads the context's Bandwidth as the band
+    digitised in the stream: a dechirp digitiser reporting its IF band gets its pulses
+    focused, one reporting a band the configured receiver cannot have gets them flagged."""
+    cfg = parse_config(
+        {
+            "radar": {"n_samples": 64, **radar},
+            "geometry": {"center_slant_range_m": 900.0, "height_m": 100.0},
+            "imaging": {"swath_m": 5.0},
+        }
+    )
+    t0 = 1_400_000_000_000_000_000
+    vrt = tmp_path / "radar.vrt"
+    context = encode_context_packet(
+        0,
+        t0,
+        0,
+        bandwidth_hz=reported_hz,
+        rf_reference_hz=cfg.radar.carrier_hz,
+        sample_rate_hz=cfg.radar.sample_rate_hz,
+    )
+    iq = np.ones(64, np.complex64)
+    vrt.write_bytes(context + b"".join(encode_signal_packet(0, t0 + k, k, iq) for k in range(3)))
+    rows = np.zeros((8, 64), np.complex64)
+    with open_radar(cfg, str(vrt)) as src:
+        got = src.read_into(rows)
+    assert len(got) == 3
+    assert [p.context_mismatch for p in got] == [not agrees] * 3

@@ -27,7 +27,7 @@ from sarmoco.daemon.runner import open_recorder
 from sarmoco.daemon.status import Counters
 from sarmoco.daemon.store import open_store
 from sarmoco.drivers.radar import RadarUdpSource
-from sarmoco.drivers.samples import AttitudeSample, EchoPacket, Validity, VelocitySample
+from sarmoco.drivers.samples import AttitudeSample, EchoPackets, Validity, VelocitySample
 from sarmoco.drivers.vita49 import encode_signal_packet
 from sarmoco.processing.metrics import PointTargetMetrics, point_target_metrics
 from sarmoco.processing.types import Image
@@ -224,7 +224,7 @@ def test_read_radar_reads_blocks_and_counts_only_real_drops(tmp_path: Path) -> N
             assert isinstance(src, RadarUdpSource)
             read_into = src.read_into
 
-            def counted(out: np.ndarray, timeout_s: float = 0.1) -> list[EchoPacket]:
+            def counted(out: np.ndarray, timeout_s: float = 0.1) -> EchoPackets:
                 nonlocal calls
                 calls += 1
                 return read_into(out, timeout_s)

@@ -18,7 +18,13 @@ from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.store import StoreNav, StorePulses, open_store
-from sarmoco.drivers.samples import AttitudeSample, EchoPacket, Validity, VelocitySample
+from sarmoco.drivers.samples import (
+    AttitudeSample,
+    EchoPacket,
+    EchoPackets,
+    Validity,
+    VelocitySample,
+)
 from sarmoco.errors import RecorderError
 from sarmoco.processing.autofocus.report import SubapertureReport
 from sarmoco.processing.geometry import ReferenceTrack
@@ -110,9 +116,8 @@ def test_pulse_flags_round_trip_to_the_packets_they_came_from(recorder: Recorder
         EchoPacket(3, T0 + k * 1_000_000, 0, 8, k % 2 == 0, k % 3 == 0, k % 5 == 0, k % 4 == 1)
         for k in range(10)
     ]
-    flags = [
-        int(PulseFlag.from_packet(p) | PulseFlag.NAV_GAP * (k == 2)) for k, p in enumerate(packets)
-    ]
+    flags = PulseFlag.of_packets(EchoPackets.of(packets, 8))
+    flags[2] |= PulseFlag.NAV_GAP
     echo = np.arange(10 * 8 * 2, dtype=np.int16).reshape(10, 8, 2)
     recorder.append_pulses([p.t_gps_ns for p in packets], range(10), [3] * 10, flags, echo)
     recorder.close()

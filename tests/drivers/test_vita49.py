@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import select
 import socket
 import struct
 import threading
@@ -106,7 +107,7 @@ def test_context_change_flags_the_pulses_after_it_until_it_agrees_again(
     """A context packet that changes the sample rate mid-stream marks the stream: the pulses
     after it come back ``context_mismatch`` (counted, the change logged naming the key), in
     packet-by-packet and batched decoding alike, until a context packet agrees again."""
-    want = ContextExpectation(bandwidth_hz=1.5e8, rf_reference_hz=9.6e9, sample_rate_hz=1.8e8)
+    want = ContextExpectation.for_receiver("matched", 1.5e8, 9.6e9, 1.8e8)
     iq = pulses(3 * BATCH)
 
     def context(rate_hz: float, count: int) -> bytes:
@@ -124,7 +125,7 @@ def test_context_change_flags_the_pulses_after_it_until_it_agrees_again(
             stage = np.zeros((len(stream), dec.max_packet_bytes), np.uint8)
             for i, p in enumerate(stream):
                 stage[i, : len(p)] = np.frombuffer(p, np.uint8)
-            got = dec.decode_batch(stage, [len(p) for p in stream], rows)
+            got = list(dec.decode_batch(stage, [len(p) for p in stream], rows))
         else:
             got = [e for p in stream if (e := dec.decode_into(p, rows[0])) is not None]
         mismatch = [e.context_mismatch for e in got]
@@ -134,6 +135,42 @@ def test_context_change_flags_the_pulses_after_it_until_it_agrees_again(
     assert "radar.sample_rate_hz: configured 180000000.0 Hz, the radar says 200000000.0 Hz" in (
         caplog.text
     )
+
+
+@pytest.mark.parametrize(
+    ("receive", "chirp_hz", "rate_hz", "reported_hz", "agrees"),
+    [
+        # pulsed LFM, complex sampling at 720 MHz of a 600 MHz chirp: any band that holds
+        # the chirp and fits in the sample rate (the chirp's, the anti-alias filter's)
+        ("matched", 600e6, 720e6, 600e6, True),
+        ("matched", 600e6, 720e6, 700e6, True),
+        ("matched", 600e6, 720e6, 720e6, True),
+        ("matched", 600e6, 720e6, 500e6, False),  # the receiver cuts the chirp
+        ("matched", 600e6, 720e6, 800e6, False),  # more than I/Q at 720 MHz can hold
+        # dechirp of a 1.1 GHz chirp digitised at 40 MHz: the IF (beat) band, not the chirp's
+        ("dechirp", 1.1e9, 40e6, 32e6, True),
+        ("dechirp", 1.1e9, 40e6, 40e6, True),
+        ("dechirp", 1.1e9, 40e6, 1.1e9, False),
+        ("dechirp", 1.1e9, 40e6, 0.0, False),
+    ],
+)
+def test_context_bandwidth_is_the_digitised_band(
+    receive: str, chirp_hz: float, rate_hz: float, reported_hz: float, agrees: bool
+) -> None:
+    """VITA 49.2's context Bandwidth is the usable band of the signal digitised in the
+    stream: a matched receiver's holds the chirp and fits in the sample rate, a dechirp
+    receiver's is its beat band, up to the sample rate. The pulses after a context in those
+    bounds are focused, the others flagged ``context_mismatch`` naming radar.bandwidth_hz."""
+    want = ContextExpectation.for_receiver(receive, chirp_hz, 9.6e9, rate_hz)  # type: ignore[arg-type]
+    dec = VitaDecoder(N, expect=want)
+    context = encode_context_packet(
+        3, T0, 0, bandwidth_hz=reported_hz, rf_reference_hz=9.6e9, sample_rate_hz=rate_hz
+    )
+    row = np.zeros(N, np.complex64)
+    assert dec.decode_into(context, row) is None and dec.last_ok
+    pulse = dec.decode_into(packets(pulses(1))[0], row)
+    assert pulse is not None and pulse.context_mismatch is not agrees
+    assert ("radar.bandwidth_hz" in dec.mismatch.get(3, "")) is not agrees
 
 
 def test_context_longer_than_its_fields_is_damage() -> None:
@@ -353,7 +390,7 @@ def test_batch_decoder_equals_packet_decoder(
     for i, d in enumerate(datagrams):
         stage[i, : len(d)] = np.frombuffer(bytes(d), np.uint8)
     out = np.zeros((len(datagrams), N), np.complex64)
-    got = dec.decode_batch(stage, [len(d) for d in datagrams], out)
+    got = list(dec.decode_batch(stage, [len(d) for d in datagrams], out))
     assert got == want
     np.testing.assert_array_equal(out[: len(got)], rows)
     assert dec.counters.snapshot() == counters
@@ -374,12 +411,67 @@ def test_timestamp_kinds_outside_the_profile_are_rejected(batched: bool) -> None
         stage = np.zeros((len(datagrams), dec.max_packet_bytes + 4), np.uint8)
         for i, d in enumerate(datagrams):
             stage[i, : len(d)] = np.frombuffer(bytes(d), np.uint8)
-        got = dec.decode_batch(stage, [len(d) for d in datagrams], out)
+        got = list(dec.decode_batch(stage, [len(d) for d in datagrams], out))
     else:
         got = [e for i, d in enumerate(datagrams) if (e := dec.decode_into(bytes(d), out[i]))]
     keep = [k for k in range(len(datagrams)) if k not in bad]
     assert [e.t_gps_ns for e in got] == [times(len(iq))[k] for k in keep]
     assert dec.counters.parse_errors == len(bad)
+
+
+def _udp_pair() -> tuple[socket.socket, socket.socket]:
+    """A bound non-blocking receiver on 127.0.0.1 and a sender."""
+    rx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    rx.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+    rx.bind(("127.0.0.1", 0))
+    rx.setblocking(False)
+    return rx, socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+
+
+@pytest.mark.parametrize("batch_receive", [True, False], ids=["recvmmsg", "recv_into"])
+def test_udp_batch_path_equals_one_packet_path_on_real_sockets(batch_receive: bool) -> None:
+    """The same datagrams over UDP on 127.0.0.1 to the radar source (batches of datagrams per
+    system call, decoded together into an int16 ring) and to a socket read one datagram per
+    call and decoded one packet per call: byte-identical rows, identical metadata and
+    identical counters. The mix spans several batches, with other streams' packets, context
+    packets, junk, torn packets, timestamps out of range, lost packets, and datagrams longer
+    than the largest packet (cut by the receive buffer)."""
+    mixed = _mixed_datagrams()
+    iq = pulses(200, seed=9)
+    datagrams = [*packets(iq[:150], sid=1)]
+    datagrams[10:10] = mixed  # a damaged stretch inside a long clean run
+    datagrams[80:80] = [datagrams[79] + bytes(64), datagrams[81][:-4] + bytes(4000)]  # too long
+    datagrams += [encode_signal_packet(1, T0 + k, 150 + k, iq[150 + k]) for k in range(50)]
+    del datagrams[200:203]  # a gap in the counts
+    one = VitaDecoder(N, leap_s=18)
+    rx, tx = _udp_pair()
+    buf = bytearray(one.max_packet_bytes + 4)  # what the source receives into
+    want_rows = np.zeros((len(datagrams), N, 2), np.int16)
+    want: list[EchoPacket] = []
+    dec = VitaDecoder(N, leap_s=18)
+    with RadarUdpSource("127.0.0.1", 0, dec, batch_receive=batch_receive) as src:
+        assert src.receiver.batched == batch_receive
+        for d in datagrams:
+            tx.sendto(d, src.address)
+            tx.sendto(d, rx.getsockname())
+        for _ in datagrams:
+            n = rx.recv_into(buf) if select.select([rx], [], [], 1.0)[0] else 0
+            assert n, "timed out"
+            if (e := one.decode_into(memoryview(buf)[:n], want_rows[len(want)])) is not None:
+                want.append(e)
+        rows = np.zeros_like(want_rows)
+        got: list[EchoPacket] = []
+        while len(got) < len(want):
+            batch = src.read_into(rows[len(got) :], timeout_s=1.0)
+            assert len(batch), "timed out"
+            got += batch
+    rx.close()
+    tx.close()
+    assert got == want
+    assert rows.tobytes() == want_rows.tobytes()
+    assert dec.counters.snapshot() == one.counters.snapshot()
+    c = one.counters
+    assert (c.frames, c.parse_errors, c.gaps) == (len(want) + 1, 5, 6)  # (the mix is as meant)
 
 
 @pytest.mark.parametrize(("configured", "decoded"), [(None, 0xC0FFEE01), (7, 7)])

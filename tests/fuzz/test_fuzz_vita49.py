@@ -135,7 +135,7 @@ def test_context_packets_against_configuration(packets: list[bytes]) -> None:
     """A context packet either agrees, is rejected (counted), or contradicts the
     configuration: then its stream is marked with a reason naming the radar key, counted,
     and nothing is raised."""
-    expect = ContextExpectation(750e6, 15e9, 1e9)
+    expect = ContextExpectation.for_receiver("matched", 750e6, 15e9, 1e9)
     dec = VitaDecoder(8, expect=expect)
     row = np.empty(8, np.complex64)
     for pkt in packets:
@@ -180,7 +180,7 @@ def test_batch_decode_equals_packet_by_packet(case: tuple[int, str, list[bytes]]
     out_fast = np.full((len(packets), n_samples), 3 + 3j, np.complex64)
     out_slow = out_fast.copy()
     with bounded_allocation():
-        got_fast = fast.decode_batch(stage, lengths, out_fast)
+        got_fast = list(fast.decode_batch(stage, lengths, out_fast))
     got_slow = []
     for i, n in enumerate(lengths):
         pkt = slow.decode_into(bytes(stage[i, :n]), out_slow[len(got_slow)])

@@ -69,7 +69,9 @@ def test_vrt_file_round_trip(tmp_path: Path, payload: PayloadFormat) -> None:
     check_exact(em, got, rows)
     ctx = dec.context[7]
     radar = tiny_run().scenario.radar
-    assert ctx.bandwidth_hz == pytest.approx(radar.bandwidth_hz, abs=1e-6)
+    # the digitised band (VITA 49.2 CIF0 bandwidth): a dechirp receiver's beat band
+    assert radar.receive == "dechirp" and em.digitised_band_hz == radar.sample_rate_hz
+    assert ctx.bandwidth_hz == pytest.approx(em.digitised_band_hz, abs=1e-6)
     assert ctx.rf_reference_hz == pytest.approx(radar.carrier_hz, abs=1e-6)
     assert ctx.sample_rate_hz == pytest.approx(radar.sample_rate_hz, abs=1e-6)
     assert dec.counters.parse_errors == 0 and dec.counters.drops == 0

@@ -5,12 +5,18 @@ polar-to-rectangular resampling (polar format). The kernel is a sinc truncated
 to ``taps`` samples and tapered with a Kaiser window (beta 2 pi). With the
 default 16 taps the error on a complex tone stays below 0.4 % up to 0.38
 cycles per sample (oversampling 1.3) and below 0.1 % up to 0.35; the signals
-must be basebanded (spectrum centred on zero).
+must be basebanded (spectrum centred on zero). The kernel is tabulated at
+``TABLE_STEPS`` fractional offsets per sample (nearest entry: a position error of
+at most 1/16384 sample) and applied by a compiled loop.
 """
 
 from __future__ import annotations
 
+import functools
+
+import numba
 import numpy as np
+import numpy.typing as npt
 import scipy.fft
 
 from sarmoco.errors import ProcessingError
@@ -18,6 +24,49 @@ from sarmoco.processing.types import ComplexArray, FloatArray
 
 KAISER_BETA = 2.0 * np.pi
 """Kaiser window shape parameter of the interpolation kernel."""
+
+TABLE_STEPS = 8192
+"""Fractional offsets per sample at which the kernel is tabulated."""
+
+
+@functools.lru_cache(maxsize=8)
+def _kernel_table(taps: int) -> npt.NDArray[np.float64]:
+    """Weights of the ``taps`` samples ``floor(pos) - taps/2 + 1 ...`` for ``frac(pos) = q /
+    TABLE_STEPS``, shape (TABLE_STEPS + 1, taps)."""
+    half = taps // 2
+    frac = np.arange(TABLE_STEPS + 1)[:, None] / TABLE_STEPS
+    d = np.arange(-half + 1, half + 1)[None, :] - frac
+    w = np.sinc(d) * np.i0(KAISER_BETA * np.sqrt(np.clip(1.0 - (d / half) ** 2, 0.0, None)))
+    table: npt.NDArray[np.float64] = w / np.i0(KAISER_BETA)
+    return table
+
+
+@numba.njit(parallel=True, nogil=True, cache=True)
+def _interp_rows(
+    x: ComplexArray, pos: FloatArray, table: npt.NDArray[np.float64], out: ComplexArray
+) -> None:  # pragma: no cover - compiled
+    """``out[i, j]``: row ``i`` of ``x`` at ``pos[i, j]`` with the tabulated kernel."""
+    n = x.shape[1]
+    steps = table.shape[0] - 1
+    taps = table.shape[1]
+    half = taps // 2
+    for i in numba.prange(x.shape[0]):
+        for j in range(pos.shape[1]):
+            p = pos[i, j]
+            if not (p >= 0.0 and p <= n - 1):
+                out[i, j] = 0.0
+                continue
+            base = int(np.floor(p))
+            w = table[int((p - base) * steps + 0.5)]
+            re = 0.0
+            im = 0.0
+            for t in range(taps):
+                idx = base - half + 1 + t
+                if 0 <= idx < n:
+                    v = x[i, idx]
+                    re += v.real * w[t]
+                    im += v.imag * w[t]
+            out[i, j] = re + 1j * im
 
 
 def sinc_interp(x: ComplexArray, pos: FloatArray, taps: int = 16) -> ComplexArray:
@@ -43,21 +92,14 @@ def sinc_interp(x: ComplexArray, pos: FloatArray, taps: int = 16) -> ComplexArra
         raise ProcessingError(f"sinc_interp: taps {taps!r} must be even and >= 2")
     if x.ndim != 2 or pos.ndim != 2 or pos.shape[0] != x.shape[0]:
         raise ProcessingError(f"sinc_interp: shapes x{x.shape} pos{pos.shape} disagree")
-    n = x.shape[1]
-    half = taps // 2
-    base = np.floor(pos).astype(np.int64)
-    frac = pos - base
-    out = np.zeros(pos.shape, dtype=np.result_type(x.dtype, np.complex64))
-    norm = np.i0(KAISER_BETA)
-    rows = np.arange(x.shape[0])[:, None]
-    for k in range(-half + 1, half + 1):
-        idx = base + k
-        d = k - frac
-        w = np.sinc(d) * np.i0(KAISER_BETA * np.sqrt(np.clip(1.0 - (d / half) ** 2, 0.0, None)))
-        valid = (idx >= 0) & (idx < n)
-        vals = x[rows, np.clip(idx, 0, n - 1)]
-        out += np.where(valid, vals * (w / norm).astype(out.real.dtype), 0)
-    out[(pos < 0) | (pos > n - 1)] = 0
+    dtype = np.result_type(x.dtype, np.complex64)
+    out = np.empty(pos.shape, dtype=dtype)
+    _interp_rows(
+        np.ascontiguousarray(x, dtype=dtype),
+        np.ascontiguousarray(pos, dtype=np.float64),
+        _kernel_table(taps),
+        out,
+    )
     return out
 
 
@@ -95,3 +137,10 @@ def fft_upsample(x: ComplexArray, factor: int) -> ComplexArray:
     out = scipy.fft.ifft(padded, axis=1, overwrite_x=True)
     out *= factor
     return np.asarray(out).astype(x.dtype, copy=False)
+
+
+def warm_up() -> None:
+    """Compile the kernel of :func:`sinc_interp` (or load it from numba's cache) for
+    complex64 and complex128 rows."""
+    for dtype in (np.complex64, np.complex128):
+        sinc_interp(np.ones((2, 8), dtype), np.full((2, 3), 2.5))

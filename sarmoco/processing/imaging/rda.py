@@ -19,9 +19,13 @@ straight track). The steps:
 4. azimuth compression ``exp(+j 4 pi r0 D / lambda)`` within the processed
    Doppler band, then inverse azimuth FFT.
 
-The processed band is ``|sin theta| <= sin(alpha / 2)`` with ``alpha`` the
-processed angle: given, or by default ``BAND_MARGIN`` times the angle the
-block subtends at each range, ``2 atan(P dx / (2 r0))``. The margin keeps the
+The processed band is ``|sin theta - sin theta_c| <= sin(alpha / 2)`` with ``alpha``
+the processed angle: given, or by default ``BAND_MARGIN`` times the angle the
+block subtends at each range, ``2 atan(P dx / (2 r0))``, and ``theta_c`` the squint
+of the Doppler centroid (0 for a beam at broadside; a crabbed platform squints the
+beam, Doppler centroid ``f_dc = 2 v sin(theta_c) / lambda``). The Doppler bins are
+unwrapped around the centroid, so a centroid beyond the sampled band (aliased)
+is processed at its true squint. The margin keeps the
 Fresnel edges of a short aperture's spectrum (small time-bandwidth product)
 inside the band, so the band edge does not weight them. The theoretical
 azimuth IRW of an unweighted target seen over an aperture of length ``L`` at
@@ -30,6 +34,8 @@ i.e. ``0.886 v / B_doppler``.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.fft
@@ -42,6 +48,102 @@ BAND_MARGIN = 1.5
 """Default processed angle over the angle the block subtends."""
 
 
+@dataclass(frozen=True)
+class RdaFilters:
+    """The range-Doppler filters of one block shape (see the module's steps).
+
+    Attributes
+    ----------
+    n_az : int
+        Azimuth FFT length.
+    src : ndarray of complex, shape (n_az, S) or None
+        Secondary range compression, a range-frequency phase per Doppler row (None: off).
+    rcmc_bins : ndarray of float64, shape (n_az, S)
+        Where each Doppler row takes the range bin of ``r0``: ``(r0 / D - r_first) / dr``.
+    azimuth : ndarray of complex, shape (n_az, S)
+        Azimuth compression ``exp(+j 4 pi r0 D / lambda)`` in the processed band, 0 outside.
+    """
+
+    n_az: int
+    src: ComplexArray | None
+    rcmc_bins: FloatArray
+    azimuth: ComplexArray
+
+
+def rda_filters(
+    n_az: int,
+    dx_m: float,
+    range_axis_m: FloatArray,
+    wavelength_m: float,
+    sin_max: FloatArray,
+    src: bool = True,
+    centroid_squint_rad: float = 0.0,
+    dtype: type[np.complexfloating] = np.complex128,
+) -> RdaFilters:
+    """The filters of :func:`focus_block` for blocks of ``n_az`` (padded) rows.
+
+    Parameters
+    ----------
+    n_az : int
+        Azimuth FFT length.
+    dx_m : float
+        Pulse spacing along the track, m.
+    range_axis_m : ndarray of float64, shape (S,)
+        Uniform slant range of each bin, m.
+    wavelength_m : float
+        Carrier wavelength, m.
+    sin_max : ndarray of float64, shape (S,)
+        Half the processed band at each range, as ``sin`` of the angle from the centroid.
+    src : bool
+        Secondary range compression.
+    centroid_squint_rad : float
+        Squint of the Doppler centroid (forward positive), rad.
+    dtype : complex dtype
+        Precision of the complex filters.
+    """
+    s = range_axis_m.shape[0]
+    dr = float(range_axis_m[1] - range_axis_m[0])
+    # Doppler bins as spatial frequency kx (cycles/m), unwrapped around the centroid's
+    kx_c = 2.0 * np.sin(centroid_squint_rad) / wavelength_m
+    kx = np.fft.fftfreq(n_az, dx_m)
+    kx = kx_c + (kx - kx_c + 0.5 / dx_m) % (1.0 / dx_m) - 0.5 / dx_m
+    sin_sq = wavelength_m * kx / 2.0  # (n_az,)
+    if np.any(np.abs(sin_sq) >= 1.0):
+        raise ProcessingError("rda: pulse spacing below lambda/2 gives evanescent Doppler bins")
+    band = np.abs(sin_sq - np.sin(centroid_squint_rad))[:, None] <= sin_max[None, :]
+    d = np.sqrt(1.0 - sin_sq**2)
+    src_filter = None
+    if src:
+        fc = C_MPS / wavelength_m
+        fr = np.fft.fftfreq(s, dr) * C_MPS / 2.0
+        a2 = (fc * sin_sq[:, None]) ** 2
+        resid = np.sqrt((fc + fr[None, :]) ** 2 - a2) - fc * d[:, None] - fr[None, :] / d[:, None]
+        r_ref = float(range_axis_m[s // 2])
+        # shift to the bin-0 origin does not matter: the filter is a pure range-frequency phase
+        src_filter = np.exp(4j * np.pi * r_ref * resid / C_MPS).astype(dtype)
+    rcmc = (range_axis_m[None, :] / d[:, None] - range_axis_m[0]) / dr
+    azimuth = np.where(
+        band, np.exp(4j * np.pi * range_axis_m[None, :] * d[:, None] / wavelength_m), 0.0
+    ).astype(dtype)
+    return RdaFilters(n_az, src_filter, rcmc, azimuth)
+
+
+def focus_block(rc: ComplexArray, filters: RdaFilters, taps: int = 16) -> ComplexArray:
+    """Range-Doppler focus of ``rc`` (P × S, P <= ``filters.n_az``) with ``filters``.
+
+    Returns the (P × S) image in the filters' precision (complex64 filters and pulses
+    are transformed in single precision).
+    """
+    p = rc.shape[0]
+    rd = scipy.fft.fft(np.asarray(rc, dtype=filters.azimuth.dtype), n=filters.n_az, axis=0)
+    if filters.src is not None:
+        rd = scipy.fft.ifft(scipy.fft.fft(rd, axis=1) * filters.src, axis=1)
+    rd = sinc_interp(rd, filters.rcmc_bins, taps)
+    rd *= filters.azimuth
+    out: ComplexArray = scipy.fft.ifft(rd, axis=0)[:p]
+    return out
+
+
 def range_doppler(
     rc: ComplexArray,
     range_axis_m: FloatArray,
@@ -50,6 +152,8 @@ def range_doppler(
     integration_angle_rad: float | None = None,
     src: bool = True,
     taps: int = 16,
+    pad: bool = True,
+    centroid_squint_rad: float = 0.0,
 ) -> Image:
     """Focus a stripmap block with the range-Doppler algorithm.
 
@@ -71,12 +175,21 @@ def range_doppler(
         Apply secondary range compression.
     taps : int
         RCMC interpolation kernel length.
+    pad : bool
+        Zero-pad the azimuth FFT to ``>= 2P - 1`` (linear compression over the
+        whole block). False: the FFT is ``P`` long and compression is circular, so
+        only the outputs at least a half aperture from both ends of the block are
+        exact.
+    centroid_squint_rad : float
+        Squint of the Doppler centroid ``theta_c`` (positive: the beam looks
+        forward, toward +x), rad; 0 for a beam at broadside.
 
     Returns
     -------
     Image
         complex64, frame ``"slant"``: axis 0 along-track (the pulse positions),
-        axis 1 slant range of closest approach.
+        axis 1 slant range of closest approach. Computed in single precision when
+        ``rc`` is complex64, else in double.
     """
     p, s = rc.shape
     if range_axis_m.shape != (s,) or along_track_m.shape != (p,) or p < 2 or s < 2:
@@ -86,35 +199,16 @@ def range_doppler(
     dx = float(along_track_m[-1] - along_track_m[0]) / (p - 1)
     if not np.allclose(np.diff(along_track_m), dx, rtol=1e-3, atol=0.0) or dx <= 0:
         raise ProcessingError("rda: pulses are not uniformly spaced along the track (resample)")
-    dr = float(range_axis_m[1] - range_axis_m[0])
-    n_az = scipy.fft.next_fast_len(2 * p - 1)
-    sin_sq = wavelength_m * np.fft.fftfreq(n_az, dx) / 2.0  # (n_az,)
     if integration_angle_rad is None:
         sin_max = np.sin(BAND_MARGIN * np.arctan(p * dx / (2.0 * range_axis_m)))  # (S,)
     else:
         sin_max = np.full(s, np.sin(integration_angle_rad / 2.0))
-    band = np.abs(sin_sq)[:, None] <= sin_max[None, :]
-    if np.any(np.abs(sin_sq) >= 1.0):
-        raise ProcessingError("rda: pulse spacing below lambda/2 gives evanescent Doppler bins")
-    d = np.sqrt(1.0 - sin_sq**2)
-
-    rd = scipy.fft.fft(np.asarray(rc, dtype=np.complex128), n=n_az, axis=0)
-    if src:
-        fc = C_MPS / wavelength_m
-        fr = np.fft.fftfreq(s, dr) * C_MPS / 2.0
-        a2 = (fc * sin_sq[:, None]) ** 2
-        resid = np.sqrt((fc + fr[None, :]) ** 2 - a2) - fc * d[:, None] - fr[None, :] / d[:, None]
-        r_ref = float(range_axis_m[s // 2])
-        # shift to the bin-0 origin does not matter: the filter is a pure range-frequency phase
-        rd = scipy.fft.ifft(
-            scipy.fft.fft(rd, axis=1) * np.exp(4j * np.pi * r_ref * resid / C_MPS), axis=1
-        )
-    pos = (range_axis_m[None, :] / d[:, None] - range_axis_m[0]) / dr
-    rd = sinc_interp(rd, pos, taps)
-    rd *= np.where(
-        band, np.exp(4j * np.pi * range_axis_m[None, :] * d[:, None] / wavelength_m), 0.0
+    n_az = scipy.fft.next_fast_len(2 * p - 1 if pad else p)
+    dtype = np.complex64 if rc.dtype == np.complex64 else np.complex128
+    filters = rda_filters(
+        n_az, dx, range_axis_m, wavelength_m, sin_max, src, centroid_squint_rad, dtype
     )
-    img = scipy.fft.ifft(rd, axis=0)[:p]
+    img = focus_block(rc, filters, taps)
     axis0 = along_track_m[0] + np.arange(p) * dx
     return Image(
         img.astype(np.complex64), axis0, np.asarray(range_axis_m, dtype=np.float64), "slant"

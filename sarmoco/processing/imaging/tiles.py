@@ -95,6 +95,19 @@ class TileLayout:
             inside &= a * grid.axis0_m[:, None] + b * grid.axis1_m[None, :] < c
         return inside
 
+    def clip(self, tiles: list[Tile]) -> list[Tile]:
+        """Finished tiles with the pixels outside :attr:`keep` zeroed (in place), those
+        wholly outside left out (``keep`` may have changed since a tile opened: a cut)."""
+        if not self.keep:
+            return tiles
+        out = []
+        for tile in tiles:
+            inside = self.kept(tile.grid)
+            tile.data[~inside] = 0.0
+            if inside.any():
+                out.append(tile)
+        return out
+
     def formed(self, tiles: range) -> range:
         """The tiles of ``tiles`` (contiguous) with a pixel inside :attr:`keep` (contiguous:
         each half-plane's boundary crosses the strip of tiles once)."""
@@ -284,13 +297,4 @@ class TileImager:
     def _pop_below(self, index: int) -> list[Tile]:
         keys = sorted(k for k in self._open if k < index)
         self._first_open = max(self._first_open, index)
-        tiles = [self._open.pop(k) for k in keys]
-        if not self.layout.keep:
-            return tiles
-        out = []
-        for tile in tiles:  # keep may have changed since the tile opened (a cut)
-            inside = self.layout.kept(tile.grid)
-            tile.data[~inside] = 0.0
-            if inside.any():
-                out.append(tile)
-        return out
+        return self.layout.clip([self._open.pop(k) for k in keys])
