@@ -62,14 +62,20 @@ class TestReferenceAndWire:
         """Defaults (seed 7), the VITA stream ID 1 the harness sends, ``radar.stream_id = 1``."""
         run_case(tmp_path)
 
-    @_xfail("worst azimuth PSLR -11.95 dB (T3), IRW 1.023 x theory")
+    def test_reference_seed_3(self, tmp_path: Path) -> None:
+        """Another draw of noise, INS error and target phases. Near the run's ends targets
+        enter or leave the beam inside autofocus subapertures, where map drift answers with
+        the edge of their echoes (85 to 520 Hz/s against rate errors of 1 to 3 Hz/s): worst
+        azimuth PSLR -10.28 dB (T3) while such lines weighed in full.
+        ``python -m bench.bench_blackbox_seeds 1-20`` runs the sweep of seeds."""
+        run_case(tmp_path, "--seed", "3")
+
     def test_left_look_utc_float32(self, tmp_path: Path) -> None:
         run_case(
             tmp_path, "--look-side", "left", "--heading", "200", "--seed", "11",
             "--tsi", "utc", "--format", "float32",
         )  # fmt: skip
 
-    @_xfail("worst azimuth PSLR -12.17 dB (T4)")
     def test_sbg_ins(self, tmp_path: Path) -> None:
         run_case(tmp_path, "--nav-format", "sbg", "--seed", "5")
 
@@ -77,11 +83,10 @@ class TestReferenceAndWire:
 class TestNavigationAndMotion:
     """ArduPilot's default streams; twice the motion and twice the INS error."""
 
-    @_xfail("worst azimuth PSLR -10.83 dB (T3)")
     def test_global_position_int(self, tmp_path: Path) -> None:
         run_case(tmp_path, "--nav-messages", "global", "--seed", "3")
 
-    @_xfail("azimuth IRW up to 1.187 x theory (T3), worst PSLR -12.72 dB")
+    @_xfail("azimuth IRW up to 1.186 x theory (T3), worst PSLR -12.95 dB")
     def test_double_motion_and_ins_error(self, tmp_path: Path) -> None:
         run_case(tmp_path, "--pp-cross", "0.8", "--pp-vert", "0.48", "--ins-error-scale", "2")
 

@@ -3,6 +3,7 @@ two steps, and the contrast that decides whether a released block is corrected."
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,12 +29,14 @@ from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 
 @dataclass(frozen=True)
 class Bands:
-    """The selected lines of one subaperture: bins (N,), bands (N, B, M) and the slant
-    range of every band bin (N * B,), m."""
+    """The selected lines of one subaperture: bins (N,), bands (N, B, M), the slant
+    range of every band bin (N * B,), m, and how evenly each line is lit over the
+    subaperture (N,), in [0, 1] (:func:`illumination_balance`)."""
 
     bins: IntArray
     bands: ComplexArray
     band_range_m: FloatArray
+    balance: FloatArray
 
 
 def select_bands(sub: ComplexArray, range_m: FloatArray, config: AutofocusConfig) -> Bands:
@@ -44,7 +47,49 @@ def select_bands(sub: ComplexArray, range_m: FloatArray, config: AutofocusConfig
         0,
         sub.shape[1] - 1,
     )
-    return Bands(bins, gather_bands(sub, bins, config.half_band), range_m[idx].ravel())
+    balance = illumination_balance(sub, bins, max(config.half_band, config.guard_bins // 2))
+    return Bands(bins, gather_bands(sub, bins, config.half_band), range_m[idx].ravel(), balance)
+
+
+def illumination_balance(sub: ComplexArray, bins: IntArray, half_width: int) -> FloatArray:
+    """How evenly each line's scatterers are lit over the subaperture, in [0, 1] (N,).
+
+    The signal energy of the bins within ``half_width`` of the line (wide enough that the
+    range walk of a moving target stays inside) in each quarter of the subaperture, the
+    noise (median bin) taken off, weakest quarter over strongest: 1 for scatterers lit
+    throughout, near 0 for one that enters or leaves the beam inside the subaperture.
+
+    Such a line is in one map-drift look and not (or only partly) in the other: the looks'
+    correlation then measures where its echo starts or stops, and where it is lit for part
+    of the subaperture its rate belongs to that part, not to the subaperture's centre. On
+    the independent ku acceptance scene (seed 3) such lines gave 85 to 520 Hz/s against
+    rate errors of 1 to 3 Hz/s and, at quality 0.32 to 0.43, passed the quality floor.
+    Dropping every unbalanced line removes them, but at the ends of a short run (wide-swath
+    ku case at 50 m altitude, 1.4 s) it leaves the end subapertures without lines or with a
+    range model lowered to a constant; :func:`measure_line_rates` multiplies a line's weight
+    by the square of its balance instead, which keeps what a partly lit line knows where
+    nothing else is (the square: wide-swath case far target -12.80 dB azimuth PSLR, -12.32
+    with the balance itself; the acceptance scene's seeds 1-7 alike).
+
+    Parameters
+    ----------
+    sub : ndarray of complex, shape (M, S)
+        Range-compressed subaperture, pulses x range bins.
+    bins : ndarray of int, shape (N,)
+        The lines' range bins.
+    half_width : int
+        Bins each side of a line counted in its energy.
+    """
+    m = sub.shape[0]
+    if m < 4 or bins.size == 0:
+        return np.ones(bins.shape[0])
+    edges = np.linspace(0, m, 5).astype(np.int64)
+    power = np.square(np.abs(sub), dtype=np.float64)
+    quarters = np.stack([power[a:b].mean(axis=0) for a, b in itertools.pairwise(edges)])
+    noise = np.median(quarters, axis=1, keepdims=True)
+    idx = np.clip(bins[:, None] + np.arange(-half_width, half_width + 1), 0, sub.shape[1] - 1)
+    signal = np.maximum(quarters - noise, 0.0)[:, idx].sum(axis=2)
+    return np.asarray(signal.min(axis=0) / np.maximum(signal.max(axis=0), 1e-300))
 
 
 def measure_line_rates(
@@ -64,7 +109,10 @@ def measure_line_rates(
     to defocus the image. A line gets
     zero weight if its estimator quality is under ``config.min_quality`` or its compressed
     peak stands less than ``config.min_peak_db`` over its median; if fewer than
-    ``config.min_lines`` lines are left, every weight is zero (no correction).
+    ``config.min_lines`` lines are left, every weight is zero (no estimate: the spliced
+    series bridges the subaperture from its neighbours). The weight is lowered for a line
+    whose scatterer is not lit throughout the subaperture (the square of its
+    :func:`illumination_balance`).
     """
     bins, bands = lines.bins, lines.bands
     if bins.size == 0:
@@ -84,15 +132,24 @@ def measure_line_rates(
     # target walks through the sidelobes' nulls as it migrates in range) or clutter
     strong = peak >= peak.max() * 10.0 ** (-config.max_below_strongest_db / 10.0)
     good = (quality >= config.min_quality) & (peak_db >= config.min_peak_db) & strong
-    if np.count_nonzero(good) < config.min_lines:
-        good[:] = False
     weight = np.where(good, 10.0 ** (peak_db / 10.0) - 1.0, 0.0)
+    weight *= lines.balance**2
+    weight[weight < NEGLIGIBLE_WEIGHT * weight.max(initial=0.0)] = 0.0
+    if np.count_nonzero(weight) < config.min_lines:
+        weight[:] = 0.0
     return LineRates(range_m[bins], delta, weight, quality, peak_db)
 
 
+NEGLIGIBLE_WEIGHT = 1e-3
+"""Lines weighing less than this fraction of the subaperture's heaviest are not used (so
+they count neither in the fits nor toward the lines a range model needs)."""
+
+
 def fit_accel(lines: LineRates, geometry: AutofocusGeometry) -> tuple[tuple[float, float], float]:
+    """(a_y, a_z), m/s², and the fit's residual, Hz/s; NaN (no estimate) with fewer than two
+    usable lines."""
     if lines.n_used < 2:
-        return (0.0, 0.0), float("nan")
+        return (float("nan"), float("nan")), float("nan")
     return fit_accelerations(
         lines.range_m, lines.rate_hz_per_s, lines.weight, geometry.depth_m, geometry.wavelength_m
     )
@@ -101,8 +158,9 @@ def fit_accel(lines: LineRates, geometry: AutofocusGeometry) -> tuple[tuple[floa
 def fit_kappa(
     lines: LineRates, geometry: AutofocusGeometry, order: int
 ) -> tuple[FloatArray, float]:
+    """κ0..κ2 and the fit's residual, Hz/s; NaN (no estimate) without a usable line."""
     if lines.n_used < 1:
-        return np.zeros(3), float("nan")
+        return np.full(3, np.nan), float("nan")
     return fit_range_polynomial(
         lines.range_m, lines.rate_hz_per_s, lines.weight, geometry.ref_range_m, order
     )

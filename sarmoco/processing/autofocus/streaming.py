@@ -178,11 +178,21 @@ class SlidingSubapertureAutofocus:
     def _spliced(self, values: History[FloatArray] | History[float], t_s: FloatArray) -> FloatArray:
         """Splice the first ``len(values)`` subaperture estimates onto ``t_s`` (only the
         estimates whose centres reach ``t_s`` and the three before them are used: the same
-        interpolation and end fits as the whole list)."""
+        interpolation and end fits as the whole list). A subaperture without an estimate
+        (NaN: no usable line) is bridged from the others, as the ends are; none at all
+        gives zeros.
+
+        A missing estimate taken for a zero rate would remove the whole rate error there
+        from the series: the subapertures short of lines are those at the ends of the
+        targets' apertures, where the rates still matter to the targets lit there.
+        """
         k0 = max(self._centres.first, min(self._first_needed(t_s), len(values) - 1) - 3)
-        return splice(
-            np.array(self._centres.since(k0, len(values))), np.array(values.since(k0)), t_s
-        )
+        centres = np.array(self._centres.since(k0, len(values)))
+        v = np.array(values.since(k0), dtype=float).reshape(centres.size, -1)
+        known = np.all(np.isfinite(v), axis=1)
+        if not np.any(known):
+            return np.zeros((np.asarray(t_s).size, v.shape[1]))
+        return splice(centres[known], v[known], t_s)
 
     def _first_needed(self, t_s: FloatArray) -> int:
         """Number of the first kept subaperture whose centre is at or after ``t_s[0]``."""
@@ -299,17 +309,18 @@ class SlidingSubapertureAutofocus:
             self._bands[j] = select_bands(self._shifted.rows[m], self.range_m, self.config)
         lines = self._bands[j]
         base = np.zeros(3)
-        if p > 0 and lines.bins.size:
+        if p > 0:
             prev = self._kappa[p - 1]
-            base = prev[j]
+            base = self._spliced(prev, np.array([self._centres[j]]))[0]
+        if p > 0 and lines.bins.size:
             zero = np.zeros(3)
             cyc = integrate_twice(t, self._spliced(prev, t), zero, zero)[0]
             phase = phase_screen(cyc, lines.band_range_m - self.geometry.ref_range_m)
             rot = np.exp(-1j * phase.T.reshape(lines.bands.shape)).astype(np.complex64)
-            lines = Bands(lines.bins, lines.bands * rot, lines.band_range_m)
+            lines = dataclasses.replace(lines, bands=lines.bands * rot)
         rates = measure_line_rates(lines, t, self.range_m, self.geometry, self.config)
         step, kres = fit_kappa(rates, self.geometry, self.config.range_order)
-        kappa = base + step
+        kappa = base + step if p == 0 or np.all(np.isfinite(step)) else base
         self._kappa[p].append(kappa)
         if p == len(self._kappa) - 1:
             del self._bands[j]
