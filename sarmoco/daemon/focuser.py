@@ -44,7 +44,16 @@ from sarmoco.processing.autofocus import (
     AutofocusGeometry,
     SlidingSubapertureAutofocus,
 )
-from sarmoco.processing.geometry import ReferenceTrack, vector_to_imaging
+from sarmoco.processing.beam import (
+    accc_centroid_hz,
+    array_axis_body,
+    array_axis_imaging,
+    centre_squint_rad,
+    doppler_hz,
+    resolve_ambiguity,
+    squint_interval_rad,
+)
+from sarmoco.processing.geometry import ReferenceTrack, look_angle, vector_to_imaging
 from sarmoco.processing.imaging.presum import AzimuthPrefilter, fill_slots, slot_steps
 from sarmoco.processing.imaging.tile_pga import StripPga, TilePga
 from sarmoco.processing.imaging.tiles import Tile, TileImager, TileLayout
@@ -101,11 +110,36 @@ class FocusOutput:
     tiles: list[Tile] = field(default_factory=list)
     tracks: list[ReferenceTrack] = field(default_factory=list)
     turn: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    doppler: list[DopplerCentroid] = field(default_factory=list)
 
     def add_tiles(self, tiles: list[Tile], track: ReferenceTrack) -> None:
         """Append tiles formed on ``track``."""
         self.tiles += tiles
         self.tracks += [track] * len(tiles)
+
+
+@dataclass(frozen=True)
+class DopplerCentroid:
+    """The Doppler centroid of one block of pulses, from the attitude and from the echoes.
+
+    Attributes
+    ----------
+    t_ns : int
+        Time of the block's first pulse, GPS ns.
+    squint_rad : float
+        Squint of the beam centre from the plane normal to the reference track at the
+        reference look angle, from the attitude and the antenna mount, rad (positive: ahead).
+    attitude_hz : float
+        Doppler centroid from the attitude and the antenna mount, ``2 v0 sin ψ / λ``, Hz.
+    echo_hz : float
+        Doppler centroid measured from the block's motion-compensated echoes (ACCC), its
+        ambiguity resolved with ``attitude_hz``, Hz (NaN: not measured).
+    """
+
+    t_ns: int
+    squint_rad: float
+    attitude_hz: float
+    echo_hz: float
 
 
 class TileSink(Protocol):
@@ -118,6 +152,7 @@ class TileSink(Protocol):
         t_ns: IntArray,
         apc_m: FloatArray,
         compensated_dy_m: FloatArray | None = None,
+        beam_squint_rad: FloatArray | None = None,
     ) -> list[Tile]:
         """Take pulses ready for backprojection (see :meth:`TileImager.add`); finished tiles."""
 
@@ -184,6 +219,7 @@ class _Segment:
         track: ReferenceTrack,
         sink: SinkFactory | None = None,
         offset_m: FloatArray | None = None,
+        quat: FloatArray | None = None,
     ) -> None:
         self.track = track
         start = np.zeros(3) if offset_m is None else np.asarray(offset_m, dtype=np.float64)
@@ -230,7 +266,6 @@ class _Segment:
             if af.enabled
             else None
         )
-        beam_rad = imaged_beam_rad(cfg)
         imager, self.tile_pga = tile_imaging(cfg, radar)
         self.imager: TileSink = imager
         self._tiles = imager
@@ -240,12 +275,16 @@ class _Segment:
         """Finished tiles waiting for the segments before this one to end."""
         if sink is not None:
             self.imager, self.tile_pga = sink(imager, track), None
-        doppler_hz = 2.0 * track.v0_mps * math.sin(beam_rad / 2.0) / radar.wavelength_m
+        self.beam = _Beam(cfg, radar, track, imager.layout)
+        if quat is not None:
+            self.beam.point(quat, track.t0_ns)
+        f_lo, f_hi = self.beam.band_hz()
         self.prefilter = (
-            AzimuthPrefilter(radar.prf_hz, doppler_hz, im.prefilter_oversampling)
-            if im.prefilter and doppler_hz > 0
+            AzimuthPrefilter(radar.prf_hz, (f_hi - f_lo) / 2.0, im.prefilter_oversampling)
+            if im.prefilter and f_hi > f_lo
             else None
         )
+        self._point_stages()
         self.presum_first = im.presum_first and self.prefilter is not None
         """The pre-filter runs on raw echoes, before range compression (``imaging.presum_first``):
         pushed pulses are raw, and everything after the pre-filter runs at its output rate."""
@@ -265,15 +304,33 @@ class _Segment:
         layout = self._tiles.layout
         self._tiles.layout = replace(layout, keep=(*layout.keep, (a, b, c)))
 
+    def _point_stages(self) -> None:
+        """Centre the pre-filter's band and the autofocus's lines on the beam's pointing."""
+        f_lo, f_hi = self.beam.band_hz()
+        if self.prefilter is not None:
+            self.prefilter.centroid_hz = (f_lo + f_hi) / 2.0
+        if self.autofocus is not None:
+            self.autofocus.geometry = replace(
+                self.autofocus.geometry, squint_rad=self.beam.scene_squint_rad
+            )
+
     def push(
-        self, pulses: ComplexArray, t_ns: IntArray, vel_ned: FloatArray
+        self,
+        pulses: ComplexArray,
+        t_ns: IntArray,
+        vel_ned: FloatArray,
+        quat: FloatArray | None = None,
     ) -> tuple[MocompSolution, list[Tile]]:
         """Compensate, autofocus and image pulses of this segment.
 
         ``pulses`` are range-compressed, or raw with :attr:`presum_first` (then: the
         scene-centre D_los phase per pulse, the pre-filter, range compression, and the
-        envelope shift and per-bin D_los at the pre-filter's output times).
+        envelope shift and per-bin D_los at the pre-filter's output times). ``quat``: the
+        pulses' attitude (body to NED), which points the beam for them (unchanged without).
         """
+        if quat is not None and t_ns.size:
+            self.beam.point(quat, int(t_ns[0]))
+            self._point_stages()
         if self.presum_first:
             motion = los_solution(
                 t_ns, self.mocomp.displacement(t_ns, vel_ned), self.mocomp.geometry
@@ -293,7 +350,9 @@ class _Segment:
         return motion, self._focus(rc, t_ns)
 
     def _focus(self, rc: ComplexArray, t_ns: IntArray) -> list[Tile]:
-        """Autofocus (when on) and image compensated, range-compressed pulses."""
+        """Autofocus (when on) and image compensated, range-compressed pulses; measure their
+        Doppler centroid."""
+        self.beam.measure(rc, t_ns, 1e9 / self._period_ns)
         if self.autofocus is None:
             return self._image(rc, t_ns)
         return self._autofocus_image(rc, t_ns)
@@ -396,7 +455,8 @@ class _Segment:
         if rc.shape[0] == 0:
             return []
         apc = self.track.position_imaging(t_ns)
-        return self._refine(self.imager.add(rc, t_ns, apc, self._compensated_dy(t_ns)))
+        dy, beam = self._compensated_dy(t_ns), self.beam.interval_at(t_ns)
+        return self._refine(self.imager.add(rc, t_ns, apc, dy, beam))
 
     def _compensated_dy(self, t_ns: IntArray) -> FloatArray | None:
         """ΔY the pulses imaged at ``t_ns`` were compensated for, m (None: no eq. 29 term).
@@ -419,6 +479,105 @@ class _Segment:
         if self.tile_pga is None:
             return tiles
         return self.tile_pga.push(tiles) + (self.tile_pga.flush() if last else [])
+
+
+class _Beam:
+    """Where a segment's beam points, block by block, and its Doppler centroid.
+
+    The antenna's array axis (``geometry.antenna_squint_deg``, fixed to the body) is turned
+    by the mean attitude of each block of pulses into the segment's imaging frame
+    (:mod:`sarmoco.processing.beam`). From it: the squint interval the pixels take (the
+    imaged beam, ``imaging.azimuth_beamwidth_deg`` plus the squint tolerance each side,
+    over the look angles of the swath, for the block's pointing and for the mean pointing
+    of the segment's blocks so far, whichever reaches further each side: the attitude
+    wanders by tenths of a degree to a degree about a steady crab), kept per block from
+    its first pulse's time for the pulses imaged later; the Doppler band of that interval (the pre-filter's); the squint of the beam
+    centre at the scene centre (the autofocus's); and the Doppler centroid at the
+    reference look angle, beside the one measured from the echoes (:attr:`centroids`).
+    Before any attitude (and without one) the beam is broadside to the track.
+    """
+
+    def __init__(
+        self, cfg: Config, radar: RadarParams, track: ReferenceTrack, layout: TileLayout
+    ) -> None:
+        geo = cfg.geometry
+        self._axis_body = array_axis_body(math.radians(geo.antenna_squint_deg), geo.look_side)
+        self._track = track
+        self._half_rad = imaged_beam_rad(cfg) / 2.0
+        edges = layout.ground_range_m + np.array([-0.5, 0.5]) * layout.swath_m
+        self._swath_look_rad = np.arctan2(edges, layout.height_m)
+        self._scene_look_rad = float(look_angle(geo.center_slant_range_m, geo.height_m))
+        self._ref_look_rad = (
+            self._scene_look_rad
+            if geo.antenna_depression_deg is None
+            else math.radians(90.0 - geo.antenna_depression_deg)
+        )
+        self._speed_mps, self._wavelength_m = track.v0_mps, radar.wavelength_m
+        self.axis = np.array([1.0, 0.0, 0.0])
+        """Array axis of the latest block in the imaging frame (broadside: along track)."""
+        self._axis_sum = np.zeros(3)
+        """Sum of the blocks' array axes (their mean: the segment's steady pointing)."""
+        self._changes_ns = np.zeros(1, np.int64)
+        self._intervals = np.array([[-self._half_rad, self._half_rad]])
+        """Times (GPS ns) from which each squint interval (rad) holds, and the intervals."""
+        self.centroids: list[DopplerCentroid] = []
+        """Doppler centroids measured and not yet taken (:meth:`take_centroids`)."""
+        self._pending: DopplerCentroid | None = None
+
+    @property
+    def scene_squint_rad(self) -> float:
+        """Squint of the beam centre at the scene centre's look angle, rad."""
+        return float(centre_squint_rad(self.axis, self._scene_look_rad))
+
+    def point(self, quat: FloatArray, t_ns: int) -> None:
+        """Point the beam by the mean attitude ``quat`` (P, 4) of the pulses from ``t_ns``
+        (GPS ns) on; rows that are not finite are left out (none finite: unchanged)."""
+        q = np.asarray(quat, dtype=np.float64).reshape(-1, 4)
+        if not np.all(np.isfinite(q), axis=1).any():
+            return
+        self.axis = array_axis_imaging(q, self._axis_body, self._track)
+        self._axis_sum += self.axis
+        mean = self._axis_sum / np.linalg.norm(self._axis_sum)
+        lo, hi = squint_interval_rad(self.axis, self._half_rad, self._swath_look_rad)
+        lo_m, hi_m = squint_interval_rad(mean, self._half_rad, self._swath_look_rad)
+        lo, hi = min(lo, lo_m), max(hi, hi_m)
+        keep = self._changes_ns < t_ns
+        self._changes_ns = np.append(self._changes_ns[keep], t_ns)
+        self._intervals = np.vstack([self._intervals[keep], [lo, hi]])
+        squint = float(centre_squint_rad(self.axis, self._ref_look_rad))
+        f_dc = float(doppler_hz(self._speed_mps, self._wavelength_m, squint))
+        self._pending = DopplerCentroid(t_ns, squint, f_dc, math.nan)
+
+    def band_hz(self) -> tuple[float, float]:
+        """Doppler band of the latest squint interval, Hz: (low, high)."""
+        lo, hi = doppler_hz(self._speed_mps, self._wavelength_m, self._intervals[-1])
+        return float(lo), float(hi)
+
+    def interval_at(self, t_ns: IntArray) -> FloatArray:
+        """Squint interval of the pulses imaged at ``t_ns`` (GPS ns), rad, (P, 2); the
+        intervals before the one of the first of them are forgotten."""
+        k = np.clip(np.searchsorted(self._changes_ns, t_ns, side="right") - 1, 0, None)
+        first = int(k[0]) if k.size else 0
+        self._changes_ns, self._intervals = self._changes_ns[first:], self._intervals[first:]
+        return self._intervals[k - first]
+
+    def measure(self, rc: ComplexArray, t_ns: IntArray, rate_hz: float) -> None:
+        """Measure the Doppler centroid of compensated, range-compressed pulses at
+        ``rate_hz`` (ACCC) for the block pointed last, its ambiguity resolved with the
+        attitude's; the first call after :meth:`point` records it."""
+        if self._pending is None or rc.shape[0] < 2:
+            return
+        p = self._pending
+        echo = accc_centroid_hz(rc, rate_hz)
+        if math.isfinite(echo):
+            echo = resolve_ambiguity(echo, p.attitude_hz, rate_hz)
+        self.centroids.append(replace(p, t_ns=int(t_ns[0]), echo_hz=echo))
+        self._pending = None
+
+    def take_centroids(self) -> list[DopplerCentroid]:
+        """The centroids recorded since the last call."""
+        out, self.centroids = self.centroids, []
+        return out
 
 
 def imaged_beam_rad(cfg: Config) -> float:
@@ -480,6 +639,9 @@ class Focuser:
     sink : SinkFactory, optional
         Hand every segment's pulses ready for backprojection to a sink made by this
         instead of imaging them (no tiles come out; see :class:`TileSink`).
+    quat : ndarray, shape (P, 4), optional
+        Attitude (scalar-first, body to NED) of the first pulses: points the first
+        segment's beam (its pre-filter band); broadside to the track when omitted.
     """
 
     def __init__(
@@ -488,6 +650,7 @@ class Focuser:
         t0_ns: int,
         velocity_ned: FloatArray,
         sink: SinkFactory | None = None,
+        quat: FloatArray | None = None,
     ) -> None:
         self.cfg = cfg
         self._sink = sink
@@ -503,7 +666,7 @@ class Focuser:
             if cfg.mocomp.segments
             else None
         )
-        self.segment: _Segment | None = _Segment(cfg, self.radar, track, sink)
+        self.segment: _Segment | None = _Segment(cfg, self.radar, track, sink, quat=quat)
         self._done = self.segment
         """The segment closed last (what :attr:`track` and :attr:`autofocus` show after it)."""
         self.segments = 1
@@ -511,9 +674,10 @@ class Focuser:
         self._tails: list[tuple[_Segment, int]] = []
         """Segments before a deviation cut still taking pulses, oldest first, each with the
         time from which it takes none (GPS ns)."""
-        self._recent: list[tuple[ComplexArray, IntArray, FloatArray]] = []
-        """Pulses (as pushed), times (GPS ns) and velocities (NED, m/s) the current segment
-        took within the overlap (what a segment starting at a deviation cut takes first)."""
+        self._recent: list[tuple[ComplexArray, IntArray, FloatArray, FloatArray]] = []
+        """Pulses (as pushed), times (GPS ns), velocities (NED, m/s) and attitudes the
+        current segment took within the overlap (what a segment starting at a deviation cut
+        takes first)."""
 
     @property
     def track(self) -> ReferenceTrack:
@@ -536,6 +700,7 @@ class Focuser:
         t_ns: IntArray,
         vel_ned: FloatArray,
         known: BoolArray | None = None,
+        quat: FloatArray | None = None,
     ) -> FocusOutput:
         """Process one block of aligned raw pulses.
 
@@ -551,15 +716,19 @@ class Focuser:
         known : ndarray of bool, shape (P,), optional
             Pulses with navigation (false: zeroed echoes with a placeholder velocity
             across a navigation gap, which never sets a segment's track); all when omitted.
+        quat : ndarray, shape (P, 4), optional
+            Attitude at the pulses (scalar-first, body to NED): points the beam (its mean
+            over the block); the beam keeps its pointing when omitted.
         """
+        q = np.full((t_ns.shape[0], 4), np.nan) if quat is None else np.asarray(quat)
         # range compression here, or after the pre-filter (imaging.presum_first)
         rc = raw if self._last.presum_first else rangecomp.compress(self.radar, raw, self.window)
         n = t_ns.shape[0]
         out = FocusOutput(turn=np.zeros(n, dtype=bool))
         if self.segmenter is None:
             assert self.segment is not None
-            out.motion, tiles = self.segment.push(rc, t_ns, vel_ned)
-            out.add_tiles(tiles, self.segment.track)
+            out.motion, tiles = self.segment.push(rc, t_ns, vel_ned, q)
+            self._emit(out, self.segment, tiles)
             return out
         plan = self.segmenter.plan(t_ns, vel_ned, known)
         out.turn = plan.turn
@@ -573,19 +742,19 @@ class Focuser:
                 track, cut_x, offset = new[a]
                 if math.isnan(cut_x):
                     self._close(out)
-                    self.segment = _Segment(self.cfg, self.radar, track, self._sink)
+                    self.segment = _Segment(self.cfg, self.radar, track, self._sink, quat=q[a:b])
                 else:
-                    self._hand_over(out, track, float(cut_x), offset, int(t_ns[a]))
+                    self._hand_over(out, track, float(cut_x), offset, int(t_ns[a]), q[a:b])
                 self.segments += 1
             if plan.turn[a]:
                 self._close(out)
                 motion.append(_nan_motion(t_ns[a:b]))
                 continue
             assert self.segment is not None
-            m, tiles = self.segment.push(rc[a:b], t_ns[a:b], vel_ned[a:b])
+            m, tiles = self.segment.push(rc[a:b], t_ns[a:b], vel_ned[a:b], q[a:b])
             motion.append(m)
             self._emit(out, self.segment, tiles)
-            self._run_on(out, rc[a:b], t_ns[a:b], vel_ned[a:b])
+            self._run_on(out, rc[a:b], t_ns[a:b], vel_ned[a:b], q[a:b])
         out.motion = _join(motion) if motion else _nan_motion(t_ns)
         return out
 
@@ -596,10 +765,12 @@ class Focuser:
         cut_x: float,
         offset: FloatArray,
         t_cut: int,
+        quat: FloatArray,
     ) -> None:
         """Start the segment of a deviation cut at ``t_cut`` (GPS ns) that overlaps the
         current one (see the module docstring); ``cut_x``: the cut's x on ``track``, m;
-        ``offset``: the APC's offset from it at its first pulse, imaging frame, m."""
+        ``offset``: the APC's offset from it at its first pulse, imaging frame, m;
+        ``quat``: the attitude of the pulses from the cut (body to NED)."""
         old = self.segment
         assert old is not None and self.segmenter is not None
         # the old frame's pixels p before the cut line: x_hat · (p_ned - origin) < cut_x
@@ -607,33 +778,43 @@ class Focuser:
         shift = float(x_hat @ (before.origin_ned - track.origin_ned))
         old.keep(float(before.x_hat @ x_hat), float(before.y_hat @ x_hat), cut_x - shift)
         self._tails.append((old, t_cut + self.segmenter.limits.overlap_ns))
-        self.segment = _Segment(self.cfg, self.radar, track, self._sink, offset)
+        self.segment = _Segment(self.cfg, self.radar, track, self._sink, offset, quat)
         self.segment.keep(-1.0, 0.0, -cut_x)
         recent, self._recent = self._recent, []
-        for pulses, t, vel in recent:
+        for pulses, t, vel, q in recent:
             rows = t >= track.t0_ns
             if rows.any():
-                _, tiles = self.segment.push(pulses[rows], t[rows], vel[rows])
+                _, tiles = self.segment.push(pulses[rows], t[rows], vel[rows], q[rows])
                 self._emit(out, self.segment, tiles)
-                self._recent.append((pulses[rows], t[rows], vel[rows]))
+                self._recent.append((pulses[rows], t[rows], vel[rows], q[rows]))
 
-    def _run_on(self, out: FocusOutput, pulses: ComplexArray, t: IntArray, vel: FloatArray) -> None:
+    def _run_on(
+        self,
+        out: FocusOutput,
+        pulses: ComplexArray,
+        t: IntArray,
+        vel: FloatArray,
+        quat: FloatArray,
+    ) -> None:
         """Give pulses the current segment took to the segments before deviation cuts that
         still take them (ending those past their time), and keep them for the next cut."""
         for old, until_ns in self._tails:
             rows = t < until_ns
             if rows.any():
-                self._emit(out, old, old.push(pulses[rows], t[rows], vel[rows])[1])
+                pushed = old.push(pulses[rows], t[rows], vel[rows], quat[rows])
+                self._emit(out, old, pushed[1])
         while self._tails and t[-1] >= self._tails[0][1]:
             self._end_tail(out)
         assert self.segmenter is not None
         overlap_ns = self.segmenter.limits.overlap_ns
         self._recent = [p for p in self._recent if p[1][-1] >= t[-1] - overlap_ns]
         if overlap_ns > 0:
-            self._recent.append((pulses, t, vel))
+            self._recent.append((pulses, t, vel, quat))
 
     def _emit(self, out: FocusOutput, segment: _Segment, tiles: list[Tile]) -> None:
-        """Hand out a segment's finished tiles, or hold them while an older one runs on."""
+        """Hand out a segment's finished tiles, or hold them while an older one runs on;
+        hand out its Doppler centroids."""
+        out.doppler += segment.beam.take_centroids()
         oldest = self._tails[0][0] if self._tails else segment
         if segment is oldest:
             out.add_tiles(tiles, segment.track)
@@ -644,6 +825,7 @@ class Focuser:
         """End the oldest segment still running past its cut; release the next one's tiles."""
         old, _ = self._tails.pop(0)
         out.add_tiles(old.finish(), old.track)
+        out.doppler += old.beam.take_centroids()
         after = self._tails[0][0] if self._tails else self.segment
         if after is not None:
             out.add_tiles(after.held, after.track)
@@ -663,6 +845,7 @@ class Focuser:
         self._recent = []
         if self.segment is not None:
             out.add_tiles(self.segment.finish(), self.segment.track)
+            out.doppler += self.segment.beam.take_centroids()
             self._done = self.segment
             self.segment = None
 

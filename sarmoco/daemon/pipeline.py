@@ -442,7 +442,7 @@ class Pipeline:
         if p.usable.any():
             k = int(np.flatnonzero(p.usable)[-1])
             self._last_nav = (int(p.t_ns[k]), p.vel_ned[k], p.quat[k])
-        out = self.focuser.push(p.raw, p.t_ns, p.vel_ned, p.usable)
+        out = self.focuser.push(p.raw, p.t_ns, p.vel_ned, p.usable, p.quat)
         self.summary.pulses_processed += int(np.count_nonzero(p.usable))
         self._record_motion(p, out)
         self._record(out)
@@ -483,8 +483,11 @@ class Pipeline:
         if not p.usable.any():
             return None
         p = p.since(int(np.argmax(p.usable)))
-        start_vel = p.vel_ned[p.usable][: self.cfg.imaging.block_pulses].mean(axis=0)
-        self.focuser = Focuser(self.cfg, int(p.t_ns[0]), start_vel, self.sink)
+        first = slice(0, self.cfg.imaging.block_pulses)
+        start_vel = p.vel_ned[p.usable][first].mean(axis=0)
+        self.focuser = Focuser(
+            self.cfg, int(p.t_ns[0]), start_vel, self.sink, quat=p.quat[p.usable][first]
+        )
         self.recorder.set_attribute(
             schema.REFERENCE_TRACK_ATTR, schema.encode_reference_track(self.focuser.track)
         )

@@ -23,6 +23,7 @@ from sarmoco.processing.autofocus.separation import (
     look_angle,
 )
 from sarmoco.processing.autofocus.settings import AutofocusConfig, AutofocusGeometry
+from sarmoco.processing.mocomp import shift_range
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 
 
@@ -34,6 +35,17 @@ class Bands:
     bins: IntArray
     bands: ComplexArray
     band_range_m: FloatArray
+
+
+def unwalk(sub: ComplexArray, t_s: FloatArray, bin_m: float, geometry: AutofocusGeometry) -> ComplexArray:
+    """A subaperture (pulses x bins at times ``t_s``, s; bins ``bin_m`` apart, m) with the
+    range walk of the beam centre removed about its mid time (a squinted beam,
+    :attr:`AutofocusGeometry.walk_mps`): each target stays on its line while its phase
+    history is kept. The subaperture itself when the beam is broadside."""
+    if geometry.walk_mps == 0.0 or sub.shape[0] == 0:
+        return sub
+    mid = 0.5 * (float(t_s[0]) + float(t_s[-1]))
+    return shift_range(sub, -geometry.walk_mps * (np.asarray(t_s) - mid) / bin_m)
 
 
 def select_bands(sub: ComplexArray, range_m: FloatArray, config: AutofocusConfig) -> Bands:
@@ -70,7 +82,7 @@ def measure_line_rates(
     if bins.size == 0:
         empty = np.zeros(0)
         return LineRates(empty, empty, empty, empty, empty)
-    ref = nominal_rate(range_m[bins], geometry.speed_mps, geometry.wavelength_m)
+    ref = nominal_rate(range_m[bins], geometry.rate_speed_mps, geometry.wavelength_m)
     if config.estimator == "map-drift":
         delta, quality = map_drift(bands, t_s, ref)
     else:
@@ -131,7 +143,7 @@ def block_contrast(
     the targets on those lines, the larger the contrast. Needs at least 8 pulses.
     """
     bands = gather_bands(data, bins, 0)
-    ref = nominal_rate(range_m[bins], geometry.speed_mps, geometry.wavelength_m)
+    ref = nominal_rate(range_m[bins], geometry.rate_speed_mps, geometry.wavelength_m)
     return float(np.sum(line_contrast(bands, t_s, ref)))
 
 

@@ -40,6 +40,7 @@ from sarmoco.processing.autofocus.lines import (
     los_accel,
     measure_line_rates,
     select_bands,
+    unwalk,
 )
 from sarmoco.processing.autofocus.report import AutofocusReport, LineRates, SubapertureReport
 from sarmoco.processing.autofocus.settings import AutofocusConfig, AutofocusGeometry
@@ -208,7 +209,7 @@ class SlidingSubapertureAutofocus:
         m = _members(self._t, self._start(j), self.config)
         self._centres.append(self._start(j) + 0.5 * self.config.subaperture_s)
         if self.config.envelope_step:
-            sub = self._data.rows[m]
+            sub = unwalk(self._data.rows[m], self._t[m], self._bin_m, self.geometry)
             lines = measure_line_rates(
                 select_bands(sub, self.range_m, self.config),
                 self._t[m],
@@ -296,7 +297,8 @@ class SlidingSubapertureAutofocus:
         m = _members(self._t, self._start(j), self.config)
         t = self._t[m]
         if p == 0:
-            self._bands[j] = select_bands(self._shifted.rows[m], self.range_m, self.config)
+            sub = unwalk(self._shifted.rows[m], t, self._bin_m, self.geometry)
+            self._bands[j] = select_bands(sub, self.range_m, self.config)
         lines = self._bands[j]
         base = np.zeros(3)
         if p > 0 and lines.bins.size:
