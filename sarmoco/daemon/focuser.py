@@ -45,10 +45,11 @@ from sarmoco.processing.autofocus import (
     SlidingSubapertureAutofocus,
 )
 from sarmoco.processing.beam import (
-    accc_centroid_hz,
+    accc_correlation,
     array_axis_body,
     array_axis_imaging,
     centre_squint_rad,
+    correlation_centroid_hz,
     doppler_hz,
     resolve_ambiguity,
     squint_interval_rad,
@@ -279,8 +280,9 @@ class _Segment:
         if quat is not None:
             self.beam.point(quat, track.t0_ns)
         f_lo, f_hi = self.beam.band_hz()
+        # the band holds the beam from the attitude and room for the echoes' beside it
         self.prefilter = (
-            AzimuthPrefilter(radar.prf_hz, (f_hi - f_lo) / 2.0, im.prefilter_oversampling)
+            AzimuthPrefilter(radar.prf_hz, f_hi - f_lo, im.prefilter_oversampling)
             if im.prefilter and f_hi > f_lo
             else None
         )
@@ -353,6 +355,7 @@ class _Segment:
         """Autofocus (when on) and image compensated, range-compressed pulses; measure their
         Doppler centroid."""
         self.beam.measure(rc, t_ns, 1e9 / self._period_ns)
+        self._point_stages()
         if self.autofocus is None:
             return self._image(rc, t_ns)
         return self._autofocus_image(rc, t_ns)
@@ -523,10 +526,18 @@ class _Beam:
         self.centroids: list[DopplerCentroid] = []
         """Doppler centroids measured and not yet taken (:meth:`take_centroids`)."""
         self._pending: DopplerCentroid | None = None
+        self._correlation = 0j
+        """Pulse-to-pulse correlation of the segment's echoes so far (ACCC)."""
+        self._echo_squint_rad: float | None = None
+        """Squint of the centroid of that correlation, rad (None: not measured yet)."""
 
     @property
     def scene_squint_rad(self) -> float:
-        """Squint of the beam centre at the scene centre's look angle, rad."""
+        """Squint of the beam centre at the scene centre's look angle, rad: that of the
+        segment's echoes once measured (where the echoes' energy is, what the autofocus's
+        lines see), else the attitude's."""
+        if self._echo_squint_rad is not None:
+            return self._echo_squint_rad
         return float(centre_squint_rad(self.axis, self._scene_look_rad))
 
     def point(self, quat: FloatArray, t_ns: int) -> None:
@@ -564,15 +575,32 @@ class _Beam:
     def measure(self, rc: ComplexArray, t_ns: IntArray, rate_hz: float) -> None:
         """Measure the Doppler centroid of compensated, range-compressed pulses at
         ``rate_hz`` (ACCC) for the block pointed last, its ambiguity resolved with the
-        attitude's; the first call after :meth:`point` records it."""
+        attitude's; the first call after :meth:`point` records it.
+
+        The beam the pixels take for that block then also covers the interval centred on
+        the centroid of the segment's echoes so far (their correlations summed): the beam
+        is where the echoes say as well as where the attitude says (an INS heading a
+        degree off, an antenna that does not follow the body's every motion).
+        """
         if self._pending is None or rc.shape[0] < 2:
             return
         p = self._pending
-        echo = accc_centroid_hz(rc, rate_hz)
+        corr = accc_correlation(rc)
+        self._correlation += corr
+        echo = correlation_centroid_hz(corr, rate_hz)
         if math.isfinite(echo):
             echo = resolve_ambiguity(echo, p.attitude_hz, rate_hz)
         self.centroids.append(replace(p, t_ns=int(t_ns[0]), echo_hz=echo))
         self._pending = None
+        steady = correlation_centroid_hz(self._correlation, rate_hz)
+        if math.isfinite(steady):
+            steady = resolve_ambiguity(steady, p.attitude_hz, rate_hz)
+            sine = steady * self._wavelength_m / (2.0 * self._speed_mps)
+            if abs(sine) < 1.0:
+                self._echo_squint_rad = math.asin(sine)
+                shift = self._echo_squint_rad - p.squint_rad
+                lo, hi = self._intervals[-1]
+                self._intervals[-1] = (min(lo, lo + shift), max(hi, hi + shift))
 
     def take_centroids(self) -> list[DopplerCentroid]:
         """The centroids recorded since the last call."""

@@ -108,6 +108,11 @@ class RunSummary:
     pulses_duplicate: int = 0
     pulses_reordered: int = 0
     pulses_late_dropped: int = 0
+    doppler_attitude_hz: float = math.nan
+    """Doppler centroid of the latest block from the attitude and the antenna mount, Hz."""
+    doppler_echo_hz: float = math.nan
+    """Doppler centroid of the latest block measured from the echoes, Hz (a wrong mount or
+    attitude source shows as a difference from ``doppler_attitude_hz``)."""
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-able form."""
@@ -123,7 +128,14 @@ class RunSummary:
             "pulses_duplicate": self.pulses_duplicate,
             "pulses_reordered": self.pulses_reordered,
             "pulses_late_dropped": self.pulses_late_dropped,
+            "doppler_attitude_hz": _finite_or_none(self.doppler_attitude_hz),
+            "doppler_echo_hz": _finite_or_none(self.doppler_echo_hz),
         }
+
+
+def _finite_or_none(value: float) -> float | None:
+    """``value``, or None when it is not finite (JSON has no NaN)."""
+    return value if math.isfinite(value) else None
 
 
 @dataclass(frozen=True)
@@ -522,8 +534,16 @@ class Pipeline:
         return replace(p, raw=raw, vel_ned=vel, quat=quat)
 
     def _record(self, out: FocusOutput) -> None:
-        """Record the autofocus estimates made so far and the tiles of ``out``."""
+        """Record the autofocus estimates made so far, the Doppler centroids and the tiles
+        of ``out``."""
         self._record_autofocus()
+        if out.doppler:
+            self.recorder.append_rows(schema.DOPPLER, schema.encode_doppler(out.doppler))
+            last = out.doppler[-1]
+            self.summary.doppler_attitude_hz, self.summary.doppler_echo_hz = (
+                last.attitude_hz,
+                last.echo_hz,
+            )
         for tile, track in zip(out.tiles, out.tracks, strict=True):
             metrics = recorded_tile_metrics(tile)
             self.recorder.add_image(

@@ -143,12 +143,23 @@ def accc_centroid_hz(rc: ComplexArray, prf_hz: float) -> float:
     float
         The centroid, Hz; NaN when the pulses carry no energy.
     """
+    return correlation_centroid_hz(accc_correlation(rc), prf_hz)
+
+
+def accc_correlation(rc: ComplexArray) -> complex:
+    """``Σ_n Σ_r s[n + 1, r] conj(s[n, r])`` of pulses (P, S), P >= 2: the sum whose phase
+    :func:`accc_centroid_hz` turns into a centroid (sums of several blocks add up)."""
     if rc.shape[0] < 2:
-        raise ProcessingError(f"accc_centroid_hz: {rc.shape[0]} pulses (need 2)")
-    acc = complex(np.vdot(rc[:-1], rc[1:]))
-    if acc == 0:
+        raise ProcessingError(f"accc_correlation: {rc.shape[0]} pulses (need 2)")
+    return complex(np.vdot(rc[:-1], rc[1:]))
+
+
+def correlation_centroid_hz(correlation: complex, prf_hz: float) -> float:
+    """Doppler centroid of a pulse-to-pulse correlation (:func:`accc_correlation`) at pulse
+    rate ``prf_hz``, in ``(-PRF/2, PRF/2]``, Hz; NaN for a zero correlation."""
+    if correlation == 0:
         return math.nan
-    return prf_hz * math.atan2(acc.imag, acc.real) / (2.0 * math.pi)
+    return prf_hz * math.atan2(correlation.imag, correlation.real) / (2.0 * math.pi)
 
 
 def resolve_ambiguity(measured_hz: float, expected_hz: float, prf_hz: float) -> float:
