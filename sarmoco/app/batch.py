@@ -19,8 +19,8 @@ file with its INS log) is reprocessed in two kinds of task:
    that were created beforehand (region writes: each block fills only its tiles'
    arrays). A block replays the imager calls whose pulses' beam footprints reach its
    tiles (a pixel takes the pulses whose beam sees it), and one tile more each side
-   when tile PGA is on (it focuses a tile with its raw neighbours). Its tiles then get the same pulses,
-   cut into the same calls and chunks, in the same order as in the single-process
+   when tile PGA is on (it focuses a tile with its raw neighbours). Its tiles then get
+   the same pulses, cut into the same calls and chunks, in the same order as in the single-process
    replay: the images agree to float rounding (the tests find them bit-equal).
 
 Backprojection is the bulk of the work in a full-size run; the front ends of many

@@ -2,10 +2,11 @@
 
 A batch (:mod:`sarmoco.app.batch`) replays a recording once with its imaging deferred:
 each segment of the focuser hands what its tile imager would take (range-compressed,
-compensated, autofocused, pre-filtered pulses, their imaging times, APCs and the ΔY
-of eq. 29, and their beams' squint intervals) to a :class:`StreamSink`, which appends them to ``seg_NNN/`` of a scratch
-store and remembers where each imager call began. Blocks of tiles are then formed
-from it on any worker by replaying the calls whose pulses reach the block
+compensated, autofocused, pre-filtered pulses, their imaging times, APCs, the ΔY
+of eq. 29 and their beams' squint intervals) to a :class:`StreamSink`, which appends
+them to ``seg_NNN/`` of a scratch store and remembers where each imager call began.
+Blocks of tiles are then formed from it on any worker by replaying the calls whose
+pulses' footprints reach the block
 (:meth:`SegmentStream.calls_within`), so a block's tiles get exactly the calls, in the
 same order and cut the same way, as in the single-process replay.
 

@@ -280,9 +280,8 @@ class _Segment:
         if quat is not None:
             self.beam.point(quat, track.t0_ns)
         f_lo, f_hi = self.beam.band_hz()
-        # the band holds the beam from the attitude and room for the echoes' beside it
         self.prefilter = (
-            AzimuthPrefilter(radar.prf_hz, f_hi - f_lo, im.prefilter_oversampling)
+            AzimuthPrefilter(radar.prf_hz, (f_hi - f_lo) / 2.0, im.prefilter_oversampling)
             if im.prefilter and f_hi > f_lo
             else None
         )
@@ -308,9 +307,8 @@ class _Segment:
 
     def _point_stages(self) -> None:
         """Centre the pre-filter's band and the autofocus's lines on the beam's pointing."""
-        f_lo, f_hi = self.beam.band_hz()
         if self.prefilter is not None:
-            self.prefilter.centroid_hz = (f_lo + f_hi) / 2.0
+            self.prefilter.centroid_hz = self.beam.centroid_hz
         if self.autofocus is not None:
             self.autofocus.geometry = replace(
                 self.autofocus.geometry, squint_rad=self.beam.scene_squint_rad
@@ -489,15 +487,18 @@ class _Beam:
 
     The antenna's array axis (``geometry.antenna_squint_deg``, fixed to the body) is turned
     by the mean attitude of each block of pulses into the segment's imaging frame
-    (:mod:`sarmoco.processing.beam`). From it: the squint interval the pixels take (the
-    imaged beam, ``imaging.azimuth_beamwidth_deg`` plus the squint tolerance each side,
-    over the look angles of the swath, for the block's pointing and for the mean pointing
-    of the segment's blocks so far, whichever reaches further each side: the attitude
-    wanders by tenths of a degree to a degree about a steady crab), kept per block from
-    its first pulse's time for the pulses imaged later; the Doppler band of that interval (the pre-filter's); the squint of the beam
-    centre at the scene centre (the autofocus's); and the Doppler centroid at the
-    reference look angle, beside the one measured from the echoes (:attr:`centroids`).
-    Before any attitude (and without one) the beam is broadside to the track.
+    (:mod:`sarmoco.processing.beam`). The pixels take the squint interval of the imaged
+    beam (``imaging.azimuth_beamwidth_deg`` plus the squint tolerance each side, over the
+    look angles of the swath) about three pointings, whichever reaches further each side:
+    the block's, the mean of the segment's blocks so far (the attitude wanders by tenths
+    of a degree to a degree about a steady crab), and the one of the Doppler centroid
+    measured from the segment's echoes so far (an INS heading a degree off, an antenna that
+    does not follow the body's every motion). The interval holds from the block's first
+    pulse, for the pulses imaged later. The pre-filter keeps the Doppler band of the
+    attitude's interval, centred on the echoes' centroid once measured; the autofocus's
+    lines take the echoes' squint (else the attitude's). Each block's centroid from the
+    attitude (at the reference look angle) and from its echoes go to the store
+    (:attr:`centroids`). Before any attitude (and without one) the beam is broadside.
     """
 
     def __init__(
@@ -523,6 +524,10 @@ class _Beam:
         self._changes_ns = np.zeros(1, np.int64)
         self._intervals = np.array([[-self._half_rad, self._half_rad]])
         """Times (GPS ns) from which each squint interval (rad) holds, and the intervals."""
+        self._attitude_interval = self._intervals[-1].copy()
+        self._attitude_squint_rad = 0.0
+        """The latest block's squint interval and beam-centre squint at the scene centre
+        from its attitude alone, rad."""
         self.centroids: list[DopplerCentroid] = []
         """Doppler centroids measured and not yet taken (:meth:`take_centroids`)."""
         self._pending: DopplerCentroid | None = None
@@ -551,18 +556,35 @@ class _Beam:
         mean = self._axis_sum / np.linalg.norm(self._axis_sum)
         lo, hi = squint_interval_rad(self.axis, self._half_rad, self._swath_look_rad)
         lo_m, hi_m = squint_interval_rad(mean, self._half_rad, self._swath_look_rad)
+        self._attitude_interval = np.array([lo, hi])
         lo, hi = min(lo, lo_m), max(hi, hi_m)
         keep = self._changes_ns < t_ns
         self._changes_ns = np.append(self._changes_ns[keep], t_ns)
         self._intervals = np.vstack([self._intervals[keep], [lo, hi]])
         squint = float(centre_squint_rad(self.axis, self._ref_look_rad))
+        self._attitude_squint_rad = float(centre_squint_rad(self.axis, self._scene_look_rad))
         f_dc = float(doppler_hz(self._speed_mps, self._wavelength_m, squint))
         self._pending = DopplerCentroid(t_ns, squint, f_dc, math.nan)
 
     def band_hz(self) -> tuple[float, float]:
-        """Doppler band of the latest squint interval, Hz: (low, high)."""
-        lo, hi = doppler_hz(self._speed_mps, self._wavelength_m, self._intervals[-1])
+        """Doppler band of the latest block's beam from the attitude, Hz: (low, high)."""
+        lo, hi = doppler_hz(self._speed_mps, self._wavelength_m, self._attitude_interval)
         return float(lo), float(hi)
+
+    @property
+    def centroid_hz(self) -> float:
+        """Centre of the Doppler band the pre-filter keeps (as wide as :meth:`band_hz`'s),
+        Hz: the centroid of the segment's echoes once measured, else the middle of the
+        attitude's band."""
+        squint = self._echo_squint_rad
+        if squint is None:
+            return float(np.mean(self.band_hz()))
+        shift = squint - self._attitude_squint_rad
+        return float(
+            np.mean(
+                doppler_hz(self._speed_mps, self._wavelength_m, self._attitude_interval + shift)
+            )
+        )
 
     def interval_at(self, t_ns: IntArray) -> FloatArray:
         """Squint interval of the pulses imaged at ``t_ns`` (GPS ns), rad, (P, 2); the

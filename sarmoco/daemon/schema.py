@@ -58,12 +58,12 @@ import numpy.typing as npt
 
 from sarmoco.daemon.echoring import SampleFormat, sample_dtype, sample_shape
 from sarmoco.daemon.flags import FLAG_DTYPE, PulseFlag
+from sarmoco.daemon.focuser import DopplerCentroid
 from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.drivers.samples import AttitudeSample, EchoPacket, Validity, VelocitySample
 from sarmoco.errors import RecorderError
 from sarmoco.processing.array.imaging3d import DemProduct
 from sarmoco.processing.autofocus.report import SubapertureReport
-from sarmoco.daemon.focuser import DopplerCentroid
 from sarmoco.processing.geometry import ReferenceTrack
 
 STORE_LAYOUT_VERSION = 2

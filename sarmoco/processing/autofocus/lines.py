@@ -37,7 +37,9 @@ class Bands:
     band_range_m: FloatArray
 
 
-def unwalk(sub: ComplexArray, t_s: FloatArray, bin_m: float, geometry: AutofocusGeometry) -> ComplexArray:
+def unwalk(
+    sub: ComplexArray, t_s: FloatArray, bin_m: float, geometry: AutofocusGeometry
+) -> ComplexArray:
     """A subaperture (pulses x bins at times ``t_s``, s; bins ``bin_m`` apart, m) with the
     range walk of the beam centre removed about its mid time (a squinted beam,
     :attr:`AutofocusGeometry.walk_mps`): each target stays on its line while its phase

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-
 from dataclasses import dataclass
 from typing import Literal
 
@@ -39,7 +38,7 @@ class AutofocusGeometry:
 
     @property
     def rate_speed_mps(self) -> float:
-        """Speed across the line of sight at the beam centre, ``v cos ψ`` (its Doppler rate's), m/s."""
+        """Speed across the beam centre's line of sight, ``v cos ψ`` (of its Doppler rate), m/s."""
         return self.speed_mps * math.cos(self.squint_rad)
 
     @property

@@ -435,7 +435,10 @@ class SlidingSubapertureAutofocus:
 
     def _no_worse(self, original: ComplexArray, focused: ComplexArray, t_s: FloatArray) -> bool:
         """Whether ``focused`` keeps at least :data:`CONTRAST_MARGIN` of the contrast of
-        ``original`` on the latter's :data:`GUARD_LINES` strongest lines."""
+        ``original`` on the latter's :data:`GUARD_LINES` strongest lines (each block with
+        the range walk of a squinted beam removed, so that a target stays on its line)."""
+        original = unwalk(original, t_s, self._bin_m, self.geometry)
+        focused = unwalk(focused, t_s, self._bin_m, self.geometry)
         bins = select_lines(original, GUARD_LINES, self.config.guard_bins)
         before = block_contrast(original, t_s, bins, self.range_m, self.geometry)
         after = block_contrast(focused, t_s, bins, self.range_m, self.geometry)

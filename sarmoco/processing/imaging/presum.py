@@ -218,7 +218,8 @@ class AzimuthPrefilter:
         self._next_out = -(self._half // d) * d  # first centre whose window reaches slot 0
         self._last_t = t0_ns - round(self._period_ns)
         self._last_phi = 0.0
-        self._hist_phi = 2e-9 * math.pi * self.centroid_hz * (self._hist_t - self._last_t)
+        dt = (self._hist_t - self._last_t).astype(np.float64)
+        self._hist_phi = np.asarray(2e-9 * math.pi * self.centroid_hz * dt, dtype=np.float64)
 
     def _run(
         self, rc: ComplexArray, t_ns: IntArray, steps: IntArray
@@ -241,7 +242,10 @@ class AzimuthPrefilter:
         return phi
 
     def _filter(
-        self, new: ComplexArray, t_new: IntArray, phi_new: npt.NDArray[np.float64],
+        self,
+        new: ComplexArray,
+        t_new: IntArray,
+        phi_new: npt.NDArray[np.float64],
         last_centre: int,
     ) -> tuple[ComplexArray, IntArray]:
         """Append the slots ``new`` (demodulated by ``phi_new``, rad); produce the outputs

@@ -11,8 +11,9 @@ per-pulse interval of squint ``[psi_lo, psi_hi]`` from the plane normal to the t
 at along-track position ``x_p`` reaches the tiles that meet its footprint
 ``x_p + rho tan(psi_lo) <= x <= x_p + rho tan(psi_hi)`` over the swath's ``rho`` (the
 distance from the track); a tile is finished, and handed out, once the latest pulse's
-footprint has passed its end, so memory stays bounded however long the run. Each block of pulses is upsampled in range once (in chunks of
-``CHUNK_PULSES``) and accumulated in place into every tile it reaches.
+footprint has passed its end, so memory stays bounded however long the run. Each
+block of pulses is upsampled in range once (in chunks of ``CHUNK_PULSES``) and
+accumulated in place into every tile it reaches.
 
 Segments that overlap at a cut (:mod:`sarmoco.processing.segments`) each image only
 their side of the cut line: :attr:`TileLayout.keep` holds half-planes of the ground;
