@@ -45,6 +45,7 @@ from sarmoco.processing.autofocus import (
     SlidingSubapertureAutofocus,
 )
 from sarmoco.processing.beam import (
+    accc_coherence,
     accc_correlation,
     array_axis_body,
     array_axis_imaging,
@@ -482,6 +483,12 @@ class _Segment:
         return self.tile_pga.push(tiles) + (self.tile_pga.flush() if last else [])
 
 
+MIN_COHERENCE = 0.1
+"""Blocks whose echoes correlate less from pulse to pulse (:func:`accc_coherence`) are left
+out of the segment's echo centroid: noise alone (no scene in the beam yet) gives about
+``1 / sqrt(pulses x bins)``, a scene's echoes tenths to 1."""
+
+
 class _Beam:
     """Where a segment's beam points, block by block, and its Doppler centroid.
 
@@ -608,7 +615,8 @@ class _Beam:
             return
         p = self._pending
         corr = accc_correlation(rc)
-        self._correlation += corr
+        if accc_coherence(rc, corr) >= MIN_COHERENCE:
+            self._correlation += corr
         echo = correlation_centroid_hz(corr, rate_hz)
         if math.isfinite(echo):
             echo = resolve_ambiguity(echo, p.attitude_hz, rate_hz)

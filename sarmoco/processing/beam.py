@@ -154,6 +154,14 @@ def accc_correlation(rc: ComplexArray) -> complex:
     return complex(np.vdot(rc[:-1], rc[1:]))
 
 
+def accc_coherence(rc: ComplexArray, correlation: complex) -> float:
+    """Magnitude of the correlation coefficient of consecutive pulses, ``|correlation|``
+    over the pulses' energy (0..1): near 1 for echoes of the beam's scene, about
+    ``1 / sqrt(P S)`` for noise alone (whose centroid means nothing)."""
+    energy = float(np.vdot(rc, rc).real)
+    return abs(correlation) / energy if energy > 0 else 0.0
+
+
 def correlation_centroid_hz(correlation: complex, prf_hz: float) -> float:
     """Doppler centroid of a pulse-to-pulse correlation (:func:`accc_correlation`) at pulse
     rate ``prf_hz``, in ``(-PRF/2, PRF/2]``, Hz; NaN for a zero correlation."""

@@ -17,6 +17,8 @@ import pytest
 
 from sarmoco.processing.beam import (
     accc_centroid_hz,
+    accc_coherence,
+    accc_correlation,
     array_axis_body,
     centre_squint_rad,
     doppler_hz,
@@ -123,6 +125,9 @@ def test_accc_measures_an_aliased_centroid() -> None:
     measured = accc_centroid_hz(echo, PRF)
     assert abs(measured - (f_true + PRF)) < 1.0
     assert abs(resolve_ambiguity(measured, -90.0, PRF) - f_true) < 1.0
+    noise = rng.standard_normal(echo.shape) + 1j * rng.standard_normal(echo.shape)
+    assert accc_coherence(echo, accc_correlation(echo)) > 0.8
+    assert accc_coherence(noise, accc_correlation(noise)) < 0.1
 
 
 def test_mount_squint_turns_the_array_axis_forward() -> None:
