@@ -21,7 +21,9 @@ whole aperture: the new segment's track begins up to ``overlap_s`` (the imaged b
 half footprint at far range over v0, plus 10 %) before the cut, and it is first fed the
 pulses of that stretch again (the focuser keeps the last ``overlap_s`` of pulses it
 pushed); the old segment takes the pulses up to ``overlap_s`` past the cut, then ends.
-The cut line on the ground (normal to the new track through the APC at the cut) splits
+The cut line on the ground (where the beam centre sees the ground at the cut: normal to
+the new track through the APC for a broadside beam, ``rho tan(psi)`` along it for a beam
+squinted by ``psi``, ``rho`` the distance from the track, taken linear across the swath) splits
 their tiles (:attr:`TileLayout.keep`): the old segment keeps the pixels before it, the new
 one those after it, so no target is imaged twice and none falls between. The new
 segment's tiles are handed out after the old segment's last (tiles come out segment by
@@ -300,6 +302,11 @@ class _Segment:
         self._disp_t_ns = np.zeros(0, np.int64)
         self._disp_m = np.zeros((0, 2))
         """Imaging time (GPS ns) and (ΔY, ΔZ) (m) of raw pulses not yet range-compressed."""
+
+    @property
+    def tile_layout(self) -> TileLayout:
+        """Where the segment's tiles lie (with the ground it keeps)."""
+        return self._tiles.layout
 
     def keep(self, a: float, b: float, c: float) -> None:
         """Image only the ground where ``a x + b y < c`` (imaging x, y, m) from now on."""
@@ -831,13 +838,19 @@ class Focuser:
         ``quat``: the attitude of the pulses from the cut (body to NED)."""
         old = self.segment
         assert old is not None and self.segmenter is not None
-        # the old frame's pixels p before the cut line: x_hat · (p_ned - origin) < cut_x
-        x_hat, before = track.x_hat, old.track
-        shift = float(x_hat @ (before.origin_ned - track.origin_ned))
-        old.keep(float(before.x_hat @ x_hat), float(before.y_hat @ x_hat), cut_x - shift)
+        # the cut line on the ground follows the beam centre at the cut: x - k y < c in the
+        # new frame (x = cut_x + rho tan(psi), rho ~ rho_c + (y - y_c) y_c / rho_c)
+        layout, tan_psi = old.tile_layout, math.tan(old.beam.scene_squint_rad)
+        y_c, height = layout.ground_range_m, layout.height_m
+        rho_c = math.hypot(y_c, height)
+        k, c = tan_psi * y_c / rho_c, cut_x + tan_psi * height**2 / rho_c
+        # the old frame's pixels p before it: w · (p_ned - origin) < c, w = x_hat - k y_hat
+        w, before = track.x_hat - k * track.y_hat, old.track
+        shift = float(w @ (before.origin_ned - track.origin_ned))
+        old.keep(float(before.x_hat @ w), float(before.y_hat @ w), c - shift)
         self._tails.append((old, t_cut + self.segmenter.limits.overlap_ns))
         self.segment = _Segment(self.cfg, self.radar, track, self._sink, offset, quat)
-        self.segment.keep(-1.0, 0.0, -cut_x)
+        self.segment.keep(-1.0, k, -c)
         recent, self._recent = self._recent, []
         for pulses, t, vel, q in recent:
             rows = t >= track.t0_ns
