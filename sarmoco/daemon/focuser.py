@@ -503,14 +503,15 @@ class _Beam:
     by the mean attitude of each block of pulses into the segment's imaging frame
     (:mod:`sarmoco.processing.beam`). The pixels take the squint interval of the imaged
     beam (``imaging.azimuth_beamwidth_deg`` plus the squint tolerance each side, over the
-    look angles of the swath) about three pointings, whichever reaches further each side:
-    the block's, the mean of the segment's blocks so far (the attitude wanders by tenths
-    of a degree to a degree about a steady crab), and the one of the Doppler centroid
-    measured from the segment's echoes so far (an INS heading a degree off, an antenna that
-    does not follow the body's every motion). The interval holds from the block's first
-    pulse, for the pulses imaged later. The pre-filter keeps the Doppler band of the
-    attitude's interval, centred on the echoes' centroid once measured; the autofocus's
-    lines take the echoes' squint (else the attitude's). Each block's centroid from the
+    look angles of the swath) about the block's pointing, widened to cover that of the
+    mean of the segment's blocks so far (the attitude wanders by tenths of a degree to a
+    degree about a steady crab). Once the segment's echoes have given a Doppler centroid,
+    the block's interval also covers the beam about it (an INS heading a degree off, an
+    antenna that does not follow the body's every motion: the echoes show where the beam
+    is; the attitude resolves its ambiguity). The interval holds from the block's first pulse, for
+    the pulses imaged later. The pre-filter keeps the Doppler band of the attitude's
+    interval, centred on the echoes' centroid once measured; the autofocus's lines take
+    the echoes' squint (else the attitude's). Each block's centroid from the
     attitude (at the reference look angle) and from its echoes go to the store
     (:attr:`centroids`). Before any attitude (and without one) the beam is broadside.
     """
@@ -613,10 +614,9 @@ class _Beam:
         ``rate_hz`` (ACCC) for the block pointed last, its ambiguity resolved with the
         attitude's; the first call after :meth:`point` records it.
 
-        The beam the pixels take for that block then also covers the interval centred on
-        the centroid of the segment's echoes so far (their correlations summed): the beam
-        is where the echoes say as well as where the attitude says (an INS heading a
-        degree off, an antenna that does not follow the body's every motion).
+        The beam the pixels take for that block then also covers the beam about the
+        centroid of the segment's echoes so far (their correlations summed over the blocks whose echoes
+        correlate, :data:`MIN_COHERENCE`).
         """
         if self._pending is None or rc.shape[0] < 2:
             return
@@ -635,7 +635,7 @@ class _Beam:
             sine = steady * self._wavelength_m / (2.0 * self._speed_mps)
             if abs(sine) < 1.0:
                 self._echo_squint_rad = math.asin(sine)
-                shift = self._echo_squint_rad - p.squint_rad
+                shift = self._echo_squint_rad - self._attitude_squint_rad
                 lo, hi = self._intervals[-1]
                 self._intervals[-1] = (min(lo, lo + shift), max(hi, hi + shift))
 

@@ -37,14 +37,23 @@ class Bands:
     band_range_m: FloatArray
 
 
+WALK_FRACTION = 0.5
+"""Range walk over a subaperture, in range bins, below which it is left in place."""
+
+
 def unwalk(
     sub: ComplexArray, t_s: FloatArray, bin_m: float, geometry: AutofocusGeometry
 ) -> ComplexArray:
     """A subaperture (pulses x bins at times ``t_s``, s; bins ``bin_m`` apart, m) with the
     range walk of the beam centre removed about its mid time (a squinted beam,
     :attr:`AutofocusGeometry.walk_mps`): each target stays on its line while its phase
-    history is kept. The subaperture itself when the beam is broadside."""
-    if geometry.walk_mps == 0.0 or sub.shape[0] == 0:
+    history is kept. The subaperture itself when the walk over it is under
+    :data:`WALK_FRACTION` of a bin (a beam within a few tenths of a degree of broadside:
+    the band-limited shift would only perturb the lines)."""
+    if sub.shape[0] == 0:
+        return sub
+    span = float(t_s[-1]) - float(t_s[0])
+    if abs(geometry.walk_mps) * span < WALK_FRACTION * bin_m:
         return sub
     mid = 0.5 * (float(t_s[0]) + float(t_s[-1]))
     return shift_range(sub, -geometry.walk_mps * (np.asarray(t_s) - mid) / bin_m)
