@@ -615,8 +615,8 @@ class _Beam:
         attitude's; the first call after :meth:`point` records it.
 
         The beam the pixels take for that block then also covers the beam about the
-        centroid of the segment's echoes so far (their correlations summed over the blocks whose echoes
-        correlate, :data:`MIN_COHERENCE`).
+        centroid of the segment's echoes so far (their correlations summed over the
+        blocks whose echoes correlate, :data:`MIN_COHERENCE`).
         """
         if self._pending is None or rc.shape[0] < 2:
             return
