@@ -17,11 +17,10 @@ file with its INS log) is reprocessed in two kinds of task:
 2. **Imaging blocks**, many per segment: ``--tiles-per-block`` consecutive tiles,
    backprojected, refined by tile PGA, and written into tiles of the output store
    that were created beforehand (region writes: each block fills only its tiles'
-   arrays). A block replays the imager calls whose pulses reach its tiles plus the
-   overlap: half the beam footprint beyond each end (a pixel takes the pulses within
-   half the beamwidth of broadside), and one tile more each side when tile PGA is on
-   (it focuses a tile with its raw neighbours). Its tiles then get the same pulses,
-   cut into the same calls and chunks, in the same order as in the single-process
+   arrays). A block replays the imager calls whose pulses' beam footprints reach its
+   tiles (a pixel takes the pulses whose beam sees it), and one tile more each side
+   when tile PGA is on (it focuses a tile with its raw neighbours). Its tiles then get
+   the same pulses, cut into the same calls and chunks, in the same order as in the single-process
    replay: the images agree to float rounding (the tests find them bit-equal).
 
 Backprojection is the bulk of the work in a full-size run; the front ends of many
@@ -129,13 +128,12 @@ def front_end(cfg: Config, recording: Recording) -> FrontEnd:
 
 
 def block_span_m(block: ImageBlock, with_pga: bool) -> tuple[float, float]:
-    """Along-track span (imaging x, m) of the pulses a block needs: its tiles, one tile
-    more each side with tile PGA, and half the beam footprint beyond."""
-    layout = block.stream.layout
+    """Along-track span (imaging x, m) that the footprints of the pulses a block needs
+    meet: its tiles, and one tile more each side with tile PGA."""
     extra = 1 if with_pga else 0
     first, last = block.first_tile - extra, block.last_tile + extra
-    half, length = layout.half_footprint_m, layout.tile_length_m
-    return first * length - half, (last + 1) * length + half
+    length = block.stream.layout.tile_length_m
+    return first * length, (last + 1) * length
 
 
 def image_block(cfg: Config, block: ImageBlock) -> list[tuple[int, dict[str, float]]]:

@@ -186,6 +186,24 @@ class GeometryConfig:
     center_slant_range_m: float = _key(
         900.0, "Scene-centre slant range used for first-order compensation", unit="m", gt=0
     )
+    antenna_squint_deg: float = _key(
+        0.0,
+        "Antenna mount: the antenna turned about body z from broadside to body x (positive: "
+        "the beam turns forward). The beam is fixed to the body, so with the INS attitude "
+        "this says where it points; a crabbed body squints it further",
+        unit="deg",
+        gt=-60,
+        lt=60,
+    )
+    antenna_depression_deg: float | None = _key(
+        None,
+        "Antenna mount: boresight depression below the body's x-y plane; the Doppler "
+        "centroid recorded per block is that of the boresight's look angle (90 deg minus "
+        "this). Unset: that of the scene centre (center_slant_range_m)",
+        unit="deg",
+        gt=0,
+        lt=90,
+    )
 
 
 @dataclass(frozen=True)

@@ -21,7 +21,9 @@ whole aperture: the new segment's track begins up to ``overlap_s`` (the imaged b
 half footprint at far range over v0, plus 10 %) before the cut, and it is first fed the
 pulses of that stretch again (the focuser keeps the last ``overlap_s`` of pulses it
 pushed); the old segment takes the pulses up to ``overlap_s`` past the cut, then ends.
-The cut line on the ground (normal to the new track through the APC at the cut) splits
+The cut line on the ground (where the beam centre sees the ground at the cut: normal to
+the new track through the APC for a broadside beam, ``rho tan(psi)`` along it for a beam
+squinted by ``psi``, ``rho`` the distance from the track, taken linear across the swath) splits
 their tiles (:attr:`TileLayout.keep`): the old segment keeps the pixels before it, the new
 one those after it, so no target is imaged twice and none falls between. The new
 segment's tiles are handed out after the old segment's last (tiles come out segment by
@@ -46,7 +48,19 @@ from sarmoco.processing.autofocus import (
     AutofocusGeometry,
     SlidingSubapertureAutofocus,
 )
-from sarmoco.processing.geometry import ReferenceTrack, vector_to_imaging
+from sarmoco.processing.beam import (
+    DopplerCentroid,
+    accc_coherence,
+    accc_correlation,
+    array_axis_body,
+    array_axis_imaging,
+    centre_squint_rad,
+    correlation_centroid_hz,
+    doppler_hz,
+    resolve_ambiguity,
+    squint_interval_rad,
+)
+from sarmoco.processing.geometry import ReferenceTrack, look_angle, vector_to_imaging
 from sarmoco.processing.imaging.presum import AzimuthPrefilter, fill_slots, slot_steps
 from sarmoco.processing.imaging.rda_tiles import RdaTileImager
 from sarmoco.processing.imaging.tile_pga import StripPga, TilePga
@@ -104,6 +118,7 @@ class FocusOutput:
     tiles: list[Tile] = field(default_factory=list)
     tracks: list[ReferenceTrack] = field(default_factory=list)
     turn: BoolArray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    doppler: list[DopplerCentroid] = field(default_factory=list)
 
     def add_tiles(self, tiles: list[Tile], track: ReferenceTrack) -> None:
         """Append tiles formed on ``track``."""
@@ -121,6 +136,7 @@ class TileSink(Protocol):
         t_ns: IntArray,
         apc_m: FloatArray,
         compensated_dy_m: FloatArray | None = None,
+        beam_squint_rad: FloatArray | None = None,
     ) -> list[Tile]:
         """Take pulses ready for backprojection (see :meth:`TileImager.add`); finished tiles."""
 
@@ -195,6 +211,7 @@ class _Segment:
         track: ReferenceTrack,
         sink: SinkFactory | None = None,
         offset_m: FloatArray | None = None,
+        quat: FloatArray | None = None,
     ) -> None:
         self.track = track
         start = np.zeros(3) if offset_m is None else np.asarray(offset_m, dtype=np.float64)
@@ -241,7 +258,6 @@ class _Segment:
             if af.enabled
             else None
         )
-        beam_rad = imaged_beam_rad(cfg)
         imager, self.tile_pga = tile_imaging(cfg, radar)
         self.imager: TileSink = imager
         self.tiles = imager
@@ -251,12 +267,16 @@ class _Segment:
         """Finished tiles waiting for the segments before this one to end."""
         if sink is not None:
             self.imager, self.tile_pga = sink(imager, track), None
-        doppler_hz = 2.0 * track.v0_mps * math.sin(beam_rad / 2.0) / radar.wavelength_m
+        self.beam = _Beam(cfg, radar, track, imager.layout)
+        if quat is not None:
+            self.beam.point(quat, track.t0_ns)
+        f_lo, f_hi = self.beam.band_hz()
         self.prefilter = (
-            AzimuthPrefilter(radar.prf_hz, doppler_hz, im.prefilter_oversampling)
-            if im.prefilter and doppler_hz > 0
+            AzimuthPrefilter(radar.prf_hz, (f_hi - f_lo) / 2.0, im.prefilter_oversampling)
+            if im.prefilter and f_hi > f_lo
             else None
         )
+        self._point_stages()
         self.presum_first = im.presum_first and self.prefilter is not None
         """The pre-filter runs on raw echoes, before range compression (``imaging.presum_first``):
         pushed pulses are raw, and everything after the pre-filter runs at its output rate."""
@@ -271,20 +291,42 @@ class _Segment:
         self._disp_m = np.zeros((0, 2))
         """Imaging time (GPS ns) and (ΔY, ΔZ) (m) of raw pulses not yet range-compressed."""
 
+    @property
+    def tile_layout(self) -> TileLayout:
+        """Where the segment's tiles lie (with the ground it keeps)."""
+        return self.tiles.layout
+
     def keep(self, a: float, b: float, c: float) -> None:
         """Image only the ground where ``a x + b y < c`` (imaging x, y, m) from now on."""
         layout = self.tiles.layout
         self.tiles.layout = replace(layout, keep=(*layout.keep, (a, b, c)))
 
+    def _point_stages(self) -> None:
+        """Centre the pre-filter's band and the autofocus's lines on the beam's pointing."""
+        if self.prefilter is not None:
+            self.prefilter.centroid_hz = self.beam.centroid_hz
+        if self.autofocus is not None:
+            self.autofocus.geometry = replace(
+                self.autofocus.geometry, squint_rad=self.beam.scene_squint_rad
+            )
+
     def push(
-        self, pulses: ComplexArray, t_ns: IntArray, vel_ned: FloatArray
+        self,
+        pulses: ComplexArray,
+        t_ns: IntArray,
+        vel_ned: FloatArray,
+        quat: FloatArray | None = None,
     ) -> tuple[MocompSolution, list[Tile]]:
         """Compensate, autofocus and image pulses of this segment.
 
         ``pulses`` are range-compressed, or raw with :attr:`presum_first` (then: the
         scene-centre D_los phase per pulse, the pre-filter, range compression, and the
-        envelope shift and per-bin D_los at the pre-filter's output times).
+        envelope shift and per-bin D_los at the pre-filter's output times). ``quat``: the
+        pulses' attitude (body to NED), which points the beam for them (unchanged without).
         """
+        if quat is not None and t_ns.size:
+            self.beam.point(quat, int(t_ns[0]))
+            self._point_stages()
         if self.presum_first:
             motion = los_solution(
                 t_ns, self.mocomp.displacement(t_ns, vel_ned), self.mocomp.geometry
@@ -304,7 +346,10 @@ class _Segment:
         return motion, self._focus(rc, t_ns)
 
     def _focus(self, rc: ComplexArray, t_ns: IntArray) -> list[Tile]:
-        """Autofocus (when on) and image compensated, range-compressed pulses."""
+        """Autofocus (when on) and image compensated, range-compressed pulses; measure their
+        Doppler centroid."""
+        self.beam.measure(rc, t_ns, 1e9 / self._period_ns)
+        self._point_stages()
         if self.autofocus is None:
             return self._image(rc, t_ns)
         return self._autofocus_image(rc, t_ns)
@@ -407,7 +452,8 @@ class _Segment:
         if rc.shape[0] == 0:
             return []
         apc = self.track.position_imaging(t_ns)
-        return self._refine(self.imager.add(rc, t_ns, apc, self._compensated_dy(t_ns)))
+        dy, beam = self._compensated_dy(t_ns), self.beam.interval_at(t_ns)
+        return self._refine(self.imager.add(rc, t_ns, apc, dy, beam))
 
     def _compensated_dy(self, t_ns: IntArray) -> FloatArray | None:
         """ΔY the pulses imaged at ``t_ns`` were compensated for, m (None: no eq. 29 term).
@@ -430,6 +476,161 @@ class _Segment:
         if self.tile_pga is None:
             return tiles
         return self.tile_pga.push(tiles) + (self.tile_pga.flush() if last else [])
+
+
+MIN_COHERENCE = 0.1
+"""Blocks whose echoes correlate less from pulse to pulse (:func:`accc_coherence`) are left
+out of the segment's echo centroid: noise alone (no scene in the beam yet) gives about
+``1 / sqrt(pulses x bins)``, a scene's echoes tenths to 1."""
+
+
+class _Beam:
+    """Where a segment's beam points, block by block, and its Doppler centroid.
+
+    The antenna's array axis (``geometry.antenna_squint_deg``, fixed to the body) is turned
+    by the mean attitude of each block of pulses into the segment's imaging frame
+    (:mod:`sarmoco.processing.beam`). The pixels take the squint interval of the imaged
+    beam (``imaging.azimuth_beamwidth_deg`` plus the squint tolerance each side, over the
+    look angles of the swath) about the block's pointing, widened to cover that of the
+    mean of the segment's blocks so far (the attitude wanders by tenths of a degree to a
+    degree about a steady crab). Once the segment's echoes have given a Doppler centroid,
+    the block's interval also covers the beam about it (an INS heading a degree off, an
+    antenna that does not follow the body's every motion: the echoes show where the beam
+    is; the attitude resolves its ambiguity). The interval holds from the block's first pulse, for
+    the pulses imaged later. The pre-filter keeps the Doppler band of the attitude's
+    interval, centred on the echoes' centroid once measured; the autofocus's lines take
+    the echoes' squint (else the attitude's). Each block's centroid from the
+    attitude (at the reference look angle) and from its echoes go to the store
+    (:attr:`centroids`). Before any attitude (and without one) the beam is broadside.
+    """
+
+    def __init__(
+        self, cfg: Config, radar: RadarParams, track: ReferenceTrack, layout: TileLayout
+    ) -> None:
+        geo = cfg.geometry
+        self._axis_body = array_axis_body(math.radians(geo.antenna_squint_deg), geo.look_side)
+        self._track = track
+        self._half_rad = imaged_beam_rad(cfg) / 2.0
+        edges = layout.ground_range_m + np.array([-0.5, 0.5]) * layout.swath_m
+        self._swath_look_rad = np.arctan2(edges, layout.height_m)
+        self._scene_look_rad = float(look_angle(geo.center_slant_range_m, geo.height_m))
+        self._ref_look_rad = (
+            self._scene_look_rad
+            if geo.antenna_depression_deg is None
+            else math.radians(90.0 - geo.antenna_depression_deg)
+        )
+        self._speed_mps, self._wavelength_m = track.v0_mps, radar.wavelength_m
+        self.axis = np.array([1.0, 0.0, 0.0])
+        """Array axis of the latest block in the imaging frame (broadside: along track)."""
+        self._axis_sum = np.zeros(3)
+        """Sum of the blocks' array axes (their mean: the segment's steady pointing)."""
+        self._changes_ns = np.zeros(1, np.int64)
+        self._intervals = np.array([[-self._half_rad, self._half_rad]])
+        """Times (GPS ns) from which each squint interval (rad) holds, and the intervals."""
+        self._attitude_interval = self._intervals[-1].copy()
+        self._attitude_squint_rad = 0.0
+        """The latest block's squint interval and beam-centre squint at the scene centre
+        from its attitude alone, rad."""
+        self.centroids: list[DopplerCentroid] = []
+        """Doppler centroids measured and not yet taken (:meth:`take_centroids`)."""
+        self._pending: DopplerCentroid | None = None
+        self._correlation = 0j
+        """Pulse-to-pulse correlation of the segment's echoes so far (ACCC)."""
+        self._echo_squint_rad: float | None = None
+        """Squint of the centroid of that correlation, rad (None: not measured yet)."""
+
+    @property
+    def scene_squint_rad(self) -> float:
+        """Squint of the beam centre at the scene centre's look angle, rad: that of the
+        segment's echoes once measured (where the echoes' energy is, what the autofocus's
+        lines see), else the attitude's."""
+        if self._echo_squint_rad is not None:
+            return self._echo_squint_rad
+        return float(centre_squint_rad(self.axis, self._scene_look_rad))
+
+    def point(self, quat: FloatArray, t_ns: int) -> None:
+        """Point the beam by the mean attitude ``quat`` (P, 4) of the pulses from ``t_ns``
+        (GPS ns) on; rows that are not finite are left out (none finite: unchanged)."""
+        q = np.asarray(quat, dtype=np.float64).reshape(-1, 4)
+        if not np.all(np.isfinite(q), axis=1).any():
+            return
+        self.axis = array_axis_imaging(q, self._axis_body, self._track)
+        self._axis_sum += self.axis
+        mean = self._axis_sum / np.linalg.norm(self._axis_sum)
+        lo, hi = squint_interval_rad(self.axis, self._half_rad, self._swath_look_rad)
+        lo_m, hi_m = squint_interval_rad(mean, self._half_rad, self._swath_look_rad)
+        self._attitude_interval = np.array([lo, hi])
+        lo, hi = min(lo, lo_m), max(hi, hi_m)
+        keep = self._changes_ns < t_ns
+        self._changes_ns = np.append(self._changes_ns[keep], t_ns)
+        self._intervals = np.vstack([self._intervals[keep], [lo, hi]])
+        squint = float(centre_squint_rad(self.axis, self._ref_look_rad))
+        self._attitude_squint_rad = float(centre_squint_rad(self.axis, self._scene_look_rad))
+        f_dc = float(doppler_hz(self._speed_mps, self._wavelength_m, squint))
+        self._pending = DopplerCentroid(t_ns, squint, f_dc, math.nan)
+
+    def band_hz(self) -> tuple[float, float]:
+        """Doppler band of the latest block's beam from the attitude, Hz: (low, high)."""
+        lo, hi = doppler_hz(self._speed_mps, self._wavelength_m, self._attitude_interval)
+        return float(lo), float(hi)
+
+    @property
+    def centroid_hz(self) -> float:
+        """Centre of the Doppler band the pre-filter keeps (as wide as :meth:`band_hz`'s),
+        Hz: the centroid of the segment's echoes once measured, else the middle of the
+        attitude's band."""
+        squint = self._echo_squint_rad
+        if squint is None:
+            return float(np.mean(self.band_hz()))
+        shift = squint - self._attitude_squint_rad
+        return float(
+            np.mean(
+                doppler_hz(self._speed_mps, self._wavelength_m, self._attitude_interval + shift)
+            )
+        )
+
+    def interval_at(self, t_ns: IntArray) -> FloatArray:
+        """Squint interval of the pulses imaged at ``t_ns`` (GPS ns), rad, (P, 2); the
+        intervals before the one of the first of them are forgotten."""
+        k = np.clip(np.searchsorted(self._changes_ns, t_ns, side="right") - 1, 0, None)
+        first = int(k[0]) if k.size else 0
+        self._changes_ns, self._intervals = self._changes_ns[first:], self._intervals[first:]
+        return self._intervals[k - first]
+
+    def measure(self, rc: ComplexArray, t_ns: IntArray, rate_hz: float) -> None:
+        """Measure the Doppler centroid of compensated, range-compressed pulses at
+        ``rate_hz`` (ACCC) for the block pointed last, its ambiguity resolved with the
+        attitude's; the first call after :meth:`point` records it.
+
+        The beam the pixels take for that block then also covers the beam about the
+        centroid of the segment's echoes so far (their correlations summed over the
+        blocks whose echoes correlate, :data:`MIN_COHERENCE`).
+        """
+        if self._pending is None or rc.shape[0] < 2:
+            return
+        p = self._pending
+        corr = accc_correlation(rc)
+        if accc_coherence(rc, corr) >= MIN_COHERENCE:
+            self._correlation += corr
+        echo = correlation_centroid_hz(corr, rate_hz)
+        if math.isfinite(echo):
+            echo = resolve_ambiguity(echo, p.attitude_hz, rate_hz)
+        self.centroids.append(replace(p, t_ns=int(t_ns[0]), echo_hz=echo))
+        self._pending = None
+        steady = correlation_centroid_hz(self._correlation, rate_hz)
+        if math.isfinite(steady):
+            steady = resolve_ambiguity(steady, p.attitude_hz, rate_hz)
+            sine = steady * self._wavelength_m / (2.0 * self._speed_mps)
+            if abs(sine) < 1.0:
+                self._echo_squint_rad = math.asin(sine)
+                shift = self._echo_squint_rad - self._attitude_squint_rad
+                lo, hi = self._intervals[-1]
+                self._intervals[-1] = (min(lo, lo + shift), max(hi, hi + shift))
+
+    def take_centroids(self) -> list[DopplerCentroid]:
+        """The centroids recorded since the last call."""
+        out, self.centroids = self.centroids, []
+        return out
 
 
 def imaged_beam_rad(cfg: Config) -> float:
@@ -491,6 +692,9 @@ class Focuser:
     sink : SinkFactory, optional
         Hand every segment's pulses ready for backprojection to a sink made by this
         instead of imaging them (no tiles come out; see :class:`TileSink`).
+    quat : ndarray, shape (P, 4), optional
+        Attitude (scalar-first, body to NED) of the first pulses: points the first
+        segment's beam (its pre-filter band); broadside to the track when omitted.
     """
 
     def __init__(
@@ -499,6 +703,7 @@ class Focuser:
         t0_ns: int,
         velocity_ned: FloatArray,
         sink: SinkFactory | None = None,
+        quat: FloatArray | None = None,
     ) -> None:
         self.cfg = cfg
         self._sink = sink
@@ -514,7 +719,7 @@ class Focuser:
             if cfg.mocomp.segments
             else None
         )
-        self.segment: _Segment | None = _Segment(cfg, self.radar, track, sink)
+        self.segment: _Segment | None = _Segment(cfg, self.radar, track, sink, quat=quat)
         self._done = self.segment
         """The segment closed last (what :attr:`track` and :attr:`autofocus` show after it)."""
         self.segments = 1
@@ -522,9 +727,10 @@ class Focuser:
         self._tails: list[tuple[_Segment, int]] = []
         """Segments before a deviation cut still taking pulses, oldest first, each with the
         time from which it takes none (GPS ns)."""
-        self._recent: list[tuple[ComplexArray, IntArray, FloatArray]] = []
-        """Pulses (as pushed), times (GPS ns) and velocities (NED, m/s) the current segment
-        took within the overlap (what a segment starting at a deviation cut takes first)."""
+        self._recent: list[tuple[ComplexArray, IntArray, FloatArray, FloatArray]] = []
+        """Pulses (as pushed), times (GPS ns), velocities (NED, m/s) and attitudes the
+        current segment took within the overlap (what a segment starting at a deviation cut
+        takes first)."""
         im = cfg.imaging
         self.live = (
             LiveLevel(im.live_budget, im.live_window_s)
@@ -557,6 +763,7 @@ class Focuser:
         t_ns: IntArray,
         vel_ned: FloatArray,
         known: BoolArray | None = None,
+        quat: FloatArray | None = None,
     ) -> FocusOutput:
         """Process one block of aligned raw pulses.
 
@@ -572,9 +779,12 @@ class Focuser:
         known : ndarray of bool, shape (P,), optional
             Pulses with navigation (false: zeroed echoes with a placeholder velocity
             across a navigation gap, which never sets a segment's track); all when omitted.
+        quat : ndarray, shape (P, 4), optional
+            Attitude at the pulses (scalar-first, body to NED): points the beam (its mean
+            over the block); the beam keeps its pointing when omitted.
         """
         start = time.perf_counter()
-        out = self._push(raw, t_ns, vel_ned, known)
+        out = self._push(raw, t_ns, vel_ned, known, quat)
         if self.live is not None and t_ns.shape[0]:
             data_s = (int(t_ns[-1]) - self._last_t_ns) * 1e-9
             level = self.live.update(data_s, time.perf_counter() - start)
@@ -591,16 +801,18 @@ class Focuser:
         t_ns: IntArray,
         vel_ned: FloatArray,
         known: BoolArray | None,
+        quat: FloatArray | None,
     ) -> FocusOutput:
         """:meth:`push` without the live level's accounting."""
+        q = np.full((t_ns.shape[0], 4), np.nan) if quat is None else np.asarray(quat)
         # range compression here, or after the pre-filter (imaging.presum_first)
         rc = raw if self._last.presum_first else rangecomp.compress(self.radar, raw, self.window)
         n = t_ns.shape[0]
         out = FocusOutput(turn=np.zeros(n, dtype=bool))
         if self.segmenter is None:
             assert self.segment is not None
-            out.motion, tiles = self.segment.push(rc, t_ns, vel_ned)
-            out.add_tiles(tiles, self.segment.track)
+            out.motion, tiles = self.segment.push(rc, t_ns, vel_ned, q)
+            self._emit(out, self.segment, tiles)
             return out
         plan = self.segmenter.plan(t_ns, vel_ned, known)
         out.turn = plan.turn
@@ -614,19 +826,19 @@ class Focuser:
                 track, cut_x, offset = new[a]
                 if math.isnan(cut_x):
                     self._close(out)
-                    self.segment = _Segment(self.cfg, self.radar, track, self._sink)
+                    self.segment = _Segment(self.cfg, self.radar, track, self._sink, quat=q[a:b])
                 else:
-                    self._hand_over(out, track, float(cut_x), offset, int(t_ns[a]))
+                    self._hand_over(out, track, float(cut_x), offset, int(t_ns[a]), q[a:b])
                 self.segments += 1
             if plan.turn[a]:
                 self._close(out)
                 motion.append(_nan_motion(t_ns[a:b]))
                 continue
             assert self.segment is not None
-            m, tiles = self.segment.push(rc[a:b], t_ns[a:b], vel_ned[a:b])
+            m, tiles = self.segment.push(rc[a:b], t_ns[a:b], vel_ned[a:b], q[a:b])
             motion.append(m)
             self._emit(out, self.segment, tiles)
-            self._run_on(out, rc[a:b], t_ns[a:b], vel_ned[a:b])
+            self._run_on(out, rc[a:b], t_ns[a:b], vel_ned[a:b], q[a:b])
         out.motion = _join(motion) if motion else _nan_motion(t_ns)
         return out
 
@@ -637,44 +849,62 @@ class Focuser:
         cut_x: float,
         offset: FloatArray,
         t_cut: int,
+        quat: FloatArray,
     ) -> None:
         """Start the segment of a deviation cut at ``t_cut`` (GPS ns) that overlaps the
         current one (see the module docstring); ``cut_x``: the cut's x on ``track``, m;
-        ``offset``: the APC's offset from it at its first pulse, imaging frame, m."""
+        ``offset``: the APC's offset from it at its first pulse, imaging frame, m;
+        ``quat``: the attitude of the pulses from the cut (body to NED)."""
         old = self.segment
         assert old is not None and self.segmenter is not None
-        # the old frame's pixels p before the cut line: x_hat · (p_ned - origin) < cut_x
-        x_hat, before = track.x_hat, old.track
-        shift = float(x_hat @ (before.origin_ned - track.origin_ned))
-        old.keep(float(before.x_hat @ x_hat), float(before.y_hat @ x_hat), cut_x - shift)
+        # the cut line on the ground follows the beam centre at the cut: x - k y < c in the
+        # new frame (x = cut_x + rho tan(psi), rho ~ rho_c + (y - y_c) y_c / rho_c)
+        layout, tan_psi = old.tile_layout, math.tan(old.beam.scene_squint_rad)
+        y_c, height = layout.ground_range_m, layout.height_m
+        rho_c = math.hypot(y_c, height)
+        k, c = tan_psi * y_c / rho_c, cut_x + tan_psi * height**2 / rho_c
+        # the old frame's pixels p before it: w · (p_ned - origin) < c, w = x_hat - k y_hat
+        w, before = track.x_hat - k * track.y_hat, old.track
+        shift = float(w @ (before.origin_ned - track.origin_ned))
+        old.keep(float(before.x_hat @ w), float(before.y_hat @ w), c - shift)
         self._tails.append((old, t_cut + self.segmenter.limits.overlap_ns))
-        self.segment = _Segment(self.cfg, self.radar, track, self._sink, offset)
-        self.segment.keep(-1.0, 0.0, -cut_x)
+        self.segment = _Segment(self.cfg, self.radar, track, self._sink, offset, quat)
+        self.segment.keep(-1.0, k, -c)
         recent, self._recent = self._recent, []
-        for pulses, t, vel in recent:
+        for pulses, t, vel, q in recent:
             rows = t >= track.t0_ns
             if rows.any():
-                _, tiles = self.segment.push(pulses[rows], t[rows], vel[rows])
+                _, tiles = self.segment.push(pulses[rows], t[rows], vel[rows], q[rows])
                 self._emit(out, self.segment, tiles)
-                self._recent.append((pulses[rows], t[rows], vel[rows]))
+                self._recent.append((pulses[rows], t[rows], vel[rows], q[rows]))
 
-    def _run_on(self, out: FocusOutput, pulses: ComplexArray, t: IntArray, vel: FloatArray) -> None:
+    def _run_on(
+        self,
+        out: FocusOutput,
+        pulses: ComplexArray,
+        t: IntArray,
+        vel: FloatArray,
+        quat: FloatArray,
+    ) -> None:
         """Give pulses the current segment took to the segments before deviation cuts that
         still take them (ending those past their time), and keep them for the next cut."""
         for old, until_ns in self._tails:
             rows = t < until_ns
             if rows.any():
-                self._emit(out, old, old.push(pulses[rows], t[rows], vel[rows])[1])
+                pushed = old.push(pulses[rows], t[rows], vel[rows], quat[rows])
+                self._emit(out, old, pushed[1])
         while self._tails and t[-1] >= self._tails[0][1]:
             self._end_tail(out)
         assert self.segmenter is not None
         overlap_ns = self.segmenter.limits.overlap_ns
         self._recent = [p for p in self._recent if p[1][-1] >= t[-1] - overlap_ns]
         if overlap_ns > 0:
-            self._recent.append((pulses, t, vel))
+            self._recent.append((pulses, t, vel, quat))
 
     def _emit(self, out: FocusOutput, segment: _Segment, tiles: list[Tile]) -> None:
-        """Hand out a segment's finished tiles, or hold them while an older one runs on."""
+        """Hand out a segment's finished tiles, or hold them while an older one runs on;
+        hand out its Doppler centroids."""
+        out.doppler += segment.beam.take_centroids()
         oldest = self._tails[0][0] if self._tails else segment
         if segment is oldest:
             out.add_tiles(tiles, segment.track)
@@ -685,6 +915,7 @@ class Focuser:
         """End the oldest segment still running past its cut; release the next one's tiles."""
         old, _ = self._tails.pop(0)
         out.add_tiles(old.finish(), old.track)
+        out.doppler += old.beam.take_centroids()
         after = self._tails[0][0] if self._tails else self.segment
         if after is not None:
             out.add_tiles(after.held, after.track)
@@ -704,6 +935,7 @@ class Focuser:
         self._recent = []
         if self.segment is not None:
             out.add_tiles(self.segment.finish(), self.segment.track)
+            out.doppler += self.segment.beam.take_centroids()
             self._done = self.segment
             self.segment = None
 

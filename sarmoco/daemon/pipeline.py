@@ -135,6 +135,11 @@ class RunSummary:
     pulses_late_dropped: int = 0
     pulses_focus_skipped: int = 0
     """Pulses recorded but skipped by live focusing, fallen behind (a replay focuses them)."""
+    doppler_attitude_hz: float = math.nan
+    """Doppler centroid of the latest block from the attitude and the antenna mount, Hz."""
+    doppler_echo_hz: float = math.nan
+    """Doppler centroid of the latest block measured from the echoes, Hz (a wrong mount or
+    attitude source shows as a difference from ``doppler_attitude_hz``)."""
 
     def as_dict(self) -> dict[str, Any]:
         """JSON-able form."""
@@ -151,7 +156,14 @@ class RunSummary:
             "pulses_reordered": self.pulses_reordered,
             "pulses_late_dropped": self.pulses_late_dropped,
             "pulses_focus_skipped": self.pulses_focus_skipped,
+            "doppler_attitude_hz": _finite_or_none(self.doppler_attitude_hz),
+            "doppler_echo_hz": _finite_or_none(self.doppler_echo_hz),
         }
+
+
+def _finite_or_none(value: float) -> float | None:
+    """``value``, or None when it is not finite (JSON has no NaN)."""
+    return value if math.isfinite(value) else None
 
 
 @dataclass(frozen=True)
@@ -560,7 +572,7 @@ class Pipeline:
         if p.usable.any():
             k = int(np.flatnonzero(p.usable)[-1])
             self._last_nav = (int(p.t_ns[k]), p.vel_ned[k], p.quat[k])
-        out = self.focuser.push(p.raw, p.t_ns, p.vel_ned, p.usable)
+        out = self.focuser.push(p.raw, p.t_ns, p.vel_ned, p.usable, p.quat)
         self.summary.pulses_processed += int(np.count_nonzero(p.usable))
         self._record_motion(p, out)
         self._record(out)
@@ -601,8 +613,11 @@ class Pipeline:
         if not p.usable.any():
             return None
         p = p.since(int(np.argmax(p.usable)))
-        start_vel = p.vel_ned[p.usable][: self.cfg.imaging.block_pulses].mean(axis=0)
-        self.focuser = Focuser(self.cfg, int(p.t_ns[0]), start_vel, self.sink)
+        first = slice(0, self.cfg.imaging.block_pulses)
+        start_vel = p.vel_ned[p.usable][first].mean(axis=0)
+        self.focuser = Focuser(
+            self.cfg, int(p.t_ns[0]), start_vel, self.sink, quat=p.quat[p.usable][first]
+        )
         self.recorder.set_attribute(
             schema.REFERENCE_TRACK_ATTR, schema.encode_reference_track(self.focuser.track)
         )
@@ -637,8 +652,16 @@ class Pipeline:
         return replace(p, raw=raw, vel_ned=vel, quat=quat)
 
     def _record(self, out: FocusOutput) -> None:
-        """Record the autofocus estimates made so far and the tiles of ``out``."""
+        """Record the autofocus estimates made so far, the Doppler centroids and the tiles
+        of ``out``."""
         self._record_autofocus()
+        if out.doppler:
+            self.recorder.append_rows(schema.DOPPLER, schema.encode_doppler(out.doppler))
+            last = out.doppler[-1]
+            self.summary.doppler_attitude_hz, self.summary.doppler_echo_hz = (
+                last.attitude_hz,
+                last.echo_hz,
+            )
         for tile, track in zip(out.tiles, out.tracks, strict=True):
             metrics = recorded_tile_metrics(tile)
             self.recorder.add_image(

@@ -29,6 +29,8 @@ dimension, plus a ``committed`` attribute counting the rows that are complete)::
       motion/     pulse_id, t_ns (motion) int64; pos_ned m, vel_ned m/s (motion, ned);
                   quat (motion, wxyz); d_los_m m, phase_rad rad, range_shift_m m (motion)
       autofocus/  one row per subaperture estimate (:data:`AUTOFOCUS_COLUMNS`)
+      doppler/    one row per processing block: Doppler centroid from the attitude and
+                  from the echoes (:data:`DOPPLER_COLUMNS`)
       images/     attrs committed = tiles complete; tile_000000/ ... each with
                   data (axis0, axis1) complex64, axis0_m (axis0), axis1_m (axis1),
                   attrs frame, t0_ns, t1_ns, metrics, reference_track (the segment's
@@ -70,6 +72,7 @@ from sarmoco.drivers.samples import (
 from sarmoco.errors import RecorderError
 from sarmoco.processing.array.imaging3d import DemProduct
 from sarmoco.processing.autofocus.report import SubapertureReport
+from sarmoco.processing.beam import DopplerCentroid
 from sarmoco.processing.geometry import ReferenceTrack
 
 STORE_LAYOUT_VERSION = 2
@@ -267,6 +270,25 @@ AUTOFOCUS = TableSpec(
     "subaperture",
     {name: col for name, (col, _) in AUTOFOCUS_COLUMNS.items()},
     coords=("t_center_s",),
+)
+
+DOPPLER_COLUMNS: Mapping[str, tuple[Column, Callable[[DopplerCentroid], Any]]] = {
+    "t_ns": (_col(np.int64), lambda d: d.t_ns),
+    "squint_rad": (_col(np.float64), lambda d: d.squint_rad),
+    "attitude_hz": (_col(np.float64), lambda d: d.attitude_hz),
+    "echo_hz": (_col(np.float64), lambda d: d.echo_hz),
+}
+"""Columns of the ``doppler`` table, one row per processing block, each with the field of a
+:class:`~sarmoco.processing.beam.DopplerCentroid` it records: the block's first pulse (GPS
+ns), the beam centre's squint from the attitude and the antenna mount (rad, positive
+ahead), the Doppler centroid from them (Hz) and the one measured from the echoes (Hz,
+NaN where not measured). The two disagree by much more than the estimator's noise when
+the mount or the attitude source is wrong."""
+DOPPLER = TableSpec(
+    "doppler",
+    "block",
+    {name: col for name, (col, _) in DOPPLER_COLUMNS.items()},
+    coords=("t_ns",),
 )
 
 FIXED_TABLES = ("pulses", NAV.name, INS_RAW.name, INS_BYTES.name, MOTION.name)
@@ -493,10 +515,21 @@ def decode_pulses(cols: Mapping[str, npt.NDArray[Any]], n_samples: int) -> EchoP
 
 def encode_autofocus(subapertures: Sequence[SubapertureReport]) -> dict[str, npt.NDArray[Any]]:
     """Columns of the ``autofocus`` table for subaperture reports (:data:`AUTOFOCUS_COLUMNS`)."""
-    n = len(subapertures)
+    return _encode_rows(AUTOFOCUS_COLUMNS, subapertures)
+
+
+def encode_doppler(centroids: Sequence[DopplerCentroid]) -> dict[str, npt.NDArray[Any]]:
+    """Columns of the ``doppler`` table for block centroids (:data:`DOPPLER_COLUMNS`)."""
+    return _encode_rows(DOPPLER_COLUMNS, centroids)
+
+
+def _encode_rows(
+    columns: Mapping[str, tuple[Column, Callable[[Any], Any]]], rows: Sequence[Any]
+) -> dict[str, npt.NDArray[Any]]:
+    n = len(rows)
     cols = {}
-    for name, (col, field) in AUTOFOCUS_COLUMNS.items():
-        values = [field(s) for s in subapertures]
+    for name, (col, field) in columns.items():
+        values = [field(r) for r in rows]
         cols[name] = np.asarray(values, dtype=col.dtype).reshape(n, *col.shape)
     return cols
 

@@ -9,7 +9,6 @@ neighbour tiles for tile PGA): without it the tiles lose pulses and differ.
 
 from __future__ import annotations
 
-import math
 import os
 import subprocess
 import sys
@@ -147,17 +146,17 @@ def test_batch_command_refuses_what_it_cannot_run(
 
 
 def test_a_block_gets_the_calls_that_reach_it_and_the_one_that_opens_its_tiles() -> None:
-    """:meth:`SegmentStream.calls_within` on calls of 10 m of pulses with a gap: the calls
-    with a pulse in the span, and after the gap the first call beyond it (it opens the
-    span's tiles in the single-process replay: the tiles' start time comes from it)."""
+    """:meth:`SegmentStream.calls_within` on calls whose pulses' footprints span 10 m each,
+    with a gap: the calls with a footprint in the span, and after the gap the first call
+    beyond it (it opens the span's tiles in the single-process replay: the tiles' start
+    time comes from it)."""
     layout = TileLayout(100.0, 894.0, 16.5, 10.0, 0.1, 0.05)
     x_m = np.array([[0.0, 9.0], [10.0, 19.0], [20.0, 29.0], [200.0, 209.0]])
     stream = SegmentStream(
         "unused", ReferenceTrack.from_velocity(np.zeros(3), np.array([1.0, 0, 0]), 0),
         layout, np.array([0, 10, 20, 30, 40]), x_m, False,
     )  # fmt: skip
-    half = layout.half_footprint_m
-    assert stream.tiles == range(math.floor(-half / 10.0), math.floor((209.0 + half) / 10.0) + 1)
+    assert stream.tiles == range(0, 21)
     assert stream.calls_within(25.0, 40.0) == range(2, 3)
     assert stream.calls_within(5.0, 15.0) == range(0, 2)
     assert stream.calls_within(50.0, 60.0) == range(3, 4)

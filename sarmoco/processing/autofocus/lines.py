@@ -24,6 +24,7 @@ from sarmoco.processing.autofocus.separation import (
     look_angle,
 )
 from sarmoco.processing.autofocus.settings import AutofocusConfig, AutofocusGeometry
+from sarmoco.processing.mocomp import shift_range
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 
 
@@ -37,6 +38,28 @@ class Bands:
     bands: ComplexArray
     band_range_m: FloatArray
     balance: FloatArray
+
+
+WALK_FRACTION = 0.5
+"""Range walk over a subaperture, in range bins, below which it is left in place."""
+
+
+def unwalk(
+    sub: ComplexArray, t_s: FloatArray, bin_m: float, geometry: AutofocusGeometry
+) -> ComplexArray:
+    """A subaperture (pulses x bins at times ``t_s``, s; bins ``bin_m`` apart, m) with the
+    range walk of the beam centre removed about its mid time (a squinted beam,
+    :attr:`AutofocusGeometry.walk_mps`): each target stays on its line while its phase
+    history is kept. The subaperture itself when the walk over it is under
+    :data:`WALK_FRACTION` of a bin (a beam within a few tenths of a degree of broadside:
+    the band-limited shift would only perturb the lines)."""
+    if sub.shape[0] == 0:
+        return sub
+    span = float(t_s[-1]) - float(t_s[0])
+    if abs(geometry.walk_mps) * span < WALK_FRACTION * bin_m:
+        return sub
+    mid = 0.5 * (float(t_s[0]) + float(t_s[-1]))
+    return shift_range(sub, -geometry.walk_mps * (np.asarray(t_s) - mid) / bin_m)
 
 
 def select_bands(sub: ComplexArray, range_m: FloatArray, config: AutofocusConfig) -> Bands:
@@ -118,7 +141,7 @@ def measure_line_rates(
     if bins.size == 0:
         empty = np.zeros(0)
         return LineRates(empty, empty, empty, empty, empty)
-    ref = nominal_rate(range_m[bins], geometry.speed_mps, geometry.wavelength_m)
+    ref = nominal_rate(range_m[bins], geometry.rate_speed_mps, geometry.wavelength_m)
     if config.estimator == "map-drift":
         delta, quality = map_drift(bands, t_s, ref)
     else:
@@ -189,7 +212,7 @@ def block_contrast(
     the targets on those lines, the larger the contrast. Needs at least 8 pulses.
     """
     bands = gather_bands(data, bins, 0)
-    ref = nominal_rate(range_m[bins], geometry.speed_mps, geometry.wavelength_m)
+    ref = nominal_rate(range_m[bins], geometry.rate_speed_mps, geometry.wavelength_m)
     return float(np.sum(line_contrast(bands, t_s, ref)))
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Literal
 
@@ -23,12 +24,27 @@ class AutofocusGeometry:
         Height H of the reference track above the flat ground, m (cos β = H / r).
     ref_range_m : float
         Scene-centre slant range R_c, m (envelope look angle β_c and Δd = R - R_c).
+    squint_rad : float
+        Squint of the beam centre from the plane normal to the track, rad (positive: ahead;
+        an antenna fixed to a crabbed body). A target seen at squint ψ has the Doppler rate
+        ``-2 (v cos ψ)² / (λ R)`` and walks through range at ``-v sin ψ``.
     """
 
     wavelength_m: float
     speed_mps: float
     depth_m: float
     ref_range_m: float
+    squint_rad: float = 0.0
+
+    @property
+    def rate_speed_mps(self) -> float:
+        """Speed across the beam centre's line of sight, ``v cos ψ`` (of its Doppler rate), m/s."""
+        return self.speed_mps * math.cos(self.squint_rad)
+
+    @property
+    def walk_mps(self) -> float:
+        """Range rate of a target at the beam centre, ``-v sin ψ``, m/s."""
+        return -self.speed_mps * math.sin(self.squint_rad)
 
 
 @dataclass(frozen=True)

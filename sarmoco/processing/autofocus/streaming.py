@@ -40,6 +40,7 @@ from sarmoco.processing.autofocus.lines import (
     los_accel,
     measure_line_rates,
     select_bands,
+    unwalk,
 )
 from sarmoco.processing.autofocus.report import AutofocusReport, LineRates, SubapertureReport
 from sarmoco.processing.autofocus.settings import AutofocusConfig, AutofocusGeometry
@@ -218,7 +219,7 @@ class SlidingSubapertureAutofocus:
         m = _members(self._t, self._start(j), self.config)
         self._centres.append(self._start(j) + 0.5 * self.config.subaperture_s)
         if self.config.envelope_step:
-            sub = self._data.rows[m]
+            sub = unwalk(self._data.rows[m], self._t[m], self._bin_m, self.geometry)
             lines = measure_line_rates(
                 select_bands(sub, self.range_m, self.config),
                 self._t[m],
@@ -306,7 +307,8 @@ class SlidingSubapertureAutofocus:
         m = _members(self._t, self._start(j), self.config)
         t = self._t[m]
         if p == 0:
-            self._bands[j] = select_bands(self._shifted.rows[m], self.range_m, self.config)
+            sub = unwalk(self._shifted.rows[m], t, self._bin_m, self.geometry)
+            self._bands[j] = select_bands(sub, self.range_m, self.config)
         lines = self._bands[j]
         base = np.zeros(3)
         if p > 0:
@@ -444,7 +446,10 @@ class SlidingSubapertureAutofocus:
 
     def _no_worse(self, original: ComplexArray, focused: ComplexArray, t_s: FloatArray) -> bool:
         """Whether ``focused`` keeps at least :data:`CONTRAST_MARGIN` of the contrast of
-        ``original`` on the latter's :data:`GUARD_LINES` strongest lines."""
+        ``original`` on the latter's :data:`GUARD_LINES` strongest lines (each block with
+        the range walk of a squinted beam removed, so that a target stays on its line)."""
+        original = unwalk(original, t_s, self._bin_m, self.geometry)
+        focused = unwalk(focused, t_s, self._bin_m, self.geometry)
         bins = select_lines(original, GUARD_LINES, self.config.guard_bins)
         before = block_contrast(original, t_s, bins, self.range_m, self.geometry)
         after = block_contrast(focused, t_s, bins, self.range_m, self.geometry)

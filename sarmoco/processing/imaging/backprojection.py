@@ -11,7 +11,10 @@ upsampled, then linear interpolation) and the echo phase
 and the per-pulse deramp range for data motion compensated to a reference
 point (AFRL GOTCHA). Pixels whose range falls outside the range axis get no
 contribution from that pulse. Optionally a pulse contributes only to the pixels
-it sees within an azimuth half-angle of broadside (beam culling, below).
+it sees within its beam (beam culling): within a half-angle of broadside, or within a
+per-pulse interval of squint ``[psi_lo, psi_hi]`` (a squinted beam, e.g. an antenna fixed
+to a crabbed body), the squint ``psi`` of a pixel being the angle between the APC-to-pixel
+line and the plane normal to the grid's axis 0 (``tan psi = dx / sqrt(dy^2 + h^2)``).
 
 Squint residual of the per-bin motion compensation (eq. 29, docs/methods.md §2):
 when the pulses were compensated per range bin for an APC displacement ``ΔY_p``
@@ -159,6 +162,33 @@ def _span(
     return j0, max(j0, j1)
 
 
+@numba.njit(cache=True, fastmath=True, inline="always")
+def _beam_dy2(
+    dx: float, h2: float, t_lo: float, t_hi: float, cull: bool
+) -> tuple[float, float, bool]:  # pragma: no cover - compiled
+    """Bounds ``(lo2, hi2)`` on ``dy^2`` of the points at ``dx`` along axis 0 inside the beam
+    ``t_lo rho <= dx <= t_hi rho`` (``rho^2 = dy^2 + h^2``, ``t_lo < t_hi`` tangents of the
+    squint interval), and whether any is (no culling: every point)."""
+    if not cull:
+        return -h2, np.inf, True
+    rho_lo, rho_hi = 0.0, np.inf
+    if dx > 0.0:
+        if t_hi <= 0.0:
+            return 0.0, 0.0, False
+        rho_lo = dx / t_hi
+        if t_lo > 0.0:
+            rho_hi = dx / t_lo
+    elif dx < 0.0:
+        if t_lo >= 0.0:
+            return 0.0, 0.0, False
+        rho_lo = dx / t_lo
+        if t_hi < 0.0:
+            rho_hi = dx / t_hi
+    elif t_lo > 0.0 or t_hi < 0.0:
+        return 0.0, 0.0, False
+    return rho_lo * rho_lo - h2, rho_hi * rho_hi - h2, True
+
+
 @numba.njit(parallel=True, nogil=True, cache=True, fastmath=True)
 def _bp_kernel(
     line: ComplexArray,
@@ -169,18 +199,20 @@ def _bp_kernel(
     ax0: FloatArray,
     ax1: FloatArray,
     k: float,
-    inv_tan2: float,
+    cull: bool,
     squint: bool,
     out: FloatArray,
 ) -> None:  # pragma: no cover - compiled
     """Accumulate the pulses ``rows`` of ``line`` into ``out`` (float32 view, re/im interleaved).
 
-    ``geo[p]`` is pulse ``p``'s APC in grid coordinates ``(u, w, h^2, R_ref, k ΔY)``:
-    along axis 0, along axis 1, squared height over the plane, reference range, and
+    ``geo[p]`` is pulse ``p``'s APC in grid coordinates ``(u, w, h^2, R_ref, k ΔY, t_lo,
+    t_hi)``: along axis 0, along axis 1, squared height over the plane, reference range,
     the compensated displacement along axis 1 times ``k`` (rad/m; used when ``squint``,
-    loop-invariant, so the compiler keeps a loop without the term).
+    loop-invariant, so the compiler keeps a loop without the term), and the tangents of
+    the beam's squint interval.
     A pixel ``(a0, a1)`` takes the pulse when its range is inside the range axis
-    and ``dx^2 <= tan^2(half angle) (dy^2 + h^2)`` (``inv_tan2 = 0``: no culling).
+    and (when ``cull``) ``t_lo rho <= dx <= t_hi rho``, ``rho = sqrt(dy^2 + h^2)``: a
+    lower and an upper bound on ``dy^2``, like the range axis's.
     Per row and pulse, a first loop computes range, bin, fraction and phase for
     the admitted columns (vectorised: see :func:`_sincos`), a second one interpolates
     and accumulates. A parallel task owns ``ROW_BLOCK`` rows and gives them
@@ -207,13 +239,13 @@ def _bp_kernel(
                     dx = ax0[i] - geo[p, 0]
                     dx2 = dx * dx
                     base = dx2 + h2
-                    lo2 = dx2 * inv_tan2 - h2  # beam: dy^2 >= dx^2 / tan^2 - h^2
+                    lo2, hi2, seen = _beam_dy2(dx, h2, geo[p, 5], geo[p, 6], cull)
                     r_min = rref + r_first
                     if r_min > 0.0:
                         lo2 = max(lo2, r_min * r_min - base)
                     r_max = rref + r_last
-                    hi2 = r_max * r_max - base
-                    if r_max <= 0.0 or hi2 < 0.0 or hi2 < lo2:
+                    hi2 = min(hi2, r_max * r_max - base)
+                    if not seen or r_max <= 0.0 or hi2 < 0.0 or hi2 < lo2:
                         continue
                     d_max = np.sqrt(hi2)
                     d_min = np.sqrt(max(lo2, 0.0))
@@ -257,15 +289,16 @@ class PulseGeometry:
     ----------
     rows : ndarray of int64, shape (Q,)
         Rows of the lines (pulses) to use.
-    geo : ndarray of float64, shape (P, 5)
+    geo : ndarray of float64, shape (P, 7)
         Per pulse (every row of the lines), in the grid's coordinates: the APC's offset
         from the grid origin along axis 0 ``u`` and axis 1 ``w`` (m), its squared height
-        above the grid plane ``h^2`` (m²), the reference range ``R_ref`` (m) and
-        ``k ΔY`` (rad/m · m: the compensated displacement of eq. 29 times ``k``; 0 without).
+        above the grid plane ``h^2`` (m²), the reference range ``R_ref`` (m),
+        ``k ΔY`` (rad/m · m: the compensated displacement of eq. 29 times ``k``; 0 without)
+        and the tangents of the beam's squint interval ``tan psi_lo``, ``tan psi_hi``.
     k : float
         Two-way wavenumber 4 pi / lambda, rad/m.
-    inv_tan2 : float
-        1 / tan² of the beam half-angle (beam culling), 0: no culling.
+    cull : bool
+        Beam culling (columns 5 and 6 of ``geo`` are used).
     squint : bool
         The eq. 29 squint residual is removed (``compensated_dy_m`` given).
     """
@@ -273,7 +306,7 @@ class PulseGeometry:
     rows: IntArray
     geo: FloatArray
     k: float
-    inv_tan2: float
+    cull: bool
     squint: bool
 
 
@@ -288,6 +321,7 @@ def pulse_geometry(
     pulses: IntArray | None,
     beam_half_angle_rad: float | None,
     compensated_dy_m: FloatArray | None,
+    beam_squint_rad: FloatArray | None = None,
 ) -> PulseGeometry:
     """Check the arguments of :func:`backproject_into` (or of a kernel that takes the
     same, e.g. :func:`~sarmoco.processing.imaging.ffbp.ffbp_into`) and turn them into
@@ -298,7 +332,8 @@ def pulse_geometry(
     ProcessingError
         Named after ``caller``: shapes that disagree with the lines, an accumulator that
         is not C-contiguous complex64 of the grid's shape, pulse indices out of range, a
-        beam half-angle outside (0, pi/2), a ΔY that is not finite.
+        beam half-angle outside (0, pi/2), squint intervals not inside (-pi/2, pi/2) and
+        increasing, both kinds of beam given, a ΔY that is not finite.
     """
     n_p = lines.data.shape[0]
     shape = (grid.axis0_m.size, grid.axis1_m.size)
@@ -312,11 +347,23 @@ def pulse_geometry(
     rows = np.arange(n_p) if pulses is None else np.asarray(pulses, dtype=np.int64)
     if rows.size and (rows.min() < 0 or rows.max() >= n_p):
         raise ProcessingError(f"{caller}: pulse indices outside 0..{n_p - 1}")
-    inv_tan2 = 0.0
+    tan_beam = np.zeros((n_p, 2))
     if beam_half_angle_rad is not None:
+        if beam_squint_rad is not None:
+            raise ProcessingError(f"{caller}: a beam half-angle and squint intervals both given")
         if not 0.0 < beam_half_angle_rad < np.pi / 2:
             raise ProcessingError(f"{caller}: beam half-angle {beam_half_angle_rad!r} rad")
-        inv_tan2 = float(np.tan(beam_half_angle_rad) ** -2)
+        tan_beam[:] = np.tan(beam_half_angle_rad) * np.array([-1.0, 1.0])
+    if beam_squint_rad is not None:
+        squint = np.asarray(beam_squint_rad, dtype=np.float64)
+        if squint.shape != (n_p, 2) or not (
+            np.all(squint[:, 0] < squint[:, 1]) and np.all(np.abs(squint) < np.pi / 2)
+        ):
+            raise ProcessingError(
+                f"{caller}: beam squint intervals {squint.shape} not ({n_p}, 2) increasing "
+                "within (-pi/2, pi/2)"
+            )
+        tan_beam = np.tan(squint)
     k = 4.0 * np.pi / wavelength_m
     k_dy = np.zeros(n_p)
     if compensated_dy_m is not None:
@@ -327,8 +374,9 @@ def pulse_geometry(
             )
     e0, e1 = grid.unit_vectors
     d = np.asarray(apc_m, dtype=np.float64) - np.asarray(grid.origin_m, dtype=np.float64)
-    geo = np.column_stack([d @ e0, d @ e1, d[:, 2] ** 2, ref, k_dy])
-    return PulseGeometry(rows, geo, k, inv_tan2, compensated_dy_m is not None)
+    geo = np.column_stack([d @ e0, d @ e1, d[:, 2] ** 2, ref, k_dy, tan_beam])
+    cull = beam_half_angle_rad is not None or beam_squint_rad is not None
+    return PulseGeometry(rows, geo, k, cull, compensated_dy_m is not None)
 
 
 def backproject_into(
@@ -341,6 +389,7 @@ def backproject_into(
     pulses: IntArray | None = None,
     beam_half_angle_rad: float | None = None,
     compensated_dy_m: FloatArray | None = None,
+    beam_squint_rad: FloatArray | None = None,
 ) -> None:
     """Add the backprojection of upsampled pulses to ``out`` in place.
 
@@ -369,10 +418,14 @@ def backproject_into(
         per range bin, as a broadside point sees it (docs/methods.md §2, second order),
         m. Given, every pixel gets its squint residual removed (eq. 29, module
         docstring); None: no such term.
+    beam_squint_rad : ndarray of float64, shape (P, 2), optional
+        Beam culling about a squinted beam: a pixel takes pulse ``p`` only when its
+        squint (as for ``beam_half_angle_rad``) is within ``[lo_p, hi_p]``, rad (positive:
+        ahead along axis 0). Not with ``beam_half_angle_rad``.
     """
     pg = pulse_geometry(
         "backproject", out, lines, apc_m, wavelength_m, grid,
-        ref_range_m, pulses, beam_half_angle_rad, compensated_dy_m,
+        ref_range_m, pulses, beam_half_angle_rad, compensated_dy_m, beam_squint_rad,
     )  # fmt: skip
     _bp_kernel(
         lines.data,
@@ -383,7 +436,7 @@ def backproject_into(
         np.asarray(grid.axis0_m, dtype=np.float64),
         np.asarray(grid.axis1_m, dtype=np.float64),
         pg.k,
-        pg.inv_tan2,
+        pg.cull,
         pg.squint,
         out.view(np.float32),
     )

@@ -178,15 +178,16 @@ def _pulses_to_polar(
     dr: float,
     side: float,
     k: float,
-    inv_tan2: float,
+    cull: bool,
     squint: bool,
     out: ComplexArray,
 ) -> None:  # pragma: no cover - compiled
     """First stage: pulses ``first[B] .. first[B + 1] - 1`` into the polar subimage ``B``.
 
-    ``geo[s] = (u, w, h^2, R_ref, k ΔY)`` of pulse ``s`` (rows of ``line``), as in the
-    direct kernel; a pulse adds to a sample only when its range is on the range axis and
-    the point is within its beam (``dx^2 inv_tan2 <= dy^2 + h^2``).
+    ``geo[s] = (u, w, h^2, R_ref, k ΔY, t_lo, t_hi)`` of pulse ``s`` (rows of ``line``), as
+    in the direct kernel; a pulse adds to a sample only when its range is on the range axis
+    and (when ``cull``) the point is within its beam (``t_lo rho <= dx <= t_hi rho``,
+    ``rho^2 = dy^2 + h^2``).
     """
     n_sub, n_a, n_r = out.shape
     n_bins = line.shape[1]
@@ -204,8 +205,10 @@ def _pulses_to_polar(
                 dx = pu - geo[s, 0]
                 dy = pw - geo[s, 1]
                 g2 = dy * dy + geo[s, 2]
-                if dx * dx * inv_tan2 > g2:
-                    continue
+                if cull:
+                    rho = np.sqrt(g2)
+                    if dx < geo[s, 5] * rho or dx > geo[s, 6] * rho:
+                        continue
                 rs = np.sqrt(dx * dx + g2)
                 d_rel = rs - geo[s, 3]
                 u = (d_rel - r_first) / dr_line
@@ -409,15 +412,15 @@ def _stage_costs(
     return cost + n_children * n_pixels
 
 
-def _direct_cost(geo: FloatArray, grid: PlaneGrid, inv_tan2: float) -> float:
+def _direct_cost(geo: FloatArray, grid: PlaneGrid, cull: bool) -> float:
     """Pulse-pixel pairs the direct kernel visits (beam culling at the grid's mid range)."""
     ax0, ax1 = np.asarray(grid.axis0_m), np.asarray(grid.axis1_m)
-    if inv_tan2 == 0.0:
+    if not cull:
         return float(geo.shape[0] * ax0.size * ax1.size)
     dw = float(np.mean(ax1)) - geo[:, 1]
-    half = np.sqrt((dw**2 + geo[:, 2]) / inv_tan2)
-    lo = np.maximum(geo[:, 0] - half, ax0[0])
-    hi = np.minimum(geo[:, 0] + half, ax0[-1])
+    rho = np.sqrt(dw**2 + geo[:, 2])
+    lo = np.maximum(geo[:, 0] + rho * geo[:, 5], ax0[0])
+    hi = np.minimum(geo[:, 0] + rho * geo[:, 6], ax0[-1])
     rows = np.clip(hi - lo, 0.0, None) / abs(ax0[1] - ax0[0])
     return float(np.sum(rows) * ax1.size)
 
@@ -428,15 +431,16 @@ def plan_factorisation(
     dr_m: float,
     wavelength_m: float,
     budget_rad: float,
-    inv_tan2: float = 0.0,
+    cull: bool = False,
     angle_order: int = 1,
 ) -> Factorisation:
     """The cheapest factorisation whose phase error stays within ``budget_rad``.
 
     Parameters
     ----------
-    geo : ndarray of float64, shape (P, >= 3)
-        Pulses' APC in grid coordinates ``(u, w, h^2, ...)``, along-track order.
+    geo : ndarray of float64, shape (P, 7)
+        Pulses' APC in grid coordinates ``(u, w, h^2, R_ref, k ΔY, t_lo, t_hi)``
+        (:class:`~sarmoco.processing.imaging.backprojection.PulseGeometry`), along-track order.
     grid : PlaneGrid
         Output pixels.
     dr_m : float
@@ -445,8 +449,8 @@ def plan_factorisation(
         Carrier wavelength, m.
     budget_rad : float
         Bound on the two-way phase error summed over the stages, rad (0 < budget < pi).
-    inv_tan2 : float
-        Beam culling of the direct kernel (``1 / tan^2`` of the half-angle; 0: none), for its cost.
+    cull : bool
+        Beam culling of the direct kernel (columns 5 and 6 of ``geo``), for its cost.
     angle_order : int
         Interpolation order in angle (0 or 1).
 
@@ -460,7 +464,7 @@ def plan_factorisation(
     box = _box(grid)
     n_pixels = grid.axis0_m.size * grid.axis1_m.size
     best = Factorisation(2, 0, budget_rad, angle_order)
-    best_cost = _direct_cost(geo, grid, inv_tan2)
+    best_cost = _direct_cost(geo, grid, cull)
     for merge in MERGE_FACTORS:
         stages = 1
         while merge**stages <= geo.shape[0] * merge:
@@ -508,6 +512,7 @@ def ffbp_into(
     beam_half_angle_rad: float | None = None,
     compensated_dy_m: FloatArray | None = None,
     factorisation: Factorisation | None = None,
+    beam_squint_rad: FloatArray | None = None,
 ) -> Factorisation:
     """Add the FFBP image of upsampled pulses to ``out`` in place.
 
@@ -530,14 +535,14 @@ def ffbp_into(
     """
     pg = pulse_geometry(
         "ffbp", out, lines, apc_m, wavelength_m, grid,
-        ref_range_m, pulses, beam_half_angle_rad, compensated_dy_m,
+        ref_range_m, pulses, beam_half_angle_rad, compensated_dy_m, beam_squint_rad,
     )  # fmt: skip
-    rows, k, inv_tan2 = pg.rows, pg.k, pg.inv_tan2
+    rows, k, cull = pg.rows, pg.k, pg.cull
     if rows.size == 0:
         return Factorisation(2, 0, budget_rad)
     order = np.argsort(pg.geo[rows, 0], kind="stable")
     geo = pg.geo[rows[order]]
-    plan = factorisation or plan_factorisation(geo, grid, dr_m, wavelength_m, budget_rad, inv_tan2)
+    plan = factorisation or plan_factorisation(geo, grid, dr_m, wavelength_m, budget_rad, cull)
     if plan.stages == 0:
         backproject_into(
             out,
@@ -549,6 +554,7 @@ def ffbp_into(
             pulses=rows,
             beam_half_angle_rad=beam_half_angle_rad,
             compensated_dy_m=compensated_dy_m,
+            beam_squint_rad=beam_squint_rad,
         )
         return plan
     box = _box(grid)
@@ -563,7 +569,7 @@ def ffbp_into(
     data = np.zeros((first.size - 1, n_a, n_r), np.complex64)
     _pulses_to_polar(
         line, lines.r_first_m, lines.dr_m, geo, first, cgeo, alpha0, d_alpha, r0, dr_m,
-        side, k, inv_tan2, pg.squint, data,
+        side, k, cull, pg.squint, data,
     )  # fmt: skip
     level = _upsampled(_Level(cgeo, alpha0, d_alpha, r0, dr_m, data, length))
     for _ in range(plan.stages - 1):

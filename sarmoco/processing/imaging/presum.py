@@ -14,6 +14,15 @@ filtered along slow time by a linear-phase FIR low-pass whose passband holds
   (its time is that slot's time) and the filter delays nothing; DC gain ``D``,
   so the backprojected sum over the decimated pulses keeps the image's scale.
 
+A squinted beam (an antenna fixed to a crabbed body) moves the band to
+``f_dc ± f_b`` about its Doppler centroid ``f_dc`` (:attr:`AzimuthPrefilter.centroid_hz`,
+set per block from the attitude; it may lie beyond ``PRF / 2``, the band is the
+same). Each slot is demodulated by ``exp(-j phi(t))`` before the low-pass and each
+output remodulated by ``exp(+j phi(t))`` at its centre slot, ``phi`` the running
+integral of ``2 pi f_dc`` over the slot times (continuous where the centroid
+changes): the filter is then a band-pass about the centroid, and an output is the
+band-limited signal at its slot, as backprojection needs it.
+
 The filter runs on a uniform grid of pulse slots at the nominal PRF: a pulse
 ``round(dt * PRF)`` slots after the previous one leaves empty slots as zeros
 (dropped pulses); a gap longer than the filter ends the run (as :meth:`flush`)
@@ -98,6 +107,12 @@ class AzimuthPrefilter:
         Output pulse rate over the two-sided band ``2 f_b`` (> 1).
     attenuation_db : float
         Stopband attenuation of the design, dB.
+
+    Attributes
+    ----------
+    centroid_hz : float
+        Doppler centroid ``f_dc`` the band is centred on, Hz (0: broadside); applies to
+        the pulses pushed after it is set.
     """
 
     def __init__(
@@ -138,6 +153,11 @@ class AzimuthPrefilter:
         """Centre slot of the next output (a multiple of D)."""
         self._last_t = 0
         """Time of the last input pulse, GPS ns."""
+        self.centroid_hz = 0.0
+        self._hist_phi = np.zeros(0)
+        """Demodulation phase phi of the history slots, rad."""
+        self._last_phi = 0.0
+        """phi at the last input pulse's time, rad."""
 
     @property
     def delay_slots(self) -> int:
@@ -185,7 +205,7 @@ class AzimuthPrefilter:
         n_pad = 2 * self._half
         pad = np.zeros((n_pad, self._hist.shape[1]), np.complex64)
         t_pad = self._last_t + np.rint(np.arange(1, n_pad + 1) * self._period_ns).astype(np.int64)
-        out = self._filter(pad, t_pad, self._next_slot - 1 + self._half)
+        out = self._filter(pad, t_pad, self._phases(t_pad), self._next_slot - 1 + self._half)
         self._hist = None
         return out
 
@@ -197,22 +217,43 @@ class AzimuthPrefilter:
         d = self.decimation
         self._next_out = -(self._half // d) * d  # first centre whose window reaches slot 0
         self._last_t = t0_ns - round(self._period_ns)
+        self._last_phi = 0.0
+        dt = (self._hist_t - self._last_t).astype(np.float64)
+        self._hist_phi = np.asarray(2e-9 * math.pi * self.centroid_hz * dt, dtype=np.float64)
 
     def _run(
         self, rc: ComplexArray, t_ns: IntArray, steps: IntArray
     ) -> tuple[ComplexArray, IntArray]:
         """Place a block without long gaps on its slots (zeros between) and filter."""
         new, t_new = fill_slots(rc, t_ns, steps, self._last_t)
+        phi = self._phases(t_new)
+        if self.centroid_hz != 0.0 or np.any(phi != 0.0):
+            new = new * np.exp(-1j * phi).astype(np.complex64)[:, None]
         self._last_t = int(t_ns[-1])
-        return self._filter(new, t_new, self._next_slot + new.shape[0] - 1 - self._half)
+        return self._filter(new, t_new, phi, self._next_slot + new.shape[0] - 1 - self._half)
+
+    def _phases(self, t_ns: IntArray) -> npt.NDArray[np.float64]:
+        """Demodulation phase phi at the slot times ``t_ns`` following the last input, rad
+        (advances :attr:`_last_phi` to the last of them)."""
+        dt = np.diff(np.asarray(t_ns, dtype=np.int64), prepend=self._last_t).astype(np.float64)
+        phi = self._last_phi + 2e-9 * math.pi * self.centroid_hz * np.cumsum(dt)
+        if phi.size:
+            self._last_phi = float(phi[-1])
+        return phi
 
     def _filter(
-        self, new: ComplexArray, t_new: IntArray, last_centre: int
+        self,
+        new: ComplexArray,
+        t_new: IntArray,
+        phi_new: npt.NDArray[np.float64],
+        last_centre: int,
     ) -> tuple[ComplexArray, IntArray]:
-        """Append the slots ``new``; produce the outputs centred up to ``last_centre``."""
+        """Append the slots ``new`` (demodulated by ``phi_new``, rad); produce the outputs
+        centred up to ``last_centre``, remodulated."""
         hist = self._hist
         assert hist is not None
         t_x = np.concatenate([self._hist_t, t_new])
+        phi_x = np.concatenate([self._hist_phi, phi_new])
         first_slot = self._next_slot - hist.shape[0]  # slot of the first history row
         d = self.decimation
         n_out = max(0, (last_centre - self._next_out) // d + 1)
@@ -232,6 +273,10 @@ class AzimuthPrefilter:
         else:
             self._hist = np.concatenate([hist[new.shape[0] :], new])
         self._hist_t = t_x[t_x.shape[0] - n_hist :].copy()
+        self._hist_phi = phi_x[phi_x.shape[0] - n_hist :].copy()
+        phi_out = phi_x[centres - first_slot]
+        if np.any(phi_out != 0.0):
+            out *= np.exp(1j * phi_out).astype(np.complex64)[:, None]
         return out, t_x[centres - first_slot]
 
 

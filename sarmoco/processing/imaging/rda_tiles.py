@@ -180,6 +180,9 @@ class RdaTileImager:
         if self.range_axis_m.size < 2:
             raise ProcessingError("RdaTileImager: the tiles lie outside the range window")
         half = layout.half_footprint_m
+        self._half = half
+        """Along-track reach of the pulses' footprints from their APC, m (the broadside half
+        footprint, widened by squinted beams)."""
         self.block_tiles = block_tiles or max(1, math.ceil(half / layout.tile_length_m))
         """Tiles formed per block."""
         self._rc: list[ComplexArray] = []
@@ -217,6 +220,7 @@ class RdaTileImager:
         t_ns: IntArray,
         apc_m: FloatArray,
         compensated_dy_m: FloatArray | None = None,
+        beam_squint_rad: FloatArray | None = None,
     ) -> list[Tile]:
         """Take a block of pulses; return the tiles it finished.
 
@@ -233,14 +237,25 @@ class RdaTileImager:
             Taken for the interface of :class:`TileImager`; the per-pixel squint residual
             of the range-variant compensation is a backprojection term and is not applied
             here (the autofocus, when on, absorbs it).
+        beam_squint_rad : ndarray, shape (P, 2), optional
+            Squint interval of each pulse's beam from the plane normal to the track, rad
+            (positive: ahead). The first block's median centre becomes the centroid the
+            band is processed about (when none was given), and the pulses each tile takes
+            reach as far as any pulse's footprint. Default: broadside.
         """
         if rc.shape[0] == 0:
             return []
         x = np.asarray(apc_m, dtype=np.float64)[:, 0]
+        if beam_squint_rad is not None:
+            beam = np.asarray(beam_squint_rad, dtype=np.float64)
+            if self._next is None and self.centroid_squint_rad == 0.0:
+                self.centroid_squint_rad = float(np.median(beam.mean(axis=1)))
+            back, ahead = self.layout.reach_m(beam)
+            self._half = max(self._half, float(np.max(-back)), float(np.max(ahead)))
         self._rc.append(np.asarray(rc[:, self._bins], dtype=np.complex64))
         self._x.append(x.copy())
         self._t.append(np.asarray(t_ns, dtype=np.int64).copy())
-        length, half = self.layout.tile_length_m, self.layout.half_footprint_m
+        length, half = self.layout.tile_length_m, self._half
         if self._next is None:
             self._next = math.floor((float(x[0]) - half) / length)
         if self._dx == 0.0 and sum(a.size for a in self._x) >= 2:
@@ -258,7 +273,7 @@ class RdaTileImager:
         if self._next is None or not self._x:
             return []
         x_last = float(self._x[-1][-1])
-        last = math.floor((x_last + self.layout.half_footprint_m) / self.layout.tile_length_m)
+        last = math.floor((x_last + self._half) / self.layout.tile_length_m)
         tiles = self._form(range(self._next, last + 1)) if last >= self._next else []
         self._rc, self._x, self._t = [], [], []
         return tiles
@@ -267,7 +282,7 @@ class RdaTileImager:
         """Form the tiles of ``block`` (contiguous) from the pulses held; drop the pulses no
         later tile takes and advance to the tile after the block."""
         length = self.layout.tile_length_m
-        reach = self.layout.half_footprint_m + TAPS * self._dx
+        reach = self._half + TAPS * self._dx
         rc, x, t = np.concatenate(self._rc), np.concatenate(self._x), np.concatenate(self._t)
         lo, hi = block.start * length - reach, block.stop * length + reach
         rows = np.flatnonzero((x >= lo) & (x <= hi))
@@ -344,7 +359,7 @@ class RdaTileImager:
     ) -> Tile | None:
         """Tile ``k`` on ``grid`` resampled from the block's image (along ``x_u`` × slant
         range ``range_m``, m; None: no pulse reaches it)."""
-        length, half = self.layout.tile_length_m, self.layout.half_footprint_m
+        length, half = self.layout.tile_length_m, self._half
         used = np.flatnonzero((x >= k * length - half) & (x <= (k + 1) * length + half))
         if used.size == 0:
             return None

@@ -4,14 +4,16 @@ The imaging frame is that of docs/methods.md §1 (x along the reference track, y
 the illuminated side, z down; origin at the reference APC at its start time).
 Tile ``k`` covers ``k L <= x < (k + 1) L`` and the ground-range band
 ``y_c ± W/2`` on the flat ground ``z = H``. A pixel takes the pulses that see
-it within half the azimuth beamwidth θ of broadside (squint from the plane
-normal to the track, beam culling of
+it within their beam: within half the azimuth beamwidth θ of broadside, or within a
+per-pulse interval of squint ``[psi_lo, psi_hi]`` from the plane normal to the track
+(a squinted beam; beam culling of
 :func:`~sarmoco.processing.imaging.backprojection.backproject_into`), so a pulse
 at along-track position ``x_p`` reaches the tiles that meet its footprint
-``|x - x_p| <= R_far tan(θ/2)``; a tile is finished, and handed out, once the
-platform is a half footprint past its end, so memory stays bounded however
-long the run. Each block of pulses is upsampled in range once (in chunks of
-``CHUNK_PULSES``) and accumulated in place into every tile it reaches.
+``x_p + rho tan(psi_lo) <= x <= x_p + rho tan(psi_hi)`` over the swath's ``rho`` (the
+distance from the track); a tile is finished, and handed out, once the latest pulse's
+footprint has passed its end, so memory stays bounded however long the run. Each
+block of pulses is upsampled in range once (in chunks of ``CHUNK_PULSES``) and
+accumulated in place into every tile it reaches.
 
 Segments that overlap at a cut (:mod:`sarmoco.processing.segments`) each image only
 their side of the cut line: :attr:`TileLayout.keep` holds half-planes of the ground;
@@ -77,6 +79,32 @@ class TileLayout:
         """Half the along-track beam footprint at the far edge of the swath, m."""
         far = math.hypot(self.height_m, self.ground_range_m + self.swath_m / 2.0)
         return far * math.tan(self.beamwidth_rad / 2.0)
+
+    def broadside_rad(self, n: int) -> FloatArray:
+        """Squint intervals ``[-θ/2, θ/2]`` of ``n`` pulses with the beam broadside, rad, (n, 2)."""
+        half = self.beamwidth_rad / 2.0
+        return np.tile(np.array([-half, half]), (n, 1))
+
+    def reach_m(self, beam_squint_rad: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Along-track extent of each pulse's footprint on the swath, relative to the APC, m.
+
+        Parameters
+        ----------
+        beam_squint_rad : ndarray, shape (P, 2)
+            Squint interval of each pulse's beam from the plane normal to the track, rad.
+
+        Returns
+        -------
+        back, ahead : ndarray, shape (P,)
+            The least and the greatest ``rho tan(psi)`` over the swath's near and far
+            edges (``rho`` from the track to the ground) and the interval's ends, m.
+        """
+        y = self.ground_range_m + np.array([-0.5, 0.5]) * self.swath_m
+        rho = np.hypot(self.height_m, y)
+        tan = np.tan(np.asarray(beam_squint_rad, dtype=np.float64))
+        back = np.minimum(rho[0] * tan[:, 0], rho[1] * tan[:, 0])
+        ahead = np.maximum(rho[0] * tan[:, 1], rho[1] * tan[:, 1])
+        return back, ahead
 
     def grid(self, k: int) -> PlaneGrid:
         """Pixel grid of tile ``k`` in the imaging frame (axis 0 = x, axis 1 = y)."""
@@ -173,7 +201,9 @@ class TileImager:
         self._open: dict[int, Tile] = {}
         self._first_open = -(2**62)
         """Tiles below this index were handed out and are never reopened."""
-        self._held: list[tuple[ComplexArray, IntArray, FloatArray, FloatArray | None]] = []
+        self._held: list[
+            tuple[ComplexArray, IntArray, FloatArray, FloatArray | None, FloatArray]
+        ] = []
         """With FFBP: pulses not yet imaged (fewer than ``CHUNK_PULSES``)."""
 
     def add(
@@ -182,6 +212,7 @@ class TileImager:
         t_ns: IntArray,
         apc_m: FloatArray,
         compensated_dy_m: FloatArray | None = None,
+        beam_squint_rad: FloatArray | None = None,
     ) -> list[Tile]:
         """Backproject a block and return the tiles it finished.
 
@@ -198,26 +229,40 @@ class TileImager:
             per range bin (second order, docs/methods.md §2), m: each pixel then gets the
             squint residual of eq. 29 removed
             (:func:`~sarmoco.processing.imaging.backprojection.backproject_into`).
+        beam_squint_rad : ndarray, shape (P, 2), optional
+            Squint interval of each pulse's beam from the plane normal to the track (a
+            squinted beam), rad (positive: ahead). Default: ``±θ/2`` (broadside).
         """
         if rc.shape[0] == 0:
             return []
+        beam = (
+            self.layout.broadside_rad(rc.shape[0])
+            if beam_squint_rad is None
+            else np.asarray(beam_squint_rad, dtype=np.float64)
+        )
+        if beam.shape != (rc.shape[0], 2):
+            raise ProcessingError(f"TileImager: beam {beam.shape} for {rc.shape[0]} pulses")
         if self.ffbp_budget_rad is None:
-            return self._add(rc, t_ns, apc_m, compensated_dy_m)
+            return self._add(rc, t_ns, apc_m, compensated_dy_m, beam)
         dy = None if compensated_dy_m is None else np.array(compensated_dy_m)
-        self._held.append((np.array(rc), np.array(t_ns), np.array(apc_m), dy))
+        self._held.append((np.array(rc), np.array(t_ns), np.array(apc_m), dy, beam.copy()))
         n = sum(h[0].shape[0] for h in self._held)
         if n < CHUNK_PULSES:
             return []
         return self._add(*self._release(n - n % CHUNK_PULSES))
 
-    def _release(self, n: int) -> tuple[ComplexArray, IntArray, FloatArray, FloatArray | None]:
+    def _release(
+        self, n: int
+    ) -> tuple[ComplexArray, IntArray, FloatArray, FloatArray | None, FloatArray]:
         """The first ``n`` held pulses (FFBP), the rest kept."""
         held, self._held = self._held, []
         rc, t_ns, apc_m = (np.concatenate([h[k] for h in held]) for k in range(3))
+        beam = np.concatenate([h[4] for h in held])
         dy = None if any(h[3] is None for h in held) else np.concatenate([h[3] for h in held])
         if n < rc.shape[0]:
-            self._held = [(rc[n:], t_ns[n:], apc_m[n:], None if dy is None else dy[n:])]
-        return rc[:n], t_ns[:n], apc_m[:n], None if dy is None else dy[:n]
+            rest = None if dy is None else dy[n:]
+            self._held = [(rc[n:], t_ns[n:], apc_m[n:], rest, beam[n:])]
+        return rc[:n], t_ns[:n], apc_m[:n], None if dy is None else dy[:n], beam[:n]
 
     def _add(
         self,
@@ -225,13 +270,14 @@ class TileImager:
         t_ns: IntArray,
         apc_m: FloatArray,
         compensated_dy_m: FloatArray | None,
+        beam: FloatArray,
     ) -> list[Tile]:
         """Backproject a block now; the tiles it finished."""
         x = apc_m[:, 0]
-        half = self.layout.half_footprint_m
+        back, ahead = self.layout.reach_m(beam)
         length = self.layout.tile_length_m
-        first = max(math.floor((float(x.min()) - half) / length), self._first_open)
-        last = math.floor((float(x.max()) + half) / length)
+        first = max(math.floor(float((x + back).min()) / length), self._first_open)
+        last = math.floor(float((x + ahead).max()) / length)
         for k in self.layout.formed(range(first, last + 1)):
             if k not in self._open and (self.only is None or k in self.only):
                 grid = self.layout.grid(k)
@@ -240,8 +286,8 @@ class TileImager:
         for start in range(0, rc.shape[0], CHUNK_PULSES):
             chunk = slice(start, start + CHUNK_PULSES)
             dy = None if compensated_dy_m is None else compensated_dy_m[chunk]
-            self._backproject(rc[chunk], t_ns[chunk], apc_m[chunk], dy)
-        return self._pop_below(math.floor((float(x[-1]) - half) / length))
+            self._backproject(rc[chunk], t_ns[chunk], apc_m[chunk], dy, beam[chunk])
+        return self._pop_below(math.floor(float(x[-1] + back[-1]) / length))
 
     def _backproject(
         self,
@@ -249,18 +295,18 @@ class TileImager:
         t_ns: IntArray,
         apc_m: FloatArray,
         compensated_dy_m: FloatArray | None,
+        beam: FloatArray,
     ) -> None:
         x = apc_m[:, 0]
-        half = self.layout.half_footprint_m
+        back, ahead = self.layout.reach_m(beam)
         length = self.layout.tile_length_m
         lines: RangeLines | None = None
         for k, tile in self._open.items():
-            sel = np.flatnonzero((x >= k * length - half) & (x <= (k + 1) * length + half))
+            sel = np.flatnonzero((x + ahead >= k * length) & (x + back <= (k + 1) * length))
             if sel.size == 0:
                 continue
             if lines is None:
                 lines = RangeLines.upsample(rc, self.range_axis_m)
-            beam_half = self.layout.beamwidth_rad / 2.0
             if self.ffbp_budget_rad is None:
                 backproject_into(
                     tile.data,
@@ -269,8 +315,8 @@ class TileImager:
                     self.wavelength_m,
                     tile.grid,
                     pulses=sel,
-                    beam_half_angle_rad=beam_half,
                     compensated_dy_m=compensated_dy_m,
+                    beam_squint_rad=beam,
                 )
             else:
                 ffbp_into(
@@ -282,8 +328,8 @@ class TileImager:
                     tile.grid,
                     self.ffbp_budget_rad,
                     pulses=sel,
-                    beam_half_angle_rad=beam_half,
                     compensated_dy_m=compensated_dy_m,
+                    beam_squint_rad=beam,
                 )
             tile.n_pulses += sel.size
             tile.t1_ns = int(t_ns[sel[-1]])
