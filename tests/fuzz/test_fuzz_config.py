@@ -30,8 +30,9 @@ FUZZ = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCh
 
 
 def _toml_ready(value: Any) -> Any:
+    """``value`` as TOML writes it: tuples as arrays, unset keys (None) left out."""
     if isinstance(value, dict):
-        return {k: _toml_ready(v) for k, v in value.items()}
+        return {k: _toml_ready(v) for k, v in value.items() if v is not None}
     if isinstance(value, tuple | list):
         return [_toml_ready(v) for v in value]
     return value
