@@ -91,10 +91,16 @@ def scenario_config(scn: Scenario, **sections: dict[str, Any]) -> Config:
 
 
 def write_config(path: Path, table: dict[str, Any]) -> Path:
-    """Validate ``table`` and write it as a TOML file; returns ``path``."""
+    """Validate ``table`` and write it as a TOML file (unset keys left out); returns ``path``."""
     parse_config(table)
+    written = {
+        name: {k: v for k, v in section.items() if v is not None}
+        if isinstance(section, dict)
+        else section
+        for name, section in table.items()
+    }
     path.write_text(
         "# sarmoco configuration matching a simulated scenario (written by sarmoco)\n"
-        + tomli_w.dumps(table)
+        + tomli_w.dumps(written)
     )
     return path

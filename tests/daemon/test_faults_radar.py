@@ -209,8 +209,11 @@ def test_context_change_and_sender_restart(sim_files: SimFiles, tmp_path: Path) 
     # the burst outruns focusing: the pulses it skipped ahead over never reach the motion
     # table; of the others none of the mismatched is focused, every other one is
     pushed = np.isin(got["pulse_id"], store.read("motion", ["pulse_id"])["pulse_id"])
-    assert np.count_nonzero(~pushed) == metrics["pulses_focus_skipped"]
     usable = (got["flags"] & np.uint32(UNFOCUSABLE)) == 0
+    # every skipped pulse is missing from the motion table, and every focusable pulse
+    # missing from it was skipped (under load the skips may also take mismatched pulses)
+    skipped = metrics["pulses_focus_skipped"]
+    assert np.count_nonzero(~pushed & usable) <= skipped <= np.count_nonzero(~pushed)
     assert focused == np.count_nonzero(usable & pushed)
     assert (
         "radar.sample_rate_hz: configured" in log_text
