@@ -86,7 +86,6 @@ class TestNavigationAndMotion:
     def test_global_position_int(self, tmp_path: Path) -> None:
         run_case(tmp_path, "--nav-messages", "global", "--seed", "3")
 
-    @_xfail("azimuth IRW up to 1.186 x theory (T3), worst PSLR -12.95 dB")
     def test_double_motion_and_ins_error(self, tmp_path: Path) -> None:
         run_case(tmp_path, "--pp-cross", "0.8", "--pp-vert", "0.48", "--ins-error-scale", "2")
 
