@@ -1,4 +1,4 @@
-"""``sarmoco sim --preset mimo-array``: the MIMO array scenario written as files (issue 13).
+"""``sarmoco sim --preset mimo-array``: the MIMO array scenario written as files.
 
 ::
 

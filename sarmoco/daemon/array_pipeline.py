@@ -1,4 +1,4 @@
-"""Array mode (``radar.mode = "array"``, issue 13): pulses of every Tx/Rx pair to a DEM.
+"""Array mode (``radar.mode = "array"``): pulses of every Tx/Rx pair to a DEM.
 
 The same drivers, aligner and store as the single-channel pipeline, a different product:
 

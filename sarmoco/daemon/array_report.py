@@ -1,4 +1,4 @@
-"""Report of an array run: its DEMs against the true terrain (issue 13, the paper's Table 2).
+"""Report of an array run: its DEMs against the true terrain (the paper's Table 2).
 
 ``sarmoco report RUN.zarr --truth DIR/truth.json --json`` compares each DEM product of the
 store (``compensated``: roll compensated; ``uncompensated``: imaged as if the wing were

@@ -80,7 +80,7 @@ class RadarConfig:
     mode: Literal["single", "array"] = _key(
         "single",
         "single: one channel, side-looking SAR focused into image tiles (stripmap or "
-        "spotlight); array: MIMO downward-looking array (issue 13), one stream ID per Tx/Rx "
+        "spotlight); array: MIMO downward-looking array, one stream ID per Tx/Rx "
         "pair, imaged in 3-D into a DEM (section array)",
     )
 

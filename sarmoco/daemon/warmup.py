@@ -3,7 +3,7 @@
 numba compiles a kernel at its first call, or loads it from its cache (``cache=True``,
 ``NUMBA_CACHE_DIR`` in the systemd unit): tens of seconds on a loaded 2-core board for
 an empty cache. Compiled at the first block, the radar ring overflowed meanwhile and
-the watchdog missed its period (the 30-minute soak of issue 12). ``sarmoco run`` calls
+the watchdog missed its period (a 30-minute soak). ``sarmoco run`` calls
 :func:`warm_up_kernels` first, before READY=1; while it runs the start-up timeout is
 extended (``EXTEND_TIMEOUT_USEC``: systemd's watchdog is not armed before READY=1, its
 ``TimeoutStartSec`` is).

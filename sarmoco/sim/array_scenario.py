@@ -1,4 +1,4 @@
-"""The ``mimo-array`` scenario: a MIMO downward-looking array flying over a DEM (issue 13).
+"""The ``mimo-array`` scenario: a MIMO downward-looking array flying over a DEM.
 
 Geometry (local NED, m): the platform flies due north at ``altitude_m`` above the NED origin's
 plane (``down = -altitude_m``), along the line ``east = 0``, at ``speed_mps``; the array is

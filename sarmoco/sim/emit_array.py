@@ -1,4 +1,4 @@
-"""The simulated array radar: one VITA 49.2 stream per Tx/Rx pair (issue 13).
+"""The simulated array radar: one VITA 49.2 stream per Tx/Rx pair.
 
 Each pulse goes out as one signal data packet per channel, stream ID = channel
 ``c = m * n_rx + n`` (tx-major, :mod:`sarmoco.processing.array.geometry`), all stamped
