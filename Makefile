@@ -30,7 +30,7 @@ test: $(STAMP)
 # first, then a strict build (a broken link or anchor fails). The test suite checks both.
 docs: $(STAMP)
 	$(BIN)/python docs/gen_reference.py
-	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
 
 BENCHES := bench_mocomp bench_imaging bench_autofocus bench_drivers bench_sim thz_table2 ku_vehicle_table
 
