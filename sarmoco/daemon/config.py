@@ -2,7 +2,8 @@
 
 Every section is a frozen dataclass; every field carries its unit, its
 documentation and its constraints in ``dataclasses.field`` metadata, so the
-loader, the error messages and the README's key table all come from one place.
+loader, the error messages and the key table of docs/configuration.md all come from one
+place.
 Errors name the key path, the bad value and what is allowed
 (``radar.prf_hz: -3 is not > 0``); unknown keys are errors.
 """
@@ -236,10 +237,9 @@ class MocompConfig:
     along_track: bool = _key(
         True,
         "Place each pulse at its INS along-track position (slow time resampled to "
-        "x / v0) for autofocus and image formation (INS-only focus: ku-vehicle x0.1 "
-        "-9.6 -> -13.0 dB PSLR; with the autofocus on as good as or better than uniform "
-        "speed, see README); false: uniform speed v0, the autofocus then has to absorb "
-        "the speed error as a rate error",
+        "x / v0) for autofocus and image formation, so along-track speed changes come "
+        "from the INS; false: uniform speed v0, the autofocus then has to absorb the "
+        "speed error as a rate error",
     )
     segments: bool = _key(
         True,
@@ -308,9 +308,8 @@ class ImagingConfig:
         0.3,
         "Extra squint on each side of the beam that pixels still take, and the pre-filter "
         "passes: covers the heading error of the INS-only reference track against the beam "
-        "and spotlight targets off the aperture centre; raise it for crab (the first track "
-        "follows one processing block: 3-23 mrad off under the simulator's turbulence, 1.2-1.5 "
-        "x azimuth IRW beyond 5 mrad; 0.6 deg gave 1.0 x, about 0.7 dB more noise)",
+        "and spotlight targets off the aperture centre; a wider margin gives each pixel "
+        "more pulses of noise beyond its aperture",
         unit="deg",
         ge=0,
         lt=45,
@@ -432,8 +431,8 @@ class RecorderConfig:
     echo_compression: str = _key(
         "none",
         "Lossless compression of the raw echoes: 'lz4-bitshuffle' stores noise-like int16 "
-        "echoes in about 10 % less space (README, recording) for about a quarter of a core "
-        "at 330 MB/s; 'none' stores them as they are",
+        "echoes in less space at the cost of CPU on the recording path (both measured in "
+        "docs/measurements/ingest.md); 'none' stores them as they are",
         choices=tuple(ECHO_COMPRESSION),
     )
     fsync_interval_s: float = _key(1.0, "Interval between fsyncs of committed data", unit="s", gt=0)
@@ -747,7 +746,7 @@ def _scalar(tp: type, value: Any, path: str, meta: Mapping[str, Any]) -> Any:
 
 
 def describe_keys() -> list[dict[str, str]]:
-    """List every key with its type, unit, default and constraints (for the README).
+    """List every key with its type, unit, default and constraints (for docs/configuration.md).
 
     Returns
     -------
@@ -776,7 +775,7 @@ def describe_keys() -> list[dict[str, str]]:
 
 
 def keys_markdown() -> str:
-    """Every key as a Markdown table (the README's "Configuration" table)."""
+    """Every key as a Markdown table (the table of docs/configuration.md)."""
     lines = ["| key | type | unit | default | allowed | meaning |", "|---|---|---|---|---|---|"]
     lines += [
         f"| `{r['key']}` | {r['type']} | {r['unit']} | `{r['default']}` | {r['allowed']} | "

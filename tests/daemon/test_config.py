@@ -12,7 +12,6 @@ import pytest
 from sarmoco.app.simconfig import config_table, scenario_config
 from sarmoco.daemon.config import (
     describe_keys,
-    keys_markdown,
     load_config,
     parse_config,
 )

@@ -53,7 +53,7 @@ class AutofocusConfig:
 
     Each field is a configuration key (:func:`sarmoco.keys.key`): its meaning, unit and
     bounds are in its metadata, and the daemon's ``[autofocus]`` section is this class
-    plus the daemon's own switches, so the README's key table documents every field.
+    plus the daemon's own switches, so the key table of docs/configuration.md documents every field.
     Offline (:func:`autofocus_offline`) ``pin_window_s`` runs to the last subaperture centre.
     """
 
