@@ -212,7 +212,12 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if (out / "truth.json").exists():  # an earlier demo's output: replace it
         shutil.rmtree(out)
-    run_loopback(out, args.scale, scene=args.scene)
+    if args.status_port is None:
+        run_loopback(out, args.scale, scene=args.scene)
+    else:
+        print(f"live page: http://127.0.0.1:{args.status_port}/ while the daemon runs",
+              file=sys.stderr)  # fmt: skip
+        run_loopback(out, args.scale, scene=args.scene, status={"http_port": args.status_port})
     print((out / "report" / "report.txt").read_text(), end="")
     print(f"store {out / 'run.zarr'}, quicklooks in {out / 'report'}")
     return 0
@@ -308,6 +313,10 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument(
         "--scene", default="extended", choices=("points", "extended"),
         help="extended (default): terrain clutter and corner reflectors; points: 3 targets",
+    )  # fmt: skip
+    demo.add_argument(
+        "--status-port", type=int, metavar="PORT",
+        help="serve the daemon's /status and live page on 127.0.0.1:PORT (default: a free port)",
     )  # fmt: skip
     demo.set_defaults(func=_cmd_demo)
     return parser
