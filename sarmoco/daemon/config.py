@@ -775,13 +775,15 @@ def describe_keys() -> list[dict[str, str]]:
 
 
 def keys_markdown() -> str:
-    """Every key as a Markdown table (the table of docs/configuration.md)."""
+    """Every key as a Markdown table (the table of docs/configuration.md); a ``|`` in a
+    key's meaning (``|d_los|``) is escaped so that it stays in its cell."""
     lines = ["| key | type | unit | default | allowed | meaning |", "|---|---|---|---|---|---|"]
-    lines += [
-        f"| `{r['key']}` | {r['type']} | {r['unit']} | `{r['default']}` | {r['allowed']} | "
-        f"{r['doc']} |"
-        for r in describe_keys()
-    ]
+    for r in describe_keys():
+        doc = r["doc"].replace("|", r"\|")
+        lines.append(
+            f"| `{r['key']}` | {r['type']} | {r['unit']} | `{r['default']}` | {r['allowed']} | "
+            f"{doc} |"
+        )
     return "\n".join(lines) + "\n"
 
 

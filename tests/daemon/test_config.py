@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 import tomllib
 from pathlib import Path
 
@@ -12,6 +13,7 @@ import pytest
 from sarmoco.app.simconfig import config_table, scenario_config
 from sarmoco.daemon.config import (
     describe_keys,
+    keys_markdown,
     load_config,
     parse_config,
 )
@@ -116,6 +118,14 @@ def test_every_key_is_documented() -> None:
     assert len(rows) > 30
     for row in rows:
         assert row["doc"], row["key"]
+
+
+def test_key_table_rows_keep_their_cells() -> None:
+    """A ``|`` in a key's meaning (``|d_los|``) must not split its row of the table."""
+    lines = keys_markdown().splitlines()
+    assert any("\\|" in line for line in lines)  # some meaning holds a |, escaped
+    for line in lines:
+        assert len(re.findall(r"(?<!\\)\|", line)) == 7, line
 
 
 @pytest.mark.parametrize(
