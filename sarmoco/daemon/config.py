@@ -221,8 +221,8 @@ class MocompConfig:
             (
                 1,
                 "the scene-centre look angle for every bin leaves a look-angle error across "
-                "the swath that the autofocus does not remove (acceptance reference case: "
-                "worst azimuth PSLR -10.6 dB against -12.5 dB with 2); use 2",
+                "the swath that the autofocus does not remove (measured in "
+                "docs/measurements/acceptance.md); use 2",
             ),
         ),
     )
