@@ -27,8 +27,8 @@ from sarmoco.processing.autofocus import (
 )
 from sarmoco.processing.autofocus.pga import pga_stripmap
 from sarmoco.processing.geometry import fit_reference_track
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
-from sarmoco.sim.trajectory import MotionSpec
 
 
 def measure(seconds: float) -> dict[str, float]:

@@ -49,10 +49,11 @@ from sarmoco.processing.metrics import point_target_metrics
 from sarmoco.processing.rangecomp import compress, range_axis_m
 from sarmoco.processing.types import Image
 from sarmoco.sim.echo import synthesize
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import pulse_times_ns
 from sarmoco.sim.scenario import Scenario, load_preset
 from sarmoco.sim.survey import SurveyPattern, survey_scenario, survey_spec
-from sarmoco.sim.trajectory import MotionSpec, apc_trajectory, true_trajectory
+from sarmoco.sim.trajectory import apc_trajectory, true_trajectory
 
 CHUNK_PULSES = 2048
 """Pulses generated and played per chunk."""

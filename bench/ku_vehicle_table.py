@@ -56,9 +56,9 @@ from sarmoco.processing.imaging.backprojection import backproject
 from sarmoco.processing.imaging.grid import PlaneGrid
 from sarmoco.processing.metrics import point_target_metrics
 from sarmoco.processing.types import ComplexArray, FloatArray
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import Scenario, Target, load_preset
-from sarmoco.sim.trajectory import MotionSpec
 
 ROWS = ("nav only", "baseline", "two-step", "two-step+PGA")
 EAST_FRAC = (-0.45, -0.3, -0.15, 0.0, 0.15, 0.3, 0.45)

@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from sarmoco.daemon.links import INS_OPENERS
 from sarmoco.daemon.schema import ECHO_COMPRESSION
 from sarmoco.errors import ConfigError, ProcessingError
 from sarmoco.keys import key as _key
@@ -112,11 +111,17 @@ class RadarConfig:
         )
 
 
+InsProtocol = Literal["mavlink", "sbg", "sbg-can"]
+"""Every INS wire protocol the daemon speaks (opened by ``links.INS_OPENERS``)."""
+
+
 @dataclass(frozen=True)
 class InsConfig:
     """Navigation source (INS velocity and attitude)."""
 
-    protocol: str = _key("mavlink", "Wire protocol of the INS", choices=tuple(INS_OPENERS))
+    protocol: str = _key(
+        "mavlink", "Wire protocol of the INS", choices=typing.get_args(InsProtocol)
+    )
     link: str = _key(
         "udpin:127.0.0.1:14550",
         "MAVLink: a pymavlink connection string (udpin:, tcp:, /dev/tty..., .tlog, .bin); "

@@ -32,7 +32,8 @@ from sarmoco.processing.array.geometry import ArrayLayout, mimo_layout
 from sarmoco.processing.types import C_MPS, FloatArray, RadarParams
 from sarmoco.sim.array_echo import peaks_dem
 from sarmoco.sim.scenario import DEFAULT_T0_NS, level_track, radar_table
-from sarmoco.sim.trajectory import SinusoidSum, Trajectory, euler_to_quat
+from sarmoco.sim.trajectory import Trajectory, euler_to_quat
+from sarmoco.sim.turbulence import SinusoidSum
 
 ARRAY_PRESET = "mimo-array"
 """Name of the array preset (``sarmoco sim --preset mimo-array``)."""

@@ -17,10 +17,10 @@ from sarmoco.sim.emitter import WireTime
 from sarmoco.sim.faults import Faults
 from sarmoco.sim.insfeed import InsFeed
 from sarmoco.sim.links import FileLink
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.outfiles import TruthWriter, truth_record, write_truth
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec
 
 MOTION = MotionSpec("turbulence", seed=1)
 
