@@ -256,18 +256,34 @@ def _pvp_xml() -> dict[str, Any]:
     return out
 
 
+def _scene_xml(ph: FxPhaseHistory) -> dict[str, Any]:
+    """The ``SceneCoordinates`` of a phase history: a square image area of
+    ``2 IMAGE_AREA_HALF_M`` on the plane tangent to the Earth at the IARP (east, north)."""
+    iarp = geodetic_to_ecef(np.asarray(ph.iarp_lla))
+    rot = ned_rotation(ph.iarp_lla[0], ph.iarp_lla[1])
+    half = IMAGE_AREA_HALF_M
+    n_grid = round(2 * half / GRID_M) + 1
+    square = [(-half, -half), (-half, half), (half, half), (half, -half)]
+    corners = [_scene_to_ecef(np.array([x, y, 0.0]), ph.iarp_lla) for x, y in square]
+    return {
+        "EarthModel": "WGS_84",
+        "IARP": {"ECF": iarp, "LLH": np.asarray(ph.iarp_lla)},
+        "ReferenceSurface": {"Planar": {"uIAX": rot[1], "uIAY": rot[0]}},
+        "ImageArea": {"X1Y1": [-half, -half], "X2Y2": [half, half]},
+        "ImageAreaCornerPoints": np.array([ecef_to_geodetic(c)[:2] for c in corners]),
+        "ImageGrid": {
+            "IARPLocation": [n_grid // 2, n_grid // 2],
+            "IAXExtent": {"LineSpacing": GRID_M, "FirstLine": 0, "NumLines": n_grid},
+            "IAYExtent": {"SampleSpacing": GRID_M, "FirstSample": 0, "NumSamples": n_grid},
+        },
+    }
+
+
 def _xml(ph: FxPhaseHistory, pvps: npt.NDArray[Any], core_name: str) -> Any:
     v, s = ph.signal.shape
     fx1, fx2 = float(ph.freq_hz[0]), float(ph.freq_hz[-1])
     toa1, toa2 = ph.toa_span()
     srp_fixed = bool(np.all(ph.srp_ecef_m == ph.srp_ecef_m[0]))
-    iarp = geodetic_to_ecef(np.asarray(ph.iarp_lla))
-    rot = ned_rotation(ph.iarp_lla[0], ph.iarp_lla[1])
-    east, north = rot[1], rot[0]
-    half = IMAGE_AREA_HALF_M
-    n_grid = round(2 * half / GRID_M) + 1
-    square = [(-half, -half), (-half, half), (half, half), (half, -half)]
-    corners = [_scene_to_ecef(np.array([x, y, 0.0]), ph.iarp_lla) for x, y in square]
     duration = float(ph.tx_time_s[-1])
     root = lxml.etree.Element(f"{{{CPHD_NS}}}CPHD")
     cphd = skcphd.ElementWrapper(root)
@@ -291,18 +307,7 @@ def _xml(ph: FxPhaseHistory, pvps: npt.NDArray[Any], core_name: str) -> Any:
         "FxBand": {"FxMin": fx1, "FxMax": fx2},
         "TOASwath": {"TOAMin": toa1, "TOAMax": toa2},
     }
-    cphd["SceneCoordinates"] = {
-        "EarthModel": "WGS_84",
-        "IARP": {"ECF": iarp, "LLH": np.asarray(ph.iarp_lla)},
-        "ReferenceSurface": {"Planar": {"uIAX": east, "uIAY": north}},
-        "ImageArea": {"X1Y1": [-half, -half], "X2Y2": [half, half]},
-        "ImageAreaCornerPoints": np.array([ecef_to_geodetic(c)[:2] for c in corners]),
-        "ImageGrid": {
-            "IARPLocation": [n_grid // 2, n_grid // 2],
-            "IAXExtent": {"LineSpacing": GRID_M, "FirstLine": 0, "NumLines": n_grid},
-            "IAYExtent": {"SampleSpacing": GRID_M, "FirstSample": 0, "NumSamples": n_grid},
-        },
-    }
+    cphd["SceneCoordinates"] = _scene_xml(ph)
     cphd["Data"] = {
         "SignalArrayFormat": "CF8",
         "NumBytesPVP": pvps.dtype.itemsize,
