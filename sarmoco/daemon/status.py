@@ -42,7 +42,7 @@ from sarmoco.daemon.livelevel import level_names
 from sarmoco.daemon.quicklook import gray_of, peak_blocks, png_gray
 from sarmoco.errors import ConfigError
 
-LOOPBACK_HOSTS = ("127.0.0.1", "::1", "localhost")
+STATUS_HOSTS = ("127.0.0.1", "::1", "localhost")
 """The only addresses the status server binds to."""
 
 REQUEST_TIMEOUT_S = 5.0
@@ -354,8 +354,8 @@ class StatusServer:
         request_timeout_s: float = REQUEST_TIMEOUT_S,
         live: LiveView | None = None,
     ) -> None:
-        if host not in LOOPBACK_HOSTS:
-            raise ConfigError(f"status.host: {host!r} is not one of {', '.join(LOOPBACK_HOSTS)}")
+        if host not in STATUS_HOSTS:
+            raise ConfigError(f"status.host: {host!r} is not one of {', '.join(STATUS_HOSTS)}")
         self.counters = counters
         self.health = health
         self.live = live

@@ -14,11 +14,11 @@ __all__ = [
     "ins",
     "insemitters",
     "insfeed",
-    "links",
     "motionspec",
     "outfiles",
     "pacing",
     "player",
     "run",
     "scenario",
+    "transports",
 ]
