@@ -17,7 +17,6 @@ import time
 
 import pytest
 
-from bench.ku_vehicle_table import Case, scenario
 from sarmoco.processing import rangecomp
 from sarmoco.processing.autofocus import (
     AutofocusConfig,
@@ -29,6 +28,7 @@ from sarmoco.processing.autofocus.pga import pga_stripmap
 from sarmoco.processing.geometry import fit_reference_track
 from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
+from tests.workloads.ku_vehicle import Case, scenario
 
 
 def measure(seconds: float) -> dict[str, float]:

@@ -189,6 +189,18 @@ def test_layering(layer: str) -> None:
     assert not bad, bad
 
 
+def test_tests_import_no_bench_code() -> None:
+    """Benchmarks may build on the tests' workloads (tests/workloads), never the reverse."""
+    tests = PACKAGE.parent / "tests"
+    bad = [
+        f"{p.relative_to(tests.parent)} imports {name}"
+        for p in sorted(tests.rglob("*.py"))
+        for name in sorted(_imports(p))
+        if name == "bench" or name.startswith("bench.")
+    ]
+    assert not bad, bad
+
+
 def test_no_import_cycles() -> None:
     """No module imports itself through others, counting deferred and type-only imports."""
     assert not _import_cycles(PACKAGE), _import_cycles(PACKAGE)
