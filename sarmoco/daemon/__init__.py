@@ -16,6 +16,7 @@ __all__ = [
     "report",
     "runner",
     "schema",
+    "status",
     "store",
     "threadcpu",
 ]

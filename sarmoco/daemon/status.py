@@ -246,6 +246,9 @@ class LiveView:
         return out
 
 
+LIVE_PAGE_POLL_S = 2.0
+"""The live page's refresh interval (its script's timer), s."""
+
 LIVE_PAGE = """<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>sarmoco live</title>
 <style>
@@ -314,9 +317,11 @@ function tick() {
   document.getElementById("strip").src = "tiles/latest.png?" + Date.now();
 }
 tick();
-setInterval(tick, 2000);
+setInterval(tick, @POLL_MS@);
 </script></body></html>
-""".replace("__LIVE_LEVELS__", json.dumps(level_names()))
+""".replace("@POLL_MS@", str(round(LIVE_PAGE_POLL_S * 1000))).replace(
+    "__LIVE_LEVELS__", json.dumps(level_names())
+)
 """``GET /``: the operator's live page (no external assets; data from /status, /live.json;
 the live image's degraded level, :mod:`sarmoco.daemon.livelevel`, in words)."""
 
