@@ -135,13 +135,13 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _add_import_cphd_arguments(parser: argparse.ArgumentParser) -> None:
-    from sarmoco.app.cphd import add_arguments
+    from sarmoco.app.import_cphd import add_arguments
 
     add_arguments(parser)
 
 
 def _cmd_import_cphd(args: argparse.Namespace) -> int:
-    from sarmoco.app.cphd import run_command
+    from sarmoco.app.import_cphd import run_command
 
     return run_command(args)
 

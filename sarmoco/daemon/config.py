@@ -21,11 +21,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from sarmoco.daemon.links import INS_OPENERS
 from sarmoco.daemon.schema import ECHO_COMPRESSION
 from sarmoco.errors import ConfigError, ProcessingError
 from sarmoco.keys import key as _key
 from sarmoco.processing.autofocus.settings import AutofocusConfig
+from sarmoco.processing.imaging.presum import PREFILTER_OVERSAMPLING
+from sarmoco.processing.imaging.tile_pga import StripPga
 from sarmoco.processing.mocomp import DEFAULT_ENVELOPE_FRACTION
 from sarmoco.processing.types import C_MPS
 
@@ -113,11 +114,17 @@ class RadarConfig:
         )
 
 
+InsProtocol = Literal["mavlink", "sbg", "sbg-can"]
+"""Every INS wire protocol the daemon speaks (opened by ``links.INS_OPENERS``)."""
+
+
 @dataclass(frozen=True)
 class InsConfig:
     """Navigation source (INS velocity and attitude)."""
 
-    protocol: str = _key("mavlink", "Wire protocol of the INS", choices=tuple(INS_OPENERS))
+    protocol: str = _key(
+        "mavlink", "Wire protocol of the INS", choices=typing.get_args(InsProtocol)
+    )
     link: str = _key(
         "udpin:127.0.0.1:14550",
         "MAVLink: a pymavlink connection string (udpin:, tcp:, /dev/tty..., .tlog, .bin); "
@@ -273,9 +280,9 @@ class AutofocusSection(AutofocusConfig):
         "autofocus): removes phase errors shorter than a subaperture; tiles come out one "
         "tile later",
     )
-    pga_iterations: int = _key(6, "Tile PGA iterations at most", gt=0)
+    pga_iterations: int = _key(StripPga.max_iter, "Tile PGA iterations at most", gt=0)
     pga_window_m: float = _key(
-        12.0,
+        StripPga.window_m,
         "Along-track width of tile PGA's first window around each target; it must hold the "
         "paired echoes (lambda R f / (2 v) from the peak) of the fastest phase error to remove",
         unit="m",
@@ -320,7 +327,9 @@ class ImagingConfig:
         "those squints before backprojection",
     )
     prefilter_oversampling: float = _key(
-        1.25, "Pulse rate after the pre-filter over the two-sided Doppler band it keeps", gt=1
+        PREFILTER_OVERSAMPLING,
+        "Pulse rate after the pre-filter over the two-sided Doppler band it keeps",
+        gt=1,
     )
     presum_first: bool = _key(
         False,

@@ -30,9 +30,9 @@ from sarmoco.sim.emitter import Emitter, WireTime
 from sarmoco.sim.faults import Faults
 from sarmoco.sim.insemitters import INS_EMITTERS
 from sarmoco.sim.insfeed import InsFeed
-from sarmoco.sim.links import FileLink
 from sarmoco.sim.player import Pacing, play_emitters
 from sarmoco.sim.run import SimRun
+from sarmoco.sim.transports import FileLink
 
 NAV_FILES = {name: kind.file for name, kind in INS_EMITTERS.items()}
 """File written for each INS protocol (:data:`~sarmoco.sim.insemitters.INS_EMITTERS`)."""

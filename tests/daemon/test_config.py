@@ -12,6 +12,7 @@ import pytest
 
 from sarmoco.app.simconfig import config_table, scenario_config
 from sarmoco.daemon.config import (
+    RadarConfig,
     describe_keys,
     keys_markdown,
     load_config,
@@ -20,6 +21,7 @@ from sarmoco.daemon.config import (
 from sarmoco.daemon.focuser import Focuser, radar_params
 from sarmoco.errors import ConfigError, ProcessingError
 from sarmoco.processing.rangecomp import range_axis_m
+from sarmoco.processing.types import RadarParams
 from sarmoco.sim.scenario import load_preset
 from tests.daemon.refusals import assert_refused
 
@@ -234,3 +236,11 @@ def test_radar_conventions_reach_the_range_compression(direction: str, conjugate
     cfg = scenario_config(scn)
     assert (cfg.radar.chirp_direction, cfg.radar.iq_conjugate) == (direction, conjugate)
     assert radar_params(cfg) == scn.radar
+
+
+def test_every_radar_parameter_is_a_radar_key_of_its_type() -> None:
+    """The physics' radar description (RadarParams) is built from the ``radar`` keys by name:
+    each of its fields must be a key of the same type."""
+    keys = {f.name: f.type for f in dataclasses.fields(RadarConfig)}
+    for f in dataclasses.fields(RadarParams):
+        assert keys.get(f.name) == f.type, f.name
