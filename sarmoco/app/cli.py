@@ -194,6 +194,19 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     return status
 
 
+def _add_demo_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", default="demo-out", help="output folder (default demo-out)")
+    parser.add_argument("--scale", type=float, default=0.1, help="ku-vehicle scenario scale")
+    parser.add_argument(
+        "--scene", default="extended", choices=("points", "extended"),
+        help="extended (default): terrain clutter and corner reflectors; points: 3 targets",
+    )  # fmt: skip
+    parser.add_argument(
+        "--status-port", type=int, metavar="PORT",
+        help="serve the daemon's /status and live page on 127.0.0.1:PORT (default: a free port)",
+    )  # fmt: skip
+
+
 def _add_bench_arguments(parser: argparse.ArgumentParser) -> None:
     from sarmoco.app.benchcmd import add_arguments
 
@@ -306,18 +319,10 @@ def build_parser() -> argparse.ArgumentParser:
     bench.set_defaults(func=_cmd_bench)
 
     demo = sub.add_parser(
-        "demo", help="simulated hardware + daemon on loopback, then the report (the main job)"
+        "demo",
+        help="simulated hardware + daemon on loopback, then the report (the main job)",
+        add_arguments=_add_demo_arguments,
     )
-    demo.add_argument("--out", default="demo-out", help="output folder (default demo-out)")
-    demo.add_argument("--scale", type=float, default=0.1, help="ku-vehicle scenario scale")
-    demo.add_argument(
-        "--scene", default="extended", choices=("points", "extended"),
-        help="extended (default): terrain clutter and corner reflectors; points: 3 targets",
-    )  # fmt: skip
-    demo.add_argument(
-        "--status-port", type=int, metavar="PORT",
-        help="serve the daemon's /status and live page on 127.0.0.1:PORT (default: a free port)",
-    )  # fmt: skip
     demo.set_defaults(func=_cmd_demo)
     return parser
 
