@@ -1,6 +1,6 @@
 """Ground reprocessing with dask (issue 15): wall time against workers and block size.
 
-Run as ``.venv/bin/python -m bench.bench_batch [--scale 0.05] [--pulses 3000]``.
+Run as ``.venv/bin/python -m bench.bench_batch [--scale 0.05] [--pulses 3000] [--separate]``.
 
 A ku-vehicle run is simulated as files (``sarmoco sim --out``), replayed once in one
 process (the reference and the baseline), then reprocessed by :func:`run_batch` on a
@@ -8,7 +8,9 @@ local cluster of 1 and of 2 worker processes (one thread each, 127.0.0.1) at sev
 tile counts per imaging block. Each batch store is compared with the single-process
 replay (largest relative L2 difference of a tile). The cluster is started before the
 clock starts (its start-up is printed apart); worker processes load the numba kernels
-from the on-disk cache on their first block.
+from the on-disk cache on their first block. With ``--separate`` the cluster is a
+``dask scheduler`` process and ``dask worker`` processes on 127.0.0.1
+(:mod:`bench.dask_cluster`), reached by address as ``sarmoco batch --scheduler`` does.
 """
 
 from __future__ import annotations
@@ -20,10 +22,12 @@ import subprocess
 import sys
 import tempfile
 import time
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 
+from bench.dask_cluster import separate_cluster
 from sarmoco.app.batch import Recording, cluster_client, run_batch
 from sarmoco.daemon.config import load_config
 from sarmoco.daemon.runner import replay_files
@@ -50,6 +54,10 @@ def main() -> None:
     ap.add_argument("--pulses", type=int, default=3000)
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--tiles-per-block", type=int, nargs="+", default=[1, 4, 16])
+    ap.add_argument(
+        "--separate", action="store_true",
+        help="a cluster of `dask scheduler` and `dask worker` processes (bench.dask_cluster)",
+    )  # fmt: skip
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
@@ -70,7 +78,15 @@ def main() -> None:
                           "pulses": args.pulses, "scale": args.scale}), flush=True)  # fmt: skip
         for workers in args.workers:
             start = time.perf_counter()
-            with cluster_client(None, workers, dashboard=False) as client:
+            with ExitStack() as stack:
+                if args.separate:
+                    folder = work / f"cluster-{workers}"
+                    folder.mkdir()
+                    address, _ = stack.enter_context(separate_cluster(folder, workers))
+                    client = stack.enter_context(cluster_client(address, workers))
+                    client.wait_for_workers(workers, timeout=120)
+                else:
+                    client = stack.enter_context(cluster_client(None, workers, dashboard=False))
                 startup_s = time.perf_counter() - start
                 for tiles_per_block in args.tiles_per_block:
                     out = work / f"batch-{workers}-{tiles_per_block}.zarr"
