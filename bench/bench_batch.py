@@ -11,6 +11,8 @@ clock starts (its start-up is printed apart); worker processes load the numba ke
 from the on-disk cache on their first block. With ``--separate`` the cluster is a
 ``dask scheduler`` process and ``dask worker`` processes on 127.0.0.1
 (:mod:`bench.dask_cluster`), reached by address as ``sarmoco batch --scheduler`` does.
+Each line also gives the seconds the workers spent computing the front end and the
+imaging blocks (dask's task stream): the terms of the wall-time model ``F + I / W``.
 """
 
 from __future__ import annotations
@@ -24,14 +26,31 @@ import tempfile
 import time
 from contextlib import ExitStack
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from distributed import get_task_stream
 
 from bench.dask_cluster import separate_cluster
 from sarmoco.app.batch import Recording, cluster_client, run_batch
 from sarmoco.daemon.config import load_config
 from sarmoco.daemon.runner import replay_files
 from sarmoco.daemon.store import open_store
+
+PREFIXES = ("front_end", "image_block")
+"""Task-name prefixes of a recording's front end and of its imaging blocks."""
+
+
+def task_seconds(stream: list[dict[str, Any]], prefix: str) -> float:
+    """Seconds the workers spent computing the tasks whose key starts with ``prefix``
+    (dask's task stream: the ``compute`` spans of each task)."""
+    return sum(
+        span["stop"] - span["start"]
+        for task in stream
+        if str(task["key"]).startswith(prefix)
+        for span in task["startstops"]
+        if span["action"] == "compute"
+    )
 
 
 def worst_difference(single: Path, batch: Path) -> float:
@@ -91,13 +110,17 @@ def main() -> None:
                 for tiles_per_block in args.tiles_per_block:
                     out = work / f"batch-{workers}-{tiles_per_block}.zarr"
                     start = time.perf_counter()
-                    run_batch(client, cfg, [Recording(out, radar=radar, nav=nav)],
-                              tiles_per_block, progress=False)  # fmt: skip
+                    with get_task_stream(client) as stream:
+                        run_batch(client, cfg, [Recording(out, radar=radar, nav=nav)],
+                                  tiles_per_block, progress=False)  # fmt: skip
                     wall_s = time.perf_counter() - start
+                    front_s, imaging_s = (task_seconds(stream.data, p) for p in PREFIXES)
                     print(json.dumps({
                         "workers": workers, "tiles_per_block": tiles_per_block,
                         "wall_s": round(wall_s, 2), "cluster_start_s": round(startup_s, 2),
                         "speedup_vs_single": round(single_s / wall_s, 2),
+                        "front_end_task_s": round(front_s, 2),
+                        "imaging_task_s": round(imaging_s, 2),
                         "worst_tile_rel_l2": worst_difference(single, out),
                     }), flush=True)  # fmt: skip
                     shutil.rmtree(out)
