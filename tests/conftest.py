@@ -66,6 +66,8 @@ def gotcha_files() -> list[Path]:
 REALTIME: dict[str, tuple[str, ...]] = {
     # a live run (run_loopback) watched in headless Chromium
     "tests/app/test_live_browser.py": (),
+    # `dask scheduler` and `dask worker` processes; a worker SIGKILLed while it holds a task
+    "tests/app/test_batch.py": ("test_a_worker_killed_mid_job_costs_only_its_tasks",),
     # `sarmoco bench`: simulator and daemon live on loopback, pulses and latency judged
     "tests/app/test_bench.py": ("test_bench_prints_sane_figures_and_removes_its_folder",),
     # `sarmoco run` processes: SIGKILL at random moments, sd_notify watchdog, /status

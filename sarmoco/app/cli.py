@@ -282,7 +282,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     export = sub.add_parser(
         "export",
-        help="a store's image and phase history as SICD / CPHD (sarkit-checked)",
+        help="a store's image as SICD and its phase history as CPHD (sarkit-checked)",
         add_arguments=_add_export_arguments,
     )
     export.set_defaults(func=_cmd_export)
