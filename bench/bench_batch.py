@@ -75,7 +75,7 @@ def main() -> None:
     ap.add_argument("--tiles-per-block", type=int, nargs="+", default=[1, 4, 16])
     ap.add_argument(
         "--separate", action="store_true",
-        help="a cluster of `dask scheduler` and `dask worker` processes (tests.workloads.dask_cluster)",
+        help="a cluster of `dask scheduler` and `dask worker` processes on 127.0.0.1",
     )  # fmt: skip
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
