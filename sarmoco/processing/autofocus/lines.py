@@ -75,8 +75,8 @@ def demodulate(bands: ComplexArray, t_s: FloatArray, geometry: AutofocusGeometry
     error ``f a_x / v``. Broadside, f stays within half the Doppler bandwidth of zero and
     the errors of the targets on either side of the beam centre cancel; a squinted beam
     adds its centroid to every target's f (-106 Hz at 3.5° of squint on the Ku
-    acceptance scene: 0.1 m/s² along track read as -0.6 Hz/s in every line). Removed with
-    the pulses' own times, the centroid no longer counts.
+    acceptance scene: 0.1 m/s² along track read as 0.6 Hz/s of rate error in every
+    line). Removed with the pulses' own times, the centroid no longer counts.
     """
     f_dc = geometry.centroid_hz
     if f_dc == 0.0 or bands.shape[-1] == 0:

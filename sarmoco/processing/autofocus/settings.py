@@ -107,8 +107,8 @@ class AutofocusConfig:
     )
     min_lines: int = key(
         2,
-        "A subaperture with fewer usable lines makes no correction (rate error 0) rather "
-        "than a fit through noise",
+        "A subaperture with fewer usable lines, none of them lit throughout it, makes no "
+        "estimate of its own (bridged from its neighbours) rather than a fit through noise",
         ge=1,
     )
     rate_span_hz_per_s: float = key(
