@@ -52,12 +52,33 @@ class VerbParser(argparse.ArgumentParser):
         return super().parse_known_args(args, namespace)
 
 
+def _load_checked(path: str) -> Config:
+    """The configuration at ``path``, refused when its buffers do not fit the machine
+    (:func:`~sarmoco.daemon.resources.check_resources`)."""
+    from sarmoco.daemon.resources import check_resources
+
+    cfg = load_config(path)
+    check_resources(cfg)
+    return cfg
+
+
 def _cmd_config_check(args: argparse.Namespace) -> int:
-    cfg = load_config(args.file)
+    from sarmoco.daemon.resources import data_rate_bytes_s, human_bytes, memory_limit, plan
+
+    cfg = _load_checked(args.file)
+    buffers = plan(cfg)
+    limit, where = memory_limit(cfg)
+    rate = data_rate_bytes_s(cfg)
     print(
         f"{args.file}: ok (radar {cfg.radar.receive} at {cfg.radar.carrier_hz / 1e9:g} GHz, "
         f"INS over {cfg.ins.protocol}, recording to {cfg.recorder.directory})"
     )
+    print(
+        f"echo data rate {rate * 8e-6:.4g} Mbit/s ({human_bytes(rate)}/s); buffers "
+        f"{human_bytes(sum(b.nbytes for b in buffers))} of {human_bytes(limit)} ({where}):"
+    )
+    for b in buffers:
+        print(f"  {b.name}: {human_bytes(b.nbytes)} ({b.how}; {', '.join(b.keys)})")
     return 0
 
 
@@ -70,7 +91,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from sarmoco.daemon.logging_setup import install_sighup, setup_logging
     from sarmoco.daemon.runner import run_live
 
-    cfg = load_config(args.config)
+    cfg = _load_checked(args.config)
     if cfg.radar.mode == "array":
         raise ConfigError(
             'radar.mode: "array" runs are imaged from files (sarmoco replay --radar --nav); '
@@ -85,7 +106,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _cmd_replay(args: argparse.Namespace) -> int:
     from sarmoco.daemon.runner import replay_files, replay_store
 
-    cfg = load_config(args.config)
+    cfg = _load_checked(args.config)
     out = Path(args.out)
     if cfg.radar.mode == "array":
         return _replay_array(args, cfg, out)
