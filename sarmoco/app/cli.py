@@ -189,6 +189,20 @@ def _cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_verify(args: argparse.Namespace) -> int:
+    from sarmoco.daemon.verify import verify_store
+
+    report = verify_store(args.store)
+    for fault in report.faults:
+        print(f"{args.store}/{fault}")
+    if report.unchecked:
+        print(f"{len(report.unchecked)} arrays carry no checksum (read, not checked): "
+              + ", ".join(report.unchecked))  # fmt: skip
+    verdict = f"{len(report.faults)} damaged" if report.faults else "intact"
+    print(f"{args.store}: {report.chunks} chunks of {report.arrays} arrays read: {verdict}")
+    return 1 if report.faults else 0
+
+
 def _add_sim_arguments(parser: argparse.ArgumentParser) -> None:
     from sarmoco.app.simcommand import add_arguments
 
@@ -303,6 +317,13 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--truth", help="array run: truth.json of the simulated run (DEM stats)")
     report.add_argument("--json", action="store_true", help="print the summary as one JSON")
     report.set_defaults(func=_cmd_report)
+
+    verify = sub.add_parser(
+        "verify",
+        help="read every chunk of a store and check its checksum; exit 1 when any is damaged",
+    )
+    verify.add_argument("store", help="a run or replay store")
+    verify.set_defaults(func=_cmd_verify)
 
     sim = sub.add_parser(
         "sim",
