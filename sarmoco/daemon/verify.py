@@ -136,7 +136,8 @@ def _walk(group: zarr.Group, report: VerifyReport, root: Path, prefix: str) -> N
                 _walk(node, report, root, path)  # a later tile was being formed: not stored
             continue
         report.arrays += 1
-        if not any(isinstance(c, Crc32cCodec) for c in node.metadata.codecs):
+        codecs = getattr(node.metadata, "codecs", ())  # a zarr v2 array has none
+        if not any(isinstance(c, Crc32cCodec) for c in codecs):
             report.unchecked.append(path)
         for index in _chunk_indices(node, rows):
             report.chunks += 1
