@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import logging
 import math
 import socket
 import threading
@@ -120,6 +121,93 @@ def test_udp_round_trip_timesync_rates() -> None:
         else:
             assert s.quat == pytest.approx(q, abs=1e-6)
     assert max(errors) < 20e6 and src.time_bound_ns < 20e6  # loopback: well under 20 ms
+
+
+class OtherSystem(threading.Thread):
+    """System 42 on the autopilot's link, from its own socket: random bytes, frames with a
+    broken CRC, a companion computer's HEARTBEAT, and well-formed LOCAL_POSITION_NED and
+    ATTITUDE_QUATERNION with values of its own (99 m/s north); it answers TIMESYNC
+    requests with a boot clock 5 s off. It starts before the autopilot and goes on while
+    the autopilot speaks."""
+
+    SYSID = 42
+
+    def __init__(self, port: int, duration_s: float) -> None:
+        super().__init__()
+        self.conn = mavutil.mavlink_connection(
+            f"udpout:127.0.0.1:{port}", source_system=self.SYSID, source_component=191
+        )
+        self.duration_s = duration_s
+        self.sent = 0
+
+    def run(self) -> None:
+        mav, rng = self.conn.mav, np.random.default_rng(42)
+        end = time.monotonic() + self.duration_s
+        k = 0
+        while time.monotonic() < end:
+            ms = k * 10
+            if k % 10 == 0:
+                mav.heartbeat_send(
+                    mavlink2.MAV_TYPE_ONBOARD_CONTROLLER, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 4
+                )
+            self.conn.write(rng.bytes(int(rng.integers(1, 200))))
+            frame = bytearray(mavlink2.MAVLink_local_position_ned_message(
+                ms, 0, 0, 0, 99.0, 0, 0).pack(mav))  # fmt: skip
+            frame[12] ^= 0x10  # a payload bit: the CRC no longer matches
+            self.conn.write(bytes(frame))
+            mav.local_position_ned_send(ms, 1.0 * k, 0.0, -50.0, 99.0, 0.0, 0.0)
+            mav.attitude_quaternion_send(ms, 0.0, 1.0, 0.0, 0.0, 0, 0, 0)
+            self.sent += 3
+            while (m := self.conn.recv_match(blocking=False)) is not None:
+                if m.get_type() == "TIMESYNC" and m.tc1 == 0:
+                    mav.timesync_send(time.time_ns() + 5 * 10**9, m.ts1)
+            k += 1
+            time.sleep(0.01)
+
+
+def test_the_autopilot_is_chosen_not_the_first_system_heard(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """System 42 talks first and throughout; the HEARTBEAT of system 1 says it is an
+    autopilot: its navigation is decoded, its time mapped within the stated bounds, the
+    rate requests go to it, and system 42 is named in the log and its messages counted."""
+    src = MavlinkSource("udpin:127.0.0.1:0", timesync_period_s=0.1)
+    bound_at_map = observe_map_bounds(src)
+    port = src._conn.port.getsockname()[1]
+    other = OtherSystem(port, duration_s=3.2)
+    got: list[Any] = []
+    with caplog.at_level(logging.INFO, logger="sarmoco.drivers.mavlink"):
+        other.start()
+        t_end = time.monotonic() + 0.5  # system 42 alone on the link
+        while time.monotonic() < t_end:
+            got += src.poll(0.02)
+        assert got == [] and src.system_id == 0
+        ap = Autopilot(port)
+        ap.start()
+        while ap.is_alive():
+            got += src.poll(0.02)
+        ap.join()
+        other.join()
+        src.close()
+    vel = [s for s in got if isinstance(s, VelocitySample)]
+    att = [s for s in got if isinstance(s, AttitudeSample)]
+    assert len(vel) > 100 and len(att) > 100
+    assert src.system_id == 1
+    assert (mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 32.0) in ap.commands
+    for s in vel[len(vel) // 2 :] + att[len(att) // 2 :]:
+        t, v, q = ap.truth[s.device_time_ns // 10**6]
+        assert abs(s.t_gps_ns - t) <= bound_at_map[s.device_time_ns]
+        if isinstance(s, VelocitySample):
+            assert s.vel_ned == pytest.approx(v, abs=1e-5)
+        else:
+            assert s.quat == pytest.approx(q, abs=1e-6)
+    assert src.time_bound_ns < 20e6
+    assert other.sent / 3 < src.other_systems[42] <= other.sent  # good frames, some eaten
+    assert src.counters.rejected >= src.other_systems[42]
+    assert src.counters.parse_errors + src.counters.crc_errors > 0
+    assert "listening to the autopilot of system 1 (component 1" in caplog.text
+    assert "system 42 also speaks on the link" in caplog.text
+    assert f"system 42: {src.other_systems[42]}" in caplog.text
 
 
 def test_timesync_settles_quickly_then_slows_down() -> None:
