@@ -167,9 +167,11 @@ class InsConfig:
     )
     mavlink_system_id: int = _key(
         0,
-        "MAVLink system id of the vehicle whose navigation is used; messages of other "
-        "systems on the link are ignored and counted (ins rejected). 0: the system of the "
-        "first message heard",
+        "MAVLink system id of the vehicle whose navigation is used; rate requests go to it, "
+        "messages of other systems on the link are ignored, named in the log and counted "
+        "(ins rejected). 0: the first system whose HEARTBEAT says it is an autopilot (not a "
+        "ground station, companion computer, gimbal or camera); a log without one: the first "
+        "system heard",
         ge=0,
         le=255,
     )
