@@ -22,9 +22,11 @@ Autopilot boot time is mapped onto GPS time by :class:`BootClockModel`:
 * TIMESYNC (live links): the source sends a request every ``timesync_period_s``;
   :class:`~sarmoco.drivers.timesync.TimesyncEstimator` fits boot time → host
   clock from the exchanges within a margin of the fastest recent round trip. The
-  host clock (``time.time_ns``) must be UTC-disciplined (chrony/PTP/GPS);
-  GPS = host + leap seconds. The estimate's
-  stated error bound is :attr:`MavlinkSource.time_bound_ns`.
+  host clock must be UTC-disciplined (chrony/PTP/GPS); GPS = host + leap seconds. It is
+  read on the monotonic clock (:class:`~sarmoco.drivers.hostclock.HostClock`): a step of
+  the wall clock is logged and taken only when it brings the host nearer the autopilot's
+  SYSTEM_TIME (:meth:`MavlinkSource._judge_step`). The estimate's stated error bound is
+  :attr:`MavlinkSource.time_bound_ns`.
 * SYSTEM_TIME (always; the only reference in replay): pairs of
   ``time_boot_ms`` and the autopilot's GPS-derived UNIX time, fitted with
   outlier rejection.
@@ -74,6 +76,7 @@ from sarmoco.drivers.clock import (
     unix_ns_to_gps_ns,
 )
 from sarmoco.drivers.devclock import DeviceClock
+from sarmoco.drivers.hostclock import HostClock
 from sarmoco.drivers.posframe import LocalPositions
 from sarmoco.drivers.samples import (
     AttitudeSample,
@@ -442,7 +445,7 @@ class MavlinkSource(Source):
         32-byte MAVLink 2 signing secret; when given, unsigned and badly signed
         packets are rejected (counted in ``counters.rejected``) and ours are signed.
     host_clock_is_utc : bool
-        Whether ``time.time_ns()`` is UTC-disciplined (then TIMESYNC maps boot
+        Whether the host wall clock is UTC-disciplined (then TIMESYNC maps boot
         time to GPS; otherwise only SYSTEM_TIME does).
     timesync_period_s : float
         Interval between TIMESYNC requests, s (live links); a fifth of it until the
@@ -501,6 +504,10 @@ class MavlinkSource(Source):
         self._outstanding: dict[int, int] = {}
         self._target: tuple[int, int] | None = None
         self._loss_seen = 0
+        self._host = HostClock()
+        """Host UTC for TIMESYNC, on the monotonic clock (wall clock steps are judged)."""
+        self._last_remote_ns: int | None = None
+        """Autopilot boot time of the last TIMESYNC reply, ns."""
         self.system_id = system_id
         """The vehicle's system id (0 until its autopilot's HEARTBEAT when not configured)."""
         self.other_systems: dict[int, int] = {}
@@ -532,8 +539,57 @@ class MavlinkSource(Source):
                 msg_id, round(1e6 / hz), 0, 0, 0, 0, 0,
             )  # fmt: skip
 
+    def _now_ns(self) -> int:
+        """Host UTC now, ns (:class:`~sarmoco.drivers.hostclock.HostClock`); a step of the
+        wall clock since the last read is judged first (:meth:`_judge_step`)."""
+        now = self._host.now_ns()
+        step = self._host.take_step()
+        if step and self._judge_step(step):
+            now += step
+        return now
+
+    def _judge_step(self, step_ns: int) -> bool:
+        """Take or ignore a step of the host's wall clock by ``step_ns``; returns whether it
+        was taken.
+
+        With TIMESYNC and SYSTEM_TIME both mapping the autopilot's boot clock, the step is
+        taken when it brings the host clock nearer the autopilot's GPS-derived time (chrony
+        or NTP correcting a clock that was wrong), and ignored when it takes the host clock
+        away from it (the daemon goes on with the clock before the step, on the monotonic
+        clock). Without SYSTEM_TIME to judge by, the host's time service is trusted and the
+        step taken. A step taken restarts the TIMESYNC fit (its exchanges were timed on the
+        clock before). Either way the log says what happened.
+        """
+        model, boot = self.decoder.model, self._last_remote_ns
+        if model.use_timesync and model.timesync.ready and model.systime.ready and boot is not None:
+            gps = unix_ns_to_gps_ns(model.timesync.to_local(boot), model.leap_s)
+            before = gps - model.systime.map(boot)
+            after = before + step_ns
+            take = abs(after) < abs(before)
+            why = (
+                f"against the autopilot's GPS time (SYSTEM_TIME) the host clock was "
+                f"{before / 1e6:+.1f} ms off before the step and is {after / 1e6:+.1f} ms "
+                "after it"
+            )
+        else:
+            take = True
+            why = "no SYSTEM_TIME from the autopilot to judge it by: the host clock is trusted"
+        if take:
+            self._host.adopt(step_ns)
+            self._outstanding.clear()
+            self._next_timesync_ns = 0
+            model.timesync.reset()
+            what = "the step is taken and TIMESYNC starts again"
+        else:
+            what = "the step is ignored: TIMESYNC goes on with the clock before it"
+        log.warning(
+            "mavlink %s: the host wall clock stepped by %+.3f s; %s; %s",
+            self.url, step_ns / 1e9, why, what,
+        )  # fmt: skip
+        return take
+
     def _send_timesync(self) -> None:
-        now = time.time_ns()
+        now = self._now_ns()
         if now < self._next_timesync_ns or self._target is None:
             return
         settled = self.decoder.model.timesync.ready
@@ -550,11 +606,12 @@ class MavlinkSource(Source):
                 self._target = src
                 self.request_rates()
         elif mtype == "TIMESYNC":
-            now = time.time_ns()
+            now = self._now_ns()
             if msg.tc1 == 0:  # the autopilot's own request: answer it
                 self._conn.mav.timesync_send(now, msg.ts1)
             elif msg.ts1 in self._outstanding:
                 sent = self._outstanding.pop(msg.ts1)
+                self._last_remote_ns = msg.tc1
                 self.decoder.timesync(TimesyncExchange(sent, now, msg.tc1))
 
     def poll(self, timeout_s: float = 0.0) -> list[Sample]:

@@ -8,6 +8,7 @@ import math
 import socket
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -32,24 +33,39 @@ SKEW = 50e-6
 
 
 class Autopilot(threading.Thread):
-    """A simulated autopilot: its own boot clock (50 ppm fast), answers TIMESYNC."""
+    """A simulated autopilot: its own boot clock (50 ppm fast), answers TIMESYNC; with
+    ``system_time``, SYSTEM_TIME (its GPS-derived UNIX time) every 0.25 s. Its clock is the
+    machine's wall clock as it was when it started, run on the monotonic clock."""
 
-    def __init__(self, port: int, key: bytes | None = None, duration_s: float = 2.5) -> None:
+    def __init__(
+        self,
+        port: int,
+        key: bytes | None = None,
+        duration_s: float = 2.5,
+        system_time: bool = False,
+        wall: Callable[[], int] = time.time_ns,  # the machine's, bound at import
+    ) -> None:
         super().__init__()
+        self.system_time = system_time
+        self._wall0 = wall() - time.monotonic_ns()
         self.conn = mavutil.mavlink_connection(
             f"udpout:127.0.0.1:{port}", source_system=1, source_component=1
         )
         if key is not None:
             self.conn.setup_signing(key, sign_outgoing=True)
-        self.h0 = time.time_ns() - 300 * 10**9
+        self.h0 = self.unix_ns() - 300 * 10**9
         self.duration_s = duration_s
         self.truth: dict[int, tuple[int, tuple[float, ...], tuple[float, ...]]] = {}
         self.commands: list[tuple[int, float]] = []
         self.timesync_requests: list[float] = []
         """Monotonic times at which TIMESYNC requests were answered, s."""
 
+    def unix_ns(self) -> int:
+        """UNIX time as the autopilot's GPS gives it, ns."""
+        return self._wall0 + time.monotonic_ns()
+
     def boot_ns(self) -> int:
-        return round((time.time_ns() - self.h0) * (1 + SKEW))
+        return round((self.unix_ns() - self.h0) * (1 + SKEW))
 
     def run(self) -> None:
         mav = self.conn.mav
@@ -59,6 +75,8 @@ class Autopilot(threading.Thread):
             ms = self.boot_ns() // 10**6
             if k % 25 == 0:
                 mav.heartbeat_send(1, 3, 0, 0, 0)
+                if self.system_time:
+                    mav.system_time_send((self.h0 + round(ms * 10**6 / (1 + SKEW))) // 1000, ms)
             vel = (20.0 + 0.01 * k, 1.5, -0.2 * math.sin(k / 9))
             q = euler_to_quat(0.05 * math.sin(k / 11), 0.02, 1.0 + 0.001 * k)
             mav.local_position_ned_send(ms, 0.2 * k, 0.0, -50.0, *vel)
@@ -208,6 +226,54 @@ def test_the_autopilot_is_chosen_not_the_first_system_heard(
     assert "listening to the autopilot of system 1 (component 1" in caplog.text
     assert "system 42 also speaks on the link" in caplog.text
     assert f"system 42: {src.other_systems[42]}" in caplog.text
+
+
+@pytest.mark.parametrize(
+    ("wrong_s", "step_s", "verdict"),
+    [(0, 10, "ignored"), (0, -10, "ignored"), (0, 3600, "ignored"), (0, -3600, "ignored"),
+     (-3600, 3600, "taken")],
+)  # fmt: skip
+def test_a_wall_clock_step_moves_no_sample(
+    monkeypatch: pytest.MonkeyPatch,
+    caplog: pytest.LogCaptureFixture,
+    wrong_s: int,
+    step_s: int,
+    verdict: str,
+) -> None:
+    """The host's wall clock, ``wrong_s`` off GPS time at first, steps by ``step_s`` 1.2 s
+    into the link and stays there; the autopilot's clock and GPS time do not. A step away
+    from the autopilot's SYSTEM_TIME is ignored (TIMESYNC goes on, on the monotonic clock),
+    one towards it (chrony correcting a wrong clock) is taken; either way every sample from
+    0.5 s after it (the first half second: TIMESYNC's settling, as in the round trip above)
+    keeps its GPS time within the stated bound, and the log says what happened."""
+    wall = time.time_ns
+    offset = {"ns": wrong_s * 10**9}
+    monkeypatch.setattr(time, "time_ns", lambda: wall() + offset["ns"])
+    src = MavlinkSource("udpin:127.0.0.1:0", timesync_period_s=0.05)
+    bound_at_map = observe_map_bounds(src)
+    ap = Autopilot(src._conn.port.getsockname()[1], duration_s=3.5, system_time=True)
+    ap.start()
+    t_step = time.monotonic() + 1.2
+    got: list[Any] = []
+    with caplog.at_level(logging.WARNING, logger="sarmoco.drivers.mavlink"):
+        while ap.is_alive():
+            if offset["ns"] == wrong_s * 10**9 and time.monotonic() >= t_step:
+                offset["ns"] += step_s * 10**9
+            got += [(s, time.monotonic()) for s in src.poll(0.02)]
+    ap.join()
+    src.close()
+    late = [t for t in ap.timesync_requests if t > t_step + 0.5]
+    assert len(late) > 10  # TIMESYNC goes on after the step
+    after = [s for s, t in got if isinstance(s, VelocitySample | AttitudeSample) and
+             t > t_step + 0.5]  # fmt: skip
+    assert len(after) > 200
+    for s in after:
+        t = ap.truth[s.device_time_ns // 10**6][0]
+        assert abs(s.t_gps_ns - t) <= bound_at_map[s.device_time_ns], s.t_gps_ns - t
+    assert src.time_bound_ns < 20e6
+    steps = [r.getMessage() for r in caplog.records if "wall clock stepped" in r.getMessage()]
+    assert len(steps) == 1 and f"stepped by {step_s:+.3f} s" in steps[0]
+    assert f"the step is {verdict}" in steps[0]
 
 
 def test_timesync_settles_quickly_then_slows_down() -> None:
