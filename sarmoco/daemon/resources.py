@@ -96,7 +96,7 @@ def plan(cfg: Config) -> list[Buffer]:
         buffers += [
             Buffer("echo ring", ("radar.n_samples", "radar.prf_hz"),
                    ring * (pulse + PULSE_META_BYTES),
-                   f"{ring} pulses ({RING_SECONDS:g} s at radar.prf_hz) x {size}"),
+                   f"{ring} pulses (at least {RING_SECONDS:g} s at radar.prf_hz) x {size}"),
             Buffer("read scratch", ("radar.n_samples",), READ_BLOCK_PULSES * pulse,
                    f"{READ_BLOCK_PULSES} pulses x {size}"),
             Buffer("focus backlog", ("radar.n_samples", "radar.prf_hz", "imaging.block_pulses"),

@@ -83,7 +83,7 @@ def test_verify_passes_an_intact_store(
 def test_verify_names_every_damaged_chunk(
     stores: tuple[Config, Path, Path], capsys: pytest.CaptureFixture[str]
 ) -> None:
-    _, intact, damaged = stores
+    _, _, damaged = stores
     faults = {(f.array, f.index): f.problem for f in verify_store(damaged).faults}
     assert faults == {
         ("pulses/echo", (1, 0, 0)): "checksum mismatch",
