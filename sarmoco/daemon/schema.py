@@ -183,6 +183,11 @@ DEFAULT_COMPRESSOR = ZstdCodec(level=0, checksum=False)
 """Compressor of the arrays not named otherwise (zarr's own default for numbers)."""
 
 
+CHUNK_CONFIG: Mapping[str, Any] = {"write_empty_chunks": True}
+"""Runtime configuration of every array written (not stored in the metadata: an array
+opened again for writing needs it again, ``Array.with_config``): every chunk is written."""
+
+
 def chunk_codecs(compressor: Any = DEFAULT_COMPRESSOR) -> dict[str, Any]:
     """Keyword arguments of ``zarr.Group.create_array`` for an array of a store.
 
@@ -191,7 +196,7 @@ def chunk_codecs(compressor: Any = DEFAULT_COMPRESSOR) -> dict[str, Any]:
     (a lost file), never an empty chunk left out.
     """
     codecs = () if compressor is None else (compressor,)
-    return {"compressors": (*codecs, CHUNK_CHECKSUM), "config": {"write_empty_chunks": True}}
+    return {"compressors": (*codecs, CHUNK_CHECKSUM), "config": dict(CHUNK_CONFIG)}
 
 
 def pulses_table(

@@ -20,10 +20,12 @@ import pytest
 
 from sarmoco.app.cli import main
 from sarmoco.daemon.config import Config, load_config
+from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.report import write_report
 from sarmoco.daemon.runner import replay_files, replay_store
 from sarmoco.daemon.store import open_store
 from sarmoco.daemon.verify import verify_store
+from sarmoco.processing.types import Image
 
 PULSES = 800
 CHUNK = 256
@@ -126,3 +128,20 @@ def test_report_skips_damaged_tiles_and_says_so(
     assert any(k.startswith("images/tile_000000: ") for k in skipped)
     assert "image" in summary and summary["image"]["shape"][0] < whole["image"]["shape"][0]
     assert "DAMAGED " in (tmp_path / "damaged" / "report.txt").read_text()
+
+
+def test_every_chunk_is_written_even_when_it_holds_only_zeros(tmp_path: Path) -> None:
+    """A tile whose edge saw no pulse (zero pixels in whole chunks) and a flags column of
+    zeros: their chunks are stored all the same, so a missing one is damage."""
+    path = tmp_path / "run.zarr"
+    data = np.zeros((1100, 1100), np.complex64)  # chunks of 1024 x 1024
+    data[:10, :10] = 1.0  # only chunk (0, 0) holds anything
+    axis = np.arange(1100) * 0.1
+    with Recorder(path, 64, "int16") as rec:
+        rec.add_image(Image(data, axis, axis, "ground"), 0, 1)
+        t = np.arange(300, dtype=np.int64)
+        zeros = np.zeros(300, np.int32)
+        rec.append_pulses(t, t, zeros, zeros.astype(np.uint32), np.zeros((300, 64, 2), np.int16))
+    report = verify_store(path)
+    assert report.faults == [], report.faults
+    assert (path / "images" / "tile_000000" / "data" / "c" / "1" / "1").is_file()
