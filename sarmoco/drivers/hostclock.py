@@ -18,6 +18,11 @@ from collections.abc import Callable
 HOST_STEP_NS = 10_000_000
 """A change of the wall clock against the monotonic clock this large between two reads is
 a step, ns (a slew of at most 500 ppm moves it 5 µs in 10 ms, a step moves it at once)."""
+READ_SPAN_NS = 1_000_000
+"""Two wall clock reads about a monotonic one further apart than this were interrupted (the
+thread descheduled, or the clock stepped between them): the three are read again, ns."""
+READ_TRIES = 5
+"""Reads tried before the last is taken as it is."""
 
 
 def wall_ns() -> int:
@@ -48,7 +53,7 @@ class HostClock:
     ) -> None:
         self._wall = wall
         self._mono = mono
-        self._seen = wall() - mono()
+        self._seen = self._read()[1]
         """Wall minus monotonic time at the last read, ns."""
         self.offset_ns = self._seen
         """Added to monotonic time to give host UTC, ns."""
@@ -58,14 +63,25 @@ class HostClock:
     def now_ns(self) -> int:
         """Host UTC now, POSIX ns: monotonic time plus :attr:`offset_ns` (a step of the
         wall clock since the last read is held, not applied)."""
-        mono = self._mono()
-        seen = self._wall() - mono
+        mono, seen = self._read()
         change, self._seen = seen - self._seen, seen
         if abs(change) >= HOST_STEP_NS:
             self._step_ns += change
         else:
             self.offset_ns += change
         return mono + self.offset_ns
+
+    def _read(self) -> tuple[int, int]:
+        """Monotonic time and wall minus monotonic time, ns, from reads close together (see
+        :data:`READ_SPAN_NS`: a thread descheduled between two reads would look like a
+        step)."""
+        for _ in range(READ_TRIES):
+            before = self._wall()
+            mono = self._mono()
+            after = self._wall()
+            if 0 <= after - before <= READ_SPAN_NS:
+                break
+        return mono, (before + after) // 2 - mono
 
     def take_step(self) -> int:
         """The wall clock's steps since the last call, summed, ns (0: none)."""

@@ -41,8 +41,9 @@ the first system whose HEARTBEAT says it is an autopilot (an ``autopilot`` field
 than MAV_AUTOPILOT_INVALID, a vehicle ``type``: not a ground station, companion computer,
 gimbal, camera... :data:`NOT_A_VEHICLE`). Until one has, the messages of each system are
 held (:data:`HOLD_MESSAGES` each, :data:`HOLD_SYSTEMS` systems), and the autopilot's are
-decoded when its HEARTBEAT comes; a log without such a HEARTBEAT falls back to the first
-system heard. Rate requests go to the autopilot (``target_system``); TIMESYNC carries no
+decoded when its HEARTBEAT comes; a log without such a HEARTBEAT (by its end, or by the
+time a system's hold is full) falls back to the first system heard; a live link logs that
+it is waiting. Rate requests go to the autopilot (``target_system``); TIMESYNC carries no
 target in this dialect, and only the autopilot's replies count. Every other system on the
 link (a second vehicle, a companion computer relaying its own estimate, a stray sender) is
 named in the log when first heard, its messages ignored and counted in
@@ -639,12 +640,7 @@ class MavlinkSource(Source):
                 if self.is_file:
                     self.eof = True
                     if self.system_id == 0 and self._held:  # a log without its HEARTBEAT
-                        first = next(iter(self._held))
-                        log.warning(
-                            "mavlink %s: no autopilot HEARTBEAT in the log: using system %d, "
-                            "the first heard", self.url, first,
-                        )  # fmt: skip
-                        out += self._use(self._choose(first))
+                        out += self._use(self._first_heard())
                 break
             if self._count(msg):
                 out += self._use(self._vehicle_messages(msg))
@@ -711,15 +707,33 @@ class MavlinkSource(Source):
             held = self._held.get(sysid)
             if held is None and len(self._held) < HOLD_SYSTEMS:
                 held = self._held[sysid] = deque(maxlen=HOLD_MESSAGES)
-            if held is not None:
-                held.append(msg)
-            else:
+            if held is None:
                 self._other(sysid, msg)
+                return []
+            held.append(msg)
+            if len(held) == HOLD_MESSAGES:  # full: the oldest would be lost from now on
+                if self.is_file:  # a log without the HEARTBEAT: as at its end
+                    return self._first_heard()
+                log.warning(
+                    "mavlink %s: no HEARTBEAT of an autopilot heard in %d messages; holding "
+                    "the latest of systems %s (ins.mavlink_system_id names the vehicle)",
+                    self.url, HOLD_MESSAGES, ", ".join(map(str, sorted(self._held))),
+                )  # fmt: skip
             return []
         if sysid == self.system_id:
             return [msg]
         self._other(sysid, msg)
         return []
+
+    def _first_heard(self) -> list[Any]:
+        """Make the first system heard the vehicle (a log without an autopilot's HEARTBEAT);
+        its held messages."""
+        first = next(iter(self._held))
+        log.warning(
+            "mavlink %s: no HEARTBEAT of an autopilot in the log: using system %d, the first "
+            "heard", self.url, first,
+        )  # fmt: skip
+        return self._choose(first)
 
     def _choose(self, sysid: int) -> list[Any]:
         """Make ``sysid`` the vehicle; its held messages (the others' counted as ignored)."""

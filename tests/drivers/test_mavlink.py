@@ -6,6 +6,7 @@ from __future__ import annotations
 import logging
 import math
 import socket
+import struct
 import threading
 import time
 from collections.abc import Callable
@@ -274,6 +275,40 @@ def test_a_wall_clock_step_moves_no_sample(
     steps = [r.getMessage() for r in caplog.records if "wall clock stepped" in r.getMessage()]
     assert len(steps) == 1 and f"stepped by {step_s:+.3f} s" in steps[0]
     assert f"the step is {verdict}" in steps[0]
+
+
+@pytest.mark.parametrize("n_messages", [300, 2500])
+def test_a_log_without_an_autopilot_heartbeat_uses_the_first_system(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, n_messages: int
+) -> None:
+    """A telemetry log with no HEARTBEAT at all (system 5, then system 9 too): every
+    sample of system 5 is decoded, whether the log ends before a system's hold is full
+    or after; system 9 is counted."""
+    out = bytearray()
+    mav5 = mavlink2.MAVLink(None, srcSystem=5, srcComponent=1)
+    mav9 = mavlink2.MAVLink(None, srcSystem=9, srcComponent=1)
+    unix0 = 1_700_000_000_000_000  # µs
+    for k in range(n_messages):
+        ms = 1000 + 10 * k
+        records = [(mav5, mavlink2.MAVLink_local_position_ned_message(ms, 0, 0, 0, 1.0, 0, 0))]
+        if k % 50 == 0:
+            records.append((mav5, mavlink2.MAVLink_system_time_message(unix0 + ms * 1000, ms)))
+        if k > 10:
+            records.append(
+                (mav9, mavlink2.MAVLink_local_position_ned_message(ms, 0, 0, 0, 9.0, 0, 0))
+            )
+        for mav, msg in records:
+            out += struct.pack(">Q", unix0 + ms * 1000) + msg.pack(mav)
+    path = tmp_path / "nohb.tlog"
+    path.write_bytes(bytes(out))
+    with (
+        caplog.at_level(logging.WARNING, logger="sarmoco.drivers.mavlink"),
+        MavlinkSource(str(path)) as src,
+    ):
+        vel = [s for s in src.samples() if isinstance(s, VelocitySample)]
+    assert len(vel) == n_messages and {s.vel_ned[0] for s in vel} == {1.0}
+    assert src.system_id == 5 and src.other_systems[9] == n_messages - 11
+    assert "no HEARTBEAT of an autopilot in the log: using system 5" in caplog.text
 
 
 def test_timesync_settles_quickly_then_slows_down() -> None:
