@@ -319,7 +319,7 @@ def write_tile(
     """
     data = group["data"]
     assert isinstance(data, zarr.Array)
-    data = data.with_config(dict(schema.CHUNK_CONFIG))  # opened again: every chunk written
+    data = data.with_config(schema.CHUNK_CONFIG)  # opened again: every chunk written
     if image.data.shape != data.shape:
         raise RecorderError(
             f"{group.store_path}: image of shape {image.data.shape} for a tile of {data.shape}"

@@ -58,6 +58,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from zarr.codecs import BloscCodec, Crc32cCodec, ZstdCodec
+from zarr.core.array_spec import ArrayConfigParams
 
 from sarmoco.daemon.echoring import SampleFormat, sample_dtype, sample_shape
 from sarmoco.daemon.flags import FLAG_DTYPE, PulseFlag
@@ -183,7 +184,7 @@ DEFAULT_COMPRESSOR = ZstdCodec(level=0, checksum=False)
 """Compressor of the arrays not named otherwise (zarr's own default for numbers)."""
 
 
-CHUNK_CONFIG: Mapping[str, Any] = {"write_empty_chunks": True}
+CHUNK_CONFIG: ArrayConfigParams = {"write_empty_chunks": True}
 """Runtime configuration of every array written (not stored in the metadata: an array
 opened again for writing needs it again, ``Array.with_config``): every chunk is written."""
 
