@@ -52,12 +52,33 @@ class VerbParser(argparse.ArgumentParser):
         return super().parse_known_args(args, namespace)
 
 
+def _load_checked(path: str) -> Config:
+    """The configuration at ``path``, refused when its buffers do not fit the machine
+    (:func:`~sarmoco.daemon.resources.check_resources`)."""
+    from sarmoco.daemon.resources import check_resources
+
+    cfg = load_config(path)
+    check_resources(cfg)
+    return cfg
+
+
 def _cmd_config_check(args: argparse.Namespace) -> int:
-    cfg = load_config(args.file)
+    from sarmoco.daemon.resources import data_rate_bytes_s, human_bytes, memory_limit, plan
+
+    cfg = _load_checked(args.file)
+    buffers = plan(cfg)
+    limit, where = memory_limit(cfg)
+    rate = data_rate_bytes_s(cfg)
     print(
         f"{args.file}: ok (radar {cfg.radar.receive} at {cfg.radar.carrier_hz / 1e9:g} GHz, "
         f"INS over {cfg.ins.protocol}, recording to {cfg.recorder.directory})"
     )
+    print(
+        f"echo data rate {rate * 8e-6:.4g} Mbit/s ({human_bytes(rate)}/s); buffers "
+        f"{human_bytes(sum(b.nbytes for b in buffers))} of {human_bytes(limit)} ({where}):"
+    )
+    for b in buffers:
+        print(f"  {b.name}: {human_bytes(b.nbytes)} ({b.how}; {', '.join(b.keys)})")
     return 0
 
 
@@ -70,7 +91,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from sarmoco.daemon.logging_setup import install_sighup, setup_logging
     from sarmoco.daemon.runner import run_live
 
-    cfg = load_config(args.config)
+    cfg = _load_checked(args.config)
     if cfg.radar.mode == "array":
         raise ConfigError(
             'radar.mode: "array" runs are imaged from files (sarmoco replay --radar --nav); '
@@ -85,7 +106,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
 def _cmd_replay(args: argparse.Namespace) -> int:
     from sarmoco.daemon.runner import replay_files, replay_store
 
-    cfg = load_config(args.config)
+    cfg = _load_checked(args.config)
     out = Path(args.out)
     if cfg.radar.mode == "array":
         return _replay_array(args, cfg, out)
@@ -166,6 +187,20 @@ def _cmd_report(args: argparse.Namespace) -> int:
     print((out / "report.txt").read_text(), end="")
     print(f"quicklooks and report.json in {out}")
     return 0
+
+
+def _cmd_verify(args: argparse.Namespace) -> int:
+    from sarmoco.daemon.verify import verify_store
+
+    report = verify_store(args.store)
+    for fault in report.faults:
+        print(f"{args.store}/{fault}")
+    if report.unchecked:
+        print(f"{len(report.unchecked)} arrays carry no checksum (read, not checked): "
+              + ", ".join(report.unchecked))  # fmt: skip
+    verdict = f"{len(report.faults)} damaged" if report.faults else "intact"
+    print(f"{args.store}: {report.chunks} chunks of {report.arrays} arrays read: {verdict}")
+    return 1 if report.faults else 0
 
 
 def _add_sim_arguments(parser: argparse.ArgumentParser) -> None:
@@ -300,6 +335,13 @@ def build_parser() -> argparse.ArgumentParser:
     report.add_argument("--truth", help="array run: truth.json of the simulated run (DEM stats)")
     report.add_argument("--json", action="store_true", help="print the summary as one JSON")
     report.set_defaults(func=_cmd_report)
+
+    verify = sub.add_parser(
+        "verify",
+        help="read every chunk of a store and check its checksum; exit 1 when any is damaged",
+    )
+    verify.add_argument("store", help="a run or replay store")
+    verify.set_defaults(func=_cmd_verify)
 
     sim = sub.add_parser(
         "sim",

@@ -9,12 +9,13 @@ MAVLink over UDP and VITA 49 over UDP; the end-to-end tests use the other links.
 from __future__ import annotations
 
 import json
+import os
 import signal
 import socket
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -100,6 +101,7 @@ def run_loopback(
     platform: Sequence[str] = (),
     faults: Sequence[str] = (),
     scene: str = "points",
+    daemon_env: Mapping[str, str] | None = None,
     **sections: dict[str, Any],
 ) -> dict[str, Any]:
     """Play a scaled ku-vehicle scenario from ``sarmoco sim --serve`` into ``sarmoco run``.
@@ -132,6 +134,9 @@ def run_loopback(
         ``sarmoco sim --scene``: "points" (the preset's targets) or "extended" (terrain
         clutter and corner reflectors, :mod:`sarmoco.sim.extended`); the report's
         comparison then covers the whole clutter patch.
+    daemon_env : mapping of str to str, optional
+        Variables added to the daemon's environment only (e.g. a preloaded library that
+        shifts the wall clock it sees).
     **sections : dict
         Extra configuration keys per section (e.g. ``autofocus={"enabled": False}``).
 
@@ -159,7 +164,7 @@ def run_loopback(
         daemon = subprocess.Popen(
             [*py, "run", "--config", str(cfg_path), "--store", str(out / "run.zarr"),
              "--exit-when-idle", str(IDLE_EXIT_S)],
-            stdout=subprocess.PIPE, text=True,
+            stdout=subprocess.PIPE, text=True, env={**os.environ, **(daemon_env or {})},
         )  # fmt: skip
         read_json_line(daemon, "the daemon", DAEMON_START_S)
         if sim.wait(timeout=SIM_TIMEOUT_S) != 0:

@@ -175,9 +175,11 @@ class InsConfig:
     )
     mavlink_system_id: int = _key(
         0,
-        "MAVLink system id of the vehicle whose navigation is used; messages of other "
-        "systems on the link are ignored and counted (ins rejected). 0: the system of the "
-        "first message heard",
+        "MAVLink system id of the vehicle whose navigation is used; rate requests go to it, "
+        "messages of other systems on the link are ignored, named in the log and counted "
+        "(ins rejected). 0: the first system whose HEARTBEAT says it is an autopilot (not a "
+        "ground station, companion computer, gimbal or camera); a log without one: the first "
+        "system heard",
         ge=0,
         le=255,
     )
@@ -475,6 +477,29 @@ class StatusConfig:
 
 
 @dataclass(frozen=True)
+class LimitsConfig:
+    """What a run may ask of the machine (checked by ``config check``, ``run`` and ``replay``
+    before anything is allocated; :mod:`sarmoco.daemon.resources`)."""
+
+    memory_mib: float = _key(
+        0.0,
+        "Memory the run's buffers (echo ring, focus backlog, focusing block, image tile, "
+        "recorder chunk and queue) may take together; a configuration whose buffers need "
+        "more is refused, naming the key. 0: the machine's memory (physical, or the "
+        "cgroup's limit when lower)",
+        unit="MiB",
+        ge=0,
+    )
+    data_rate_mbps: float = _key(
+        0.0,
+        "Highest echo data rate (radar.prf_hz x radar.n_samples x bytes per sample x "
+        "channels) accepted, e.g. what the recording disk sustains; 0: no limit",
+        unit="Mbit/s",
+        ge=0,
+    )
+
+
+@dataclass(frozen=True)
 class Config:
     """The whole daemon configuration."""
 
@@ -487,6 +512,7 @@ class Config:
     array: ArrayConfig = field(default_factory=ArrayConfig)
     recorder: RecorderConfig = field(default_factory=RecorderConfig)
     status: StatusConfig = field(default_factory=StatusConfig)
+    limits: LimitsConfig = field(default_factory=LimitsConfig)
 
 
 def load_config(path: str | Path) -> Config:
@@ -531,11 +557,58 @@ def parse_config(table: Mapping[str, Any]) -> Config:
     """
     cfg: Config = _build(Config, table, "")
     check_channels(cfg.radar, cfg.array)
+    check_ins_rate(cfg.ins)
     if cfg.radar.mode == "array":
         check_array(cfg)
     else:
         check_geometry(cfg)
+        check_tiles(cfg.imaging)
     return cfg
+
+
+def check_ins_rate(ins: InsConfig) -> None:
+    """Refuse an INS rate whose sample interval no pulse can be interpolated across.
+
+    A pulse is focused when INS samples bracket it no further apart than the longer of
+    ``ins.max_gap_s`` and ``ins.bridge_gap_s``, and it waits for the sample after it at
+    most ``ins.latency_budget_s``.
+
+    Raises
+    ------
+    ConfigError
+        ``1 / ins.rate_hz`` longer than either.
+    """
+    interval = 1.0 / ins.rate_hz
+    longest = max(ins.max_gap_s, ins.bridge_gap_s)
+    if interval > longest:
+        raise ConfigError(
+            f"ins.rate_hz: {ins.rate_hz!r} Hz gives INS samples {interval:.4g} s apart, longer "
+            f"than the longest interval a pulse is interpolated across (ins.max_gap_s "
+            f"{ins.max_gap_s!r} s, ins.bridge_gap_s {ins.bridge_gap_s!r} s): no pulse would "
+            "be bracketed"
+        )
+    if interval > ins.latency_budget_s:
+        raise ConfigError(
+            f"ins.rate_hz: {ins.rate_hz!r} Hz gives INS samples {interval:.4g} s apart, longer "
+            f"than ins.latency_budget_s {ins.latency_budget_s!r} s: pulses would time out "
+            "waiting for the sample after them"
+        )
+
+
+def check_tiles(imaging: ImagingConfig) -> None:
+    """Refuse a pixel that does not fit in its tile.
+
+    Raises
+    ------
+    ConfigError
+        ``imaging.pixel_m`` larger than ``imaging.tile_length_m`` or ``imaging.swath_m``.
+    """
+    for key, extent in (("tile_length_m", imaging.tile_length_m), ("swath_m", imaging.swath_m)):
+        if imaging.pixel_m > extent:
+            raise ConfigError(
+                f"imaging.pixel_m: {imaging.pixel_m!r} m is larger than imaging.{key} "
+                f"{extent!r} m (a tile holds at least one pixel each way)"
+            )
 
 
 def check_channels(radar: RadarConfig, array: ArrayConfig) -> None:

@@ -195,8 +195,7 @@ def segment_images(store: RunStore) -> list[SegmentImage]:
         A tile lacks its ``reference_track``, or tiles of a segment differ in width.
     """
     groups: dict[int, list[tuple[int, Image, dict[str, object]]]] = {}
-    for k in range(store.n_images):
-        image, attrs = store.image(k)
+    for k, image, attrs in store.images():
         where = f"{store.path}/{schema.IMAGES_GROUP}/{schema.tile_name(k)}"
         track_attr = schema.read_attr(attrs, schema.REFERENCE_TRACK_ATTR, dict, where)
         t0 = schema.read_attr(track_attr, "t0_ns", int, f"{where}.{schema.REFERENCE_TRACK_ATTR}")

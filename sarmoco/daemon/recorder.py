@@ -286,10 +286,16 @@ def create_tile(
         dtype=np.complex64,
         dimension_names=schema.TILE_DIMS,
         attributes={"coordinates": " ".join(schema.TILE_COORDS)},
+        **schema.chunk_codecs(),
     )
     for name, dim, value in zip(schema.TILE_COORDS, schema.TILE_DIMS, axes, strict=True):
         arr = group.create_array(
-            name, shape=value.shape, chunks=value.shape, dtype=value.dtype, dimension_names=(dim,)
+            name,
+            shape=value.shape,
+            chunks=value.shape,
+            dtype=value.dtype,
+            dimension_names=(dim,),
+            **schema.chunk_codecs(),
         )
         arr[...] = value
     return group
@@ -313,6 +319,7 @@ def write_tile(
     """
     data = group["data"]
     assert isinstance(data, zarr.Array)
+    data = data.with_config(schema.CHUNK_CONFIG)  # opened again: every chunk written
     if image.data.shape != data.shape:
         raise RecorderError(
             f"{group.store_path}: image of shape {image.data.shape} for a tile of {data.shape}"
@@ -365,7 +372,7 @@ class Table:
                 dtype=col.dtype,
                 dimension_names=(spec.row_dim, *col.dims),
                 fill_value=np.nan if col.dtype.kind == "f" else 0,
-                compressors=spec.compressors.get(name, "auto"),
+                **schema.chunk_codecs(spec.compressors.get(name, schema.DEFAULT_COMPRESSOR)),
                 attributes=spec.column_attrs(name),
             )
         self.group.update_attributes({COMMITTED_ATTR: 0})
@@ -819,7 +826,12 @@ class Recorder(Closing):
         group = dems.create_group(name)
         for key, (dims, value) in arrays.items():
             arr = group.create_array(
-                key, shape=value.shape, chunks=value.shape, dtype=value.dtype, dimension_names=dims
+                key,
+                shape=value.shape,
+                chunks=value.shape,
+                dtype=value.dtype,
+                dimension_names=dims,
+                **schema.chunk_codecs(),
             )
             arr[...] = value
         group.update_attributes(attrs)

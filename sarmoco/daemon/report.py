@@ -88,8 +88,7 @@ def strip(store: RunStore) -> Image | None:
     first segment keeps its own coordinates, and a single-segment run is unchanged).
     """
     segments: dict[int, list[Image]] = {}
-    for k in range(store.n_images):
-        image, attrs = store.image(k)
+    for _, image, attrs in store.images():
         segments.setdefault(int(attrs.get("reference_track", {}).get("t0_ns", 0)), []).append(image)
     if not segments:
         return None
@@ -177,8 +176,7 @@ def _segment_strip(
     that hold pixels between ``x_lo`` and ``x_hi`` (m), so a window reaching past the tile's
     edges is whole."""
     parts = [tile]
-    for k in range(store.n_images):
-        other, attrs = store.image(k)
+    for _, other, attrs in store.images():
         if attrs.get("reference_track") != track or other.data.shape[1] != tile.data.shape[1]:
             continue
         if other.axis0_m[0] == tile.axis0_m[0]:
@@ -204,8 +202,8 @@ def _brightest_window(store: RunStore, half_m: tuple[float, float]) -> tuple[Ima
         The store has no tiles, or its tiles carry no reference track.
     """
     best: tuple[float, int] | None = None
-    for k in range(store.n_images):
-        peak = float(np.abs(store.image(k)[0].data).max())
+    for k, image, _ in store.images():
+        peak = float(np.abs(image.data).max())
         if best is None or peak > best[0]:
             best = (peak, k)
     if best is None:
@@ -289,7 +287,12 @@ def focus_comparison(
     near = near[::k]
     rows = np.searchsorted(pulses["pulse_id"], motion["pulse_id"][seg][near])
     a, b = int(rows.min()), int(rows.max()) + 1
-    echo = to_complex64(store.read("pulses", ["echo"], a, b)["echo"][rows - a])
+    got = store.read("pulses", ["pulse_id", "echo"], a, b)  # damaged chunks left out
+    have = np.isin(motion["pulse_id"][seg][near], got["pulse_id"])
+    near = near[have]
+    echo = to_complex64(
+        got["echo"][np.searchsorted(got["pulse_id"], motion["pulse_id"][seg][near])]
+    )
     window_type = None if cfg.imaging.window == "none" else cfg.imaging.window
     rc = rangecomp.compress(radar, echo, window_type)
     grid = PlaneGrid(window.axis0_m, window.axis1_m, (0.0, 0.0, cfg.geometry.height_m))
@@ -510,7 +513,7 @@ def write_report(
     RecorderError
         If the store cannot be opened or holds no pulses.
     """
-    store = open_store(store_path)
+    store = open_store(store_path, skip_damaged=True)
     truth = None if truth_path is None else _read_truth(truth_path)
     out_dir.mkdir(parents=True, exist_ok=True)
     attrs = store.attrs
@@ -568,6 +571,8 @@ def write_report(
             summary["comparison"] = write_comparison(store, out_dir, compare_half_m)
         except RecorderError as exc:  # e.g. the brightest target's pulses were not kept
             summary["comparison_skipped"] = str(exc)
+    if store.skipped:
+        summary["damaged_chunks_skipped"] = dict(store.skipped)
     (out_dir / "report.json").write_text(json.dumps(summary, indent=2, default=float))
     text = _text(summary)
     (out_dir / "report.txt").write_text(text)
@@ -644,6 +649,10 @@ def _text(summary: dict[str, Any]) -> str:
         f"{run.get('pulses_nav_flagged', '?')} flagged for navigation",
         f"INS samples      {run.get('nav_samples', '?')}",
     ]
+    damaged = summary.get("damaged_chunks_skipped", {})
+    if damaged:
+        lines.append(f"DAMAGED          {len(damaged)} chunks skipped "
+                     f"({sum(damaged.values())} rows or tiles): " + "; ".join(damaged))  # fmt: skip
     if "motion" in summary:
         mo = summary["motion"]
         lines.append(f"d_los            rms {mo['d_los_rms_m']:.3f} m, "

@@ -630,11 +630,16 @@ def replay_store(
     carried over (unless ``recorder.raw_ins`` is off). ``sink``: imaging deferred (see
     :class:`Pipeline`).
     """
-    src = open_store(recording)
+    src = open_store(recording, skip_damaged=True)
     with StorePulses(src) as radar, StoreNav(src) as ins:
         if cfg.recorder.raw_ins:
             ins.keep_raw()
-        return _replay(cfg, radar, ins, out, (lambda: radar.fraction) if progress else None, sink)
+        summary = _replay(
+            cfg, radar, ins, out, (lambda: radar.fraction) if progress else None, sink
+        )
+    if src.skipped:
+        log.warning("%s", src.damage_text())
+    return summary
 
 
 def _replay(

@@ -57,7 +57,8 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from zarr.codecs import BloscCodec
+from zarr.codecs import BloscCodec, Crc32cCodec, ZstdCodec
+from zarr.core.array_spec import ArrayConfigParams
 
 from sarmoco.daemon.echoring import SampleFormat, sample_dtype, sample_shape
 from sarmoco.daemon.flags import FLAG_DTYPE, PulseFlag
@@ -174,6 +175,29 @@ ECHO_COMPRESSION: Mapping[str, Any] = {
 are mostly receiver noise, whose low bits are random: a byte compressor (zstd) finds little
 in them; a bit shuffle gathers the high bits of the samples, which a signal using part of
 the ADC's range leaves alike, and lz4 packs those fast."""
+
+
+CHUNK_CHECKSUM = Crc32cCodec()
+"""The last codec of every array of a store: a CRC-32C of each stored chunk (as compressed),
+checked whenever the chunk is read; ``sarmoco verify`` reads every chunk."""
+DEFAULT_COMPRESSOR = ZstdCodec(level=0, checksum=False)
+"""Compressor of the arrays not named otherwise (zarr's own default for numbers)."""
+
+
+CHUNK_CONFIG: ArrayConfigParams = {"write_empty_chunks": True}
+"""Runtime configuration of every array written (not stored in the metadata: an array
+opened again for writing needs it again, ``Array.with_config``): every chunk is written."""
+
+
+def chunk_codecs(compressor: Any = DEFAULT_COMPRESSOR) -> dict[str, Any]:
+    """Keyword arguments of ``zarr.Group.create_array`` for an array of a store.
+
+    The compressor (None: none) then :data:`CHUNK_CHECKSUM`; and every chunk is written
+    even when it holds only the fill value, so that a chunk missing from a store is damage
+    (a lost file), never an empty chunk left out.
+    """
+    codecs = () if compressor is None else (compressor,)
+    return {"compressors": (*codecs, CHUNK_CHECKSUM), "config": dict(CHUNK_CONFIG)}
 
 
 def pulses_table(

@@ -13,7 +13,9 @@ recording as a radar and a navigation source, for a replay.
 from __future__ import annotations
 
 import functools
-from collections.abc import Callable
+import itertools
+import logging
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, Concatenate, ParamSpec, TypeVar
 
@@ -28,18 +30,16 @@ from sarmoco.closing import Closing
 from sarmoco.daemon import schema
 from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.daemon.schema import COMMITTED_ATTR
+from sarmoco.daemon.verify import DAMAGE, chunk_present, chunk_rows, describe
 from sarmoco.drivers.samples import EchoPackets, Sample, TangentFrame
 from sarmoco.drivers.source import Source
 from sarmoco.errors import RecorderError
 from sarmoco.processing.array.imaging3d import DemProduct
 from sarmoco.processing.types import Image
 
+log = logging.getLogger(__name__)
 _P = ParamSpec("_P")
 _R = TypeVar("_R")
-_DAMAGE = (OSError, ValueError, KeyError, IndexError, TypeError, RuntimeError)
-"""What zarr, numcodecs and json raise on a damaged store: a metadata file that is not
-JSON or not UTF-8 (ValueError), a missing node or array (KeyError, FileNotFoundError), a
-chunk that does not decompress (numcodecs' RuntimeError) or has the wrong size (ValueError)."""
 
 
 def _reading(
@@ -54,7 +54,7 @@ def _reading(
             return method(self, *args, **kwargs)
         except RecorderError:
             raise
-        except _DAMAGE as exc:
+        except DAMAGE as exc:
             raise RecorderError(
                 f"{self.path}: damaged store ({type(exc).__name__}: {exc})"
             ) from exc
@@ -76,6 +76,11 @@ class RunStore:
     ----------
     path : str or Path
         The store directory.
+    skip_damaged : bool
+        Rows in chunks that are missing, fail their checksum or do not decode are left out
+        of what :meth:`read` returns, and damaged tiles out of :meth:`images`, each logged
+        once as a warning and counted in :attr:`skipped` (a replay or report of a store
+        off a failing card focuses the rest). False: such a chunk raises RecorderError.
 
     Raises
     ------
@@ -83,8 +88,12 @@ class RunStore:
         The path is not a readable sarmoco store.
     """
 
-    def __init__(self, path: str | Path) -> None:
+    def __init__(self, path: str | Path, skip_damaged: bool = False) -> None:
         self.path = Path(path)
+        self.skip_damaged = skip_damaged
+        self.skipped: dict[str, int] = {}
+        """Damaged chunks skipped (``"pulses/echo chunk 3: checksum mismatch"``) to the rows
+        (tiles: 1) each cost."""
         try:
             self.root = zarr.open_group(str(self.path), mode="r", zarr_format=3)
         except (OSError, ValueError, KeyError) as exc:  # zarr reports a missing store so
@@ -151,6 +160,7 @@ class RunStore:
         group = self._group(table)
         names = columns if columns is not None else sorted(k for k, _ in group.arrays())
         out: dict[str, npt.NDArray[Any]] = {}
+        bad = np.zeros(max(stop - start, 0), dtype=bool)
         for name in names:
             arr = _array(group, name)
             if arr.ndim == 0 or arr.shape[0] < stop:
@@ -158,8 +168,63 @@ class RunStore:
                     f"{self.path}/{table}/{name}: shape {arr.shape} holds fewer rows than "
                     f"{table}.{COMMITTED_ATTR} = {n}"
                 )
-            out[name] = np.asarray(arr[start:stop])
-        return out
+            if self.skip_damaged:
+                out[name] = self._read_intact(arr, f"{table}/{name}", start, stop, n, bad)
+            else:
+                out[name] = np.asarray(arr[start:stop])
+        return {k: v[~bad] for k, v in out.items()} if bad.any() else out
+
+    def _read_intact(
+        self,
+        arr: zarr.Array,
+        where: str,
+        start: int,
+        stop: int,
+        committed: int,
+        bad: npt.NDArray[np.bool_],
+    ) -> npt.NDArray[Any]:
+        """Rows ``[start, stop)`` of ``arr``; those of damaged chunks marked in ``bad``
+        (their values are left as the fill value) and the chunks noted in :attr:`skipped`
+        with their ``committed`` rows."""
+        rows = chunk_rows(arr)
+        first, last = start // rows, -(-stop // rows)
+        tail = (0,) * (arr.ndim - 1)
+
+        def held(i: int) -> int:  # committed rows of chunk i
+            return min((i + 1) * rows, committed) - i * rows
+
+        missing = [i for i in range(first, last) if not chunk_present(self.path, arr, (i, *tail))]
+        try:
+            values = np.asarray(arr[start:stop])
+        except DAMAGE:
+            values = np.full((stop - start, *arr.shape[1:]), arr.fill_value, dtype=arr.dtype)
+            for i in range(first, last):
+                lo, hi = max(i * rows, start), min((i + 1) * rows, stop)
+                try:
+                    values[lo - start : hi - start] = arr[lo:hi]
+                except DAMAGE as exc:
+                    self._skip(f"{where} chunk {i}: {describe(exc)}", held(i))
+                    bad[lo - start : hi - start] = True
+        for i in missing:
+            lo, hi = max(i * rows, start), min((i + 1) * rows, stop)
+            self._skip(f"{where} chunk {i}: missing", held(i))
+            bad[lo - start : hi - start] = True
+        return values
+
+    def _skip(self, what: str, rows: int) -> None:
+        """Note a damaged chunk (logged the first time it is met)."""
+        if what not in self.skipped:
+            log.warning("%s: %s: skipped (%d rows)", self.path, what, rows)
+            self.skipped[what] = rows
+
+    def damage_text(self) -> str:
+        """The damaged chunks skipped, counted: empty when none was."""
+        if not self.skipped:
+            return ""
+        return (
+            f"{self.path}: {len(self.skipped)} damaged chunks skipped "
+            f"({sum(self.skipped.values())} rows or tiles): " + "; ".join(self.skipped)
+        )
 
     @_reading
     def dataset(self, table: str) -> xr.Dataset:
@@ -190,13 +255,39 @@ class RunStore:
         """Image tiles that are complete."""
         return self.committed(schema.IMAGES_GROUP)
 
+    def images(self) -> Iterator[tuple[int, Image, dict[str, Any]]]:
+        """Every committed tile: its index, image and attributes (:meth:`image`); with
+        ``skip_damaged``, a tile with a damaged chunk is left out and noted in
+        :attr:`skipped`."""
+        for k in range(self.n_images):
+            try:
+                image, attrs = self.image(k)
+            except RecorderError as exc:
+                if not self.skip_damaged:
+                    raise
+                self._skip(f"{schema.IMAGES_GROUP}/{schema.tile_name(k)}: {exc}", 1)
+                continue
+            yield k, image, attrs
+
     @_reading
     def image(self, index: int) -> tuple[Image, dict[str, Any]]:
-        """Tile ``index`` and its attributes (``t0_ns``, ``t1_ns``, ``metrics``)."""
+        """Tile ``index`` and its attributes (``t0_ns``, ``t1_ns``, ``metrics``).
+
+        Raises
+        ------
+        RecorderError
+            Not committed, or damaged (a chunk missing, failing its checksum, undecodable).
+        """
         if not 0 <= index < self.n_images:
             raise RecorderError(f"{self.path}: image {index} not committed ({self.n_images} are)")
         name = f"{schema.IMAGES_GROUP}/{schema.tile_name(index)}"
         group = self._group(name)
+        for key in ("data", "axis0_m", "axis1_m"):
+            arr = _array(group, key)
+            grid = [range(-(-n // c)) for n, c in zip(arr.shape, arr.chunks, strict=True)]
+            for index_ in itertools.product(*grid):
+                if not chunk_present(self.path, arr, index_):
+                    raise RecorderError(f"{self.path}/{name}/{key}: chunk {index_} missing")
         attrs = dict(group.attrs)
         image = Image(
             data=np.asarray(_array(group, "data")[...]),
@@ -236,9 +327,9 @@ class RunStore:
         return byte.tobytes()
 
 
-def open_store(path: str | Path) -> RunStore:
+def open_store(path: str | Path, skip_damaged: bool = False) -> RunStore:
     """Open a run store read-only (see :class:`RunStore`)."""
-    return RunStore(path)
+    return RunStore(path, skip_damaged)
 
 
 class StorePulses(Closing):

@@ -22,9 +22,11 @@ Autopilot boot time is mapped onto GPS time by :class:`BootClockModel`:
 * TIMESYNC (live links): the source sends a request every ``timesync_period_s``;
   :class:`~sarmoco.drivers.timesync.TimesyncEstimator` fits boot time → host
   clock from the exchanges within a margin of the fastest recent round trip. The
-  host clock (``time.time_ns``) must be UTC-disciplined (chrony/PTP/GPS);
-  GPS = host + leap seconds. The estimate's
-  stated error bound is :attr:`MavlinkSource.time_bound_ns`.
+  host clock must be UTC-disciplined (chrony/PTP/GPS); GPS = host + leap seconds. It is
+  read on the monotonic clock (:class:`~sarmoco.drivers.hostclock.HostClock`): a step of
+  the wall clock is logged and taken only when it brings the host nearer the autopilot's
+  SYSTEM_TIME (:meth:`MavlinkSource._judge_step`). The estimate's stated error bound is
+  :attr:`MavlinkSource.time_bound_ns`.
 * SYSTEM_TIME (always; the only reference in replay): pairs of
   ``time_boot_ms`` and the autopilot's GPS-derived UNIX time, fitted with
   outlier rejection.
@@ -32,10 +34,20 @@ Autopilot boot time is mapped onto GPS time by :class:`BootClockModel`:
 A boot time that goes backwards (reboot) resets both. The wanted message rates
 are requested with MAV_CMD_SET_MESSAGE_INTERVAL when the autopilot's first
 HEARTBEAT arrives and again after a reboot. With a signing key, unsigned and
-badly signed packets are rejected and counted in ``counters.rejected``. Only one
-system's messages are used (``system_id``; by default the first system heard):
-another system on the same link (a second vehicle, a companion computer relaying
-its own estimate) is ignored and its messages counted in ``counters.rejected``.
+badly signed packets are rejected and counted in ``counters.rejected``.
+
+Only the vehicle's autopilot is listened to: the configured ``system_id``, or by default
+the first system whose HEARTBEAT says it is an autopilot (an ``autopilot`` field other
+than MAV_AUTOPILOT_INVALID, a vehicle ``type``: not a ground station, companion computer,
+gimbal, camera... :data:`NOT_A_VEHICLE`). Until one has, the messages of each system are
+held (:data:`HOLD_MESSAGES` each, :data:`HOLD_SYSTEMS` systems), and the autopilot's are
+decoded when its HEARTBEAT comes; a log without such a HEARTBEAT (by its end, or by the
+time a system's hold is full) falls back to the first system heard; a live link logs that
+it is waiting. Rate requests go to the autopilot (``target_system``); TIMESYNC carries no
+target in this dialect, and only the autopilot's replies count. Every other system on the
+link (a second vehicle, a companion computer relaying its own estimate, a stray sender) is
+named in the log when first heard, its messages ignored and counted in
+``counters.rejected`` and per system in :attr:`MavlinkSource.other_systems`.
 
 pymavlink picks MAVLink 1 or 2 from the ``MAVLINK20`` environment variable at
 import time; this module sets it (to MAVLink 2) unless the caller already did.
@@ -48,6 +60,7 @@ import math
 import os
 import struct
 import time
+from collections import deque
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -64,6 +77,7 @@ from sarmoco.drivers.clock import (
     unix_ns_to_gps_ns,
 )
 from sarmoco.drivers.devclock import DeviceClock
+from sarmoco.drivers.hostclock import HostClock
 from sarmoco.drivers.posframe import LocalPositions
 from sarmoco.drivers.samples import (
     AttitudeSample,
@@ -384,6 +398,30 @@ def _rotate(
     )
 
 
+NOT_A_VEHICLE = frozenset(
+    getattr(mavlink2, f"MAV_TYPE_{name}")
+    for name in (
+        "GCS", "ONBOARD_CONTROLLER", "GIMBAL", "ADSB", "CAMERA", "ANTENNA_TRACKER",
+        "CHARGING_STATION", "FLARM", "SERVO", "ODID", "BATTERY", "PARACHUTE", "LOG", "OSD",
+        "IMU", "GPS", "WINCH", "GENERIC",
+    )
+    if hasattr(mavlink2, f"MAV_TYPE_{name}")
+)  # fmt: skip
+"""HEARTBEAT ``type`` values of systems that are not a vehicle's autopilot."""
+HOLD_MESSAGES = 2000
+"""Messages held per system until an autopilot is chosen (a few seconds of a 100 Hz INS)."""
+HOLD_SYSTEMS = 4
+"""Systems whose messages are held until an autopilot is chosen (others': dropped, counted)."""
+
+
+def is_autopilot(heartbeat: Any) -> bool:
+    """Whether a HEARTBEAT is that of a vehicle's autopilot (see :data:`NOT_A_VEHICLE`)."""
+    return (
+        heartbeat.autopilot != mavlink2.MAV_AUTOPILOT_INVALID
+        and heartbeat.type not in NOT_A_VEHICLE
+    )
+
+
 def tlog_record(msg: Any) -> bytes:
     """A received message as a telemetry-log record: receive time (UNIX µs, 8 bytes
     big-endian; the log's own time for a ``.tlog``) then the frame as on the wire."""
@@ -408,7 +446,7 @@ class MavlinkSource(Source):
         32-byte MAVLink 2 signing secret; when given, unsigned and badly signed
         packets are rejected (counted in ``counters.rejected``) and ours are signed.
     host_clock_is_utc : bool
-        Whether ``time.time_ns()`` is UTC-disciplined (then TIMESYNC maps boot
+        Whether the host wall clock is UTC-disciplined (then TIMESYNC maps boot
         time to GPS; otherwise only SYSTEM_TIME does).
     timesync_period_s : float
         Interval between TIMESYNC requests, s (live links); a fifth of it until the
@@ -419,9 +457,9 @@ class MavlinkSource(Source):
     source_system, source_component : int
         Our MAVLink identity.
     system_id : int
-        MAVLink system id of the vehicle whose messages are used; 0: the system of the
-        first message heard. Messages from other systems are counted in
-        ``counters.rejected`` and ignored.
+        MAVLink system id of the vehicle whose messages are used; 0: the first system whose
+        HEARTBEAT says it is an autopilot (see the module doc). Messages from other systems
+        are counted in ``counters.rejected`` and :attr:`other_systems`, and ignored.
     """
 
     raw_format = "tlog"
@@ -467,10 +505,16 @@ class MavlinkSource(Source):
         self._outstanding: dict[int, int] = {}
         self._target: tuple[int, int] | None = None
         self._loss_seen = 0
+        self._host = HostClock()
+        """Host UTC for TIMESYNC, on the monotonic clock (wall clock steps are judged)."""
+        self._last_remote_ns: int | None = None
+        """Autopilot boot time of the last TIMESYNC reply, ns."""
         self.system_id = system_id
-        """The vehicle's system id (0 until the first message when not configured)."""
-        self._foreign = 0
-        """Messages of other systems ignored."""
+        """The vehicle's system id (0 until its autopilot's HEARTBEAT when not configured)."""
+        self.other_systems: dict[int, int] = {}
+        """Messages ignored, by the system id that sent them (all but the vehicle's)."""
+        self._held: dict[int, deque[Any]] = {}
+        """Messages of each system heard before the autopilot was chosen, oldest first."""
         if isinstance(self._conn, mavutil.mavtcp):
             # pymavlink prints and carries on (returning no data) when the peer goes away
             self._conn.handle_eof = self._conn.handle_disconnect = self._peer_closed
@@ -496,8 +540,57 @@ class MavlinkSource(Source):
                 msg_id, round(1e6 / hz), 0, 0, 0, 0, 0,
             )  # fmt: skip
 
+    def _now_ns(self) -> int:
+        """Host UTC now, ns (:class:`~sarmoco.drivers.hostclock.HostClock`); a step of the
+        wall clock since the last read is judged first (:meth:`_judge_step`)."""
+        now = self._host.now_ns()
+        step = self._host.take_step()
+        if step and self._judge_step(step):
+            now += step
+        return now
+
+    def _judge_step(self, step_ns: int) -> bool:
+        """Take or ignore a step of the host's wall clock by ``step_ns``; returns whether it
+        was taken.
+
+        With TIMESYNC and SYSTEM_TIME both mapping the autopilot's boot clock, the step is
+        taken when it brings the host clock nearer the autopilot's GPS-derived time (chrony
+        or NTP correcting a clock that was wrong), and ignored when it takes the host clock
+        away from it (the daemon goes on with the clock before the step, on the monotonic
+        clock). Without SYSTEM_TIME to judge by, the host's time service is trusted and the
+        step taken. A step taken restarts the TIMESYNC fit (its exchanges were timed on the
+        clock before). Either way the log says what happened.
+        """
+        model, boot = self.decoder.model, self._last_remote_ns
+        if model.use_timesync and model.timesync.ready and model.systime.ready and boot is not None:
+            gps = unix_ns_to_gps_ns(model.timesync.to_local(boot), model.leap_s)
+            before = gps - model.systime.map(boot)
+            after = before + step_ns
+            take = abs(after) < abs(before)
+            why = (
+                f"against the autopilot's GPS time (SYSTEM_TIME) the host clock was "
+                f"{before / 1e6:+.1f} ms off before the step and is {after / 1e6:+.1f} ms "
+                "after it"
+            )
+        else:
+            take = True
+            why = "no SYSTEM_TIME from the autopilot to judge it by: the host clock is trusted"
+        if take:
+            self._host.adopt(step_ns)
+            self._outstanding.clear()
+            self._next_timesync_ns = 0
+            model.timesync.reset()
+            what = "the step is taken and TIMESYNC starts again"
+        else:
+            what = "the step is ignored: TIMESYNC goes on with the clock before it"
+        log.warning(
+            "mavlink %s: the host wall clock stepped by %+.3f s; %s; %s",
+            self.url, step_ns / 1e9, why, what,
+        )  # fmt: skip
+        return take
+
     def _send_timesync(self) -> None:
-        now = time.time_ns()
+        now = self._now_ns()
         if now < self._next_timesync_ns or self._target is None:
             return
         settled = self.decoder.model.timesync.ready
@@ -510,15 +603,16 @@ class MavlinkSource(Source):
         mtype = msg.get_type()
         if mtype == "HEARTBEAT":
             src = (msg.get_srcSystem(), msg.get_srcComponent())
-            if src[1] == mavlink2.MAV_COMP_ID_AUTOPILOT1 and self._target is None:
+            if is_autopilot(msg) and self._target is None:
                 self._target = src
                 self.request_rates()
         elif mtype == "TIMESYNC":
-            now = time.time_ns()
+            now = self._now_ns()
             if msg.tc1 == 0:  # the autopilot's own request: answer it
                 self._conn.mav.timesync_send(now, msg.ts1)
             elif msg.ts1 in self._outstanding:
                 sent = self._outstanding.pop(msg.ts1)
+                self._last_remote_ns = msg.tc1
                 self.decoder.timesync(TimesyncExchange(sent, now, msg.tc1))
 
     def poll(self, timeout_s: float = 0.0) -> list[Sample]:
@@ -545,9 +639,18 @@ class MavlinkSource(Source):
             if msg is None:
                 if self.is_file:
                     self.eof = True
+                    if self.system_id == 0 and self._held:  # a log without its HEARTBEAT
+                        out += self._use(self._first_heard())
                 break
-            if not self._count(msg) or not self._from_vehicle(msg):
-                continue
+            if self._count(msg):
+                out += self._use(self._vehicle_messages(msg))
+        self._sync_counters()
+        return out
+
+    def _use(self, msgs: list[Any]) -> list[Sample]:
+        """Record, answer and decode messages of the vehicle, in order."""
+        out: list[Sample] = []
+        for msg in msgs:
             if self._raw is not None:
                 self._keep(tlog_record(msg))
             if not self.is_file:
@@ -556,7 +659,6 @@ class MavlinkSource(Source):
                 out += self.decoder.handle(msg)
             except ClockError as exc:  # pragma: no cover - stamping queues instead of raising
                 log.debug("mavlink %s: %s", self.url, exc)
-        self._sync_counters()
         return out
 
     def _count(self, msg: Any) -> bool:
@@ -587,27 +689,89 @@ class MavlinkSource(Source):
             self.counters.parse_errors += 1
         return False
 
-    def _from_vehicle(self, msg: Any) -> bool:
-        """Whether ``msg`` comes from the vehicle's system (the first one heard when not
-        configured); counts the others."""
+    def _vehicle_messages(self, msg: Any) -> list[Any]:
+        """The vehicle's messages that ``msg`` lets through: itself when it is the vehicle's;
+        when it is the HEARTBEAT that makes its system the vehicle (module doc), that
+        system's held messages and it; none otherwise (held, or counted as another
+        system's)."""
         sysid = msg.get_srcSystem()
         if self.system_id == 0:
-            self.system_id = sysid
+            if msg.get_type() == "HEARTBEAT" and is_autopilot(msg):
+                log.info(
+                    "mavlink %s: listening to the autopilot of system %d (component %d, "
+                    "MAV_TYPE %d, MAV_AUTOPILOT %d)", self.url, sysid, msg.get_srcComponent(),
+                    msg.type, msg.autopilot,
+                )  # fmt: skip
+                self._held.setdefault(sysid, deque(maxlen=HOLD_MESSAGES))
+                return [*self._choose(sysid), msg]
+            held = self._held.get(sysid)
+            if held is None and len(self._held) < HOLD_SYSTEMS:
+                held = self._held[sysid] = deque(maxlen=HOLD_MESSAGES)
+            if held is None:
+                self._other(sysid, msg)
+                return []
+            held.append(msg)
+            if len(held) == HOLD_MESSAGES:  # full: the oldest would be lost from now on
+                if self.is_file:  # a log without the HEARTBEAT: as at its end
+                    return self._first_heard()
+                log.warning(
+                    "mavlink %s: no HEARTBEAT of an autopilot heard in %d messages; holding "
+                    "the latest of systems %s (ins.mavlink_system_id names the vehicle)",
+                    self.url, HOLD_MESSAGES, ", ".join(map(str, sorted(self._held))),
+                )  # fmt: skip
+            return []
         if sysid == self.system_id:
-            return True
-        self._foreign += 1
-        return False
+            return [msg]
+        self._other(sysid, msg)
+        return []
+
+    def _first_heard(self) -> list[Any]:
+        """Make the first system heard the vehicle (a log without an autopilot's HEARTBEAT);
+        its held messages."""
+        first = next(iter(self._held))
+        log.warning(
+            "mavlink %s: no HEARTBEAT of an autopilot in the log: using system %d, the first "
+            "heard", self.url, first,
+        )  # fmt: skip
+        return self._choose(first)
+
+    def _choose(self, sysid: int) -> list[Any]:
+        """Make ``sysid`` the vehicle; its held messages (the others' counted as ignored)."""
+        self.system_id = sysid
+        held, self._held = self._held, {}
+        for other, msgs in held.items():
+            if other != sysid:
+                for m in msgs:
+                    self._other(other, m)
+        return list(held.get(sysid, ()))
+
+    def _other(self, sysid: int, msg: Any) -> None:
+        """Count a message of a system that is not the vehicle (named in the log once)."""
+        if sysid not in self.other_systems:
+            self.other_systems[sysid] = 0
+            log.warning(
+                "mavlink %s: system %d also speaks on the link (first %s); the vehicle is "
+                "system %s: its messages are ignored and counted (ins rejected)",
+                self.url, sysid, msg.get_type(), self.system_id or "not chosen yet",
+            )  # fmt: skip
+        self.other_systems[sysid] += 1
 
     def _sync_counters(self) -> None:
         mav = self._conn.mav
         self.counters.bytes = mav.total_bytes_received
         signing = mav.signing.reject_count if mav.signing.secret_key is not None else 0
-        self.counters.rejected = signing + self._foreign
+        self.counters.rejected = signing + sum(self.other_systems.values())
 
     def _peer_closed(self) -> None:
         raise DriverError(f"mavlink {self.url}: peer closed the connection")
 
     def close(self) -> None:
+        if self.other_systems:
+            log.warning(
+                "mavlink %s: messages ignored from systems other than the vehicle (%d): %s",
+                self.url, self.system_id,
+                ", ".join(f"system {k}: {n}" for k, n in sorted(self.other_systems.items())),
+            )  # fmt: skip
         try:
             self._conn.close()
         except OSError as exc:

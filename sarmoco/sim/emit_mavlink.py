@@ -95,6 +95,11 @@ ROGUE_BOOT_AHEAD_MS = 7
 between the vehicle's, so that mixing them in would not be caught as duplicates)."""
 ROGUE_VEL_NED = np.array([5.0, 0.0, 0.0])
 """What the second system's velocity adds to the vehicle's, NED m/s."""
+ROGUE_PREROLL_PERIOD_S = 0.05
+"""Interval of the second system's messages while the autopilot waits for the daemon, s."""
+ROGUE_NOISE_EVERY = 10
+"""The second system sends random bytes and a frame with a broken CRC with every this many
+of its samples (and each time it speaks before playback)."""
 
 
 def _yawed_90(q: FloatArray) -> FloatArray:
@@ -129,9 +134,13 @@ class MavlinkEmitter(Emitter):
     signing_key : bytes, optional
         32-byte MAVLink 2 signing secret: sign every packet.
     rogue_system : int
-        A fault: a second system with this id (0: none) sends the same messages on the
-        link, its boot clock :data:`ROGUE_BOOT_AHEAD_MS` ahead, its velocity
-        :data:`ROGUE_VEL_NED` more and its heading 90 degrees off (counted as ``ROGUE``).
+        A fault: a second system with this id (0: none), a companion computer by its
+        HEARTBEAT, sends the same messages on the link, its boot clock
+        :data:`ROGUE_BOOT_AHEAD_MS` ahead, its velocity :data:`ROGUE_VEL_NED` more and its
+        heading 90 degrees off, and with them random bytes and frames with a broken CRC
+        (:data:`ROGUE_NOISE_EVERY`, counted as ``ROGUE_NOISE``); it speaks first: every
+        :data:`ROGUE_PREROLL_PERIOD_S` while the autopilot waits for the daemon (counted as
+        ``ROGUE_PREROLL``). Its well-formed messages in playback are counted as ``ROGUE``.
     faults, seed, rank
         See :class:`~sarmoco.sim.emitter.Emitter`.
     """
@@ -178,6 +187,8 @@ class MavlinkEmitter(Emitter):
             else None
         )
         self._rx.robust_parsing = True
+        self._rogue_rng = np.random.default_rng(rogue_system)
+        self._last_rogue_preroll = -ROGUE_PREROLL_PERIOD_S
         self.peer_heard = False
         self._last_preroll_heartbeat = -HEARTBEAT_PERIOD_S
         self.sent: dict[str, int] = {}
@@ -240,11 +251,17 @@ class MavlinkEmitter(Emitter):
             self._tx.home_position_send(lat, lon, alt, 0.0, 0.0, 0.0, q, 0.0, 0.0, 0.0, usec)
             self._count("HOME_POSITION")
         if self._rogue is not None:
-            self._rogue.heartbeat_send(
-                mavlink2.MAV_TYPE_QUADROTOR, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0,
-                mavlink2.MAV_STATE_ACTIVE,
-            )  # fmt: skip
-            self._count("ROGUE")
+            self._rogue_heartbeat()
+
+    def _rogue_heartbeat(self, tally: str = "ROGUE") -> None:
+        """The second system's HEARTBEAT: a companion computer, no autopilot (counted as
+        ``tally``)."""
+        assert self._rogue is not None
+        self._rogue.heartbeat_send(
+            mavlink2.MAV_TYPE_ONBOARD_CONTROLLER, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0,
+            mavlink2.MAV_STATE_ACTIVE,
+        )  # fmt: skip
+        self._count(tally)
 
     def _sample(self, i: int) -> None:
         f = self.feed
@@ -281,24 +298,48 @@ class MavlinkEmitter(Emitter):
         if self._rogue is not None:
             self._rogue_sample(i, boot_ms + ROGUE_BOOT_AHEAD_MS, up_ns)
 
-    def _rogue_sample(self, i: int, boot_ms: int, up_ns: int) -> None:
-        """The second system's copy of sample ``i`` (see ``rogue_system``)."""
+    def _rogue_sample(self, i: int, boot_ms: int, up_ns: int, tally: str = "ROGUE") -> None:
+        """The second system's copy of sample ``i`` (see ``rogue_system``; its well-formed
+        messages counted as ``tally``)."""
         assert self._rogue is not None
         f, k = self.feed, int(self.feed.index[i])
         if self._due("SYSTEM_TIME", k):
             t_ref = int(f.t_ns[i]) + boot_ms * 1_000_000 - up_ns - ROGUE_BOOT_AHEAD_MS * 10**6
             self._rogue.system_time_send(round(self.wire.unix_ns(t_ref) / 1000), boot_ms)
-            self._count("ROGUE")
+            self._count(tally)
         x, y, z = (float(v) for v in self.pos_ned[i])
         vx, vy, vz = (float(v) for v in f.vel_ned[i] + ROGUE_VEL_NED)
         self._rogue.local_position_ned_send(boot_ms, x, y, z, vx, vy, vz)
         w, qx, qy, qz = (float(v) for v in _yawed_90(f.quat[i]))
         self._rogue.attitude_quaternion_send(boot_ms, w, qx, qy, qz, 0.0, 0.0, 0.0)
-        self._count("ROGUE", 2)
+        self._count(tally, 2)
+        if i % ROGUE_NOISE_EVERY == 0:
+            self._rogue_noise(boot_ms)
+
+    def _rogue_noise(self, boot_ms: int) -> None:
+        """The second system's noise: random bytes, then a LOCAL_POSITION_NED whose CRC no
+        longer matches (a payload bit flipped)."""
+        assert self._rogue is not None
+        rng = self._rogue_rng
+        self.send(rng.bytes(int(rng.integers(1, 200))), self.now_ns)
+        msg = mavlink2.MAVLink_local_position_ned_message(boot_ms, 0.0, 0.0, 0.0, 99.0, 0.0, 0.0)
+        frame = bytearray(msg.pack(self._rogue))
+        frame[12] ^= 0x10
+        self.send(bytes(frame), self.now_ns)
+        self._count("ROGUE_NOISE", 2)
 
     # --- answering --------------------------------------------------------------------
 
     def service(self, now_ns: int | None) -> None:
+        if (
+            now_ns is None
+            and self._rogue is not None
+            and time.monotonic() - self._last_rogue_preroll >= ROGUE_PREROLL_PERIOD_S
+        ):
+            self._last_rogue_preroll = time.monotonic()
+            self._rogue_heartbeat("ROGUE_PREROLL")
+            boot_ms = round(int(self.feed.uptime_ns[0]) / 1e6)
+            self._rogue_sample(0, boot_ms, int(self.feed.uptime_ns[0]), "ROGUE_PREROLL")
         if now_ns is None and time.monotonic() - self._last_preroll_heartbeat >= HEARTBEAT_PERIOD_S:
             self._last_preroll_heartbeat = time.monotonic()
             self._heartbeat(self.now_ns)

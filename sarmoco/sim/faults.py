@@ -29,9 +29,11 @@ Switches (``sarmoco sim --fault SPEC``, repeatable):
 ``can-bus-off=AT:DURATION``       the slcan adapter's CAN bus is off (status flags 0xA4) for
                                   DURATION s from AT s after the INS link's first packet: every
                                   CAN frame of that window is lost
-``mavlink-rogue=SYSID``           a second MAVLink system SYSID on the INS link sends the same
-                                  messages with its own boot clock (7 ms ahead) and values
-                                  (velocity 5 m/s more north, heading 90 deg off)
+``mavlink-rogue=SYSID``           a second MAVLink system SYSID (a companion computer by its
+                                  HEARTBEAT) on the INS link sends the same messages with its
+                                  own boot clock (7 ms ahead) and values (velocity 5 m/s more
+                                  north, heading 90 deg off), random bytes and frames with a
+                                  broken CRC; it speaks first, from before playback starts
 ================================  ===========================================================
 
 ``LINK`` is ``radar`` or ``ins``; without it the packet fault applies to both.

@@ -29,6 +29,7 @@ while the daemon runs.
 from __future__ import annotations
 
 import json
+import re
 import socket
 import threading
 import time
@@ -122,6 +123,43 @@ def test_autopilot_reboot_and_second_system(tmp_path_factory: pytest.TempPathFac
     assert all(p <= SINC_PSLR_DB + 1.0 for p in pslr), pslr
     assert usable[t_s < 0.99].all()  # nothing lost before the reboot
     assert usable[t_s > 2.0].all()  # navigation back within a second of the reboot
+
+
+def test_a_second_system_talking_first(
+    tmp_path_factory: pytest.TempPathFactory, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """System 42 (a companion computer by its HEARTBEAT) speaks on the INS link before the
+    autopilot and all along: its LOCAL_POSITION_NED and ATTITUDE_QUATERNION (5 m/s more
+    north, heading 90 degrees off), random bytes and frames with a broken CRC. The daemon
+    listens to the autopilot (system 1, whose HEARTBEAT says so), its requests reach it
+    (the autopilot waits to hear the daemon before it plays), every recorded velocity is
+    the autopilot's at its own time stamp, no pulse is flagged, the targets focus as
+    without the second system, and the log names system 42 and counts its messages."""
+    out = tmp_path_factory.mktemp("second_system")
+    summary, status = _run_watched(out, ("mavlink-rogue=42",))
+    log = capfd.readouterr().err
+    store = open_store(out / "run.zarr")
+    assert store.attrs["complete"]
+    truth = json.loads((out / "truth.json").read_text())
+    stats = truth["wire"]["links"]["ins1"]["stats"]
+    nav = store.read("nav", ["t_ns", "vel_ned"])
+    kin = np.isfinite(nav["vel_ned"]).all(axis=1)
+    err = np.linalg.norm(nav["vel_ned"][kin] - _truth_vel(truth, nav["t_ns"][kin]), axis=1)
+    flags = store.read("pulses", ["flags"])["flags"]
+    pslr = [p["pslr_az_db"] for p in summary["image"]["points"][:3]]
+    print(f"second system first: messages {stats['messages']}, ins_rejected "
+          f"{status['counters'].get('ins_rejected')}; {kin.sum()} velocity samples, max "
+          f"|error| {err.max():.4f} m/s; {(flags & np.uint32(NAV_UNUSABLE) != 0).sum()} of "
+          f"{flags.size} pulses flagged; azimuth PSLR {pslr} dB")  # fmt: skip
+    assert stats["messages"]["ROGUE_PREROLL"] > 10 and stats["messages"]["ROGUE"] > 100
+    assert stats["answered"]["SET_MESSAGE_INTERVAL"] > 0 and stats["answered"]["TIMESYNC"] > 0
+    assert kin.sum() > 100 and err.max() < 0.01  # the autopilot's, at their own stamps
+    assert (flags & np.uint32(NAV_UNUSABLE) == 0).all()
+    assert all(p <= SINC_PSLR_DB + 1.0 for p in pslr), pslr
+    assert "listening to the autopilot of system 1 (component 1" in log
+    assert "system 42 also speaks on the link" in log
+    ignored = re.search(r"systems other than the vehicle \(1\): system 42: (\d+)", log)
+    assert ignored is not None and int(ignored.group(1)) >= 0.9 * stats["messages"]["ROGUE"]
 
 
 def test_ins_later_than_the_latency_budget(tmp_path_factory: pytest.TempPathFactory) -> None:

@@ -189,7 +189,8 @@ def test_large_echo_chunks_round_trip_with_and_without_o_direct(
     alignment, then cut to their length), or with a plain write where the file system
     refuses O_DIRECT (EINVAL, as older tmpfs and some network file systems answer; injected
     here): either way the samples read back exactly and every chunk file has the length
-    zarr gave it (uncompressed: its bytes; compressed: lengths that are not whole pages)."""
+    zarr gave it (uncompressed: its bytes and their checksum; compressed: lengths that are
+    not whole pages)."""
     if not direct:
         real_open = os.open
 
@@ -220,6 +221,6 @@ def test_large_echo_chunks_round_trip_with_and_without_o_direct(
     sizes = [f.stat().st_size for f in files]
     assert len(sizes) == 3 and not list(path.rglob("*.partial"))
     if compression == "none":
-        assert sizes == [128 * 4096 * 4] * 3
+        assert sizes == [128 * 4096 * 4 + 4] * 3  # the samples, then their CRC-32C
     else:
         assert all(s % 4096 for s in sizes), sizes

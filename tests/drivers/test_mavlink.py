@@ -3,10 +3,13 @@
 
 from __future__ import annotations
 
+import logging
 import math
 import socket
+import struct
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,24 +34,39 @@ SKEW = 50e-6
 
 
 class Autopilot(threading.Thread):
-    """A simulated autopilot: its own boot clock (50 ppm fast), answers TIMESYNC."""
+    """A simulated autopilot: its own boot clock (50 ppm fast), answers TIMESYNC; with
+    ``system_time``, SYSTEM_TIME (its GPS-derived UNIX time) every 0.25 s. Its clock is the
+    machine's wall clock as it was when it started, run on the monotonic clock."""
 
-    def __init__(self, port: int, key: bytes | None = None, duration_s: float = 2.5) -> None:
+    def __init__(
+        self,
+        port: int,
+        key: bytes | None = None,
+        duration_s: float = 2.5,
+        system_time: bool = False,
+        wall: Callable[[], int] = time.time_ns,  # the machine's, bound at import
+    ) -> None:
         super().__init__()
+        self.system_time = system_time
+        self._wall0 = wall() - time.monotonic_ns()
         self.conn = mavutil.mavlink_connection(
             f"udpout:127.0.0.1:{port}", source_system=1, source_component=1
         )
         if key is not None:
             self.conn.setup_signing(key, sign_outgoing=True)
-        self.h0 = time.time_ns() - 300 * 10**9
+        self.h0 = self.unix_ns() - 300 * 10**9
         self.duration_s = duration_s
         self.truth: dict[int, tuple[int, tuple[float, ...], tuple[float, ...]]] = {}
         self.commands: list[tuple[int, float]] = []
         self.timesync_requests: list[float] = []
         """Monotonic times at which TIMESYNC requests were answered, s."""
 
+    def unix_ns(self) -> int:
+        """UNIX time as the autopilot's GPS gives it, ns."""
+        return self._wall0 + time.monotonic_ns()
+
     def boot_ns(self) -> int:
-        return round((time.time_ns() - self.h0) * (1 + SKEW))
+        return round((self.unix_ns() - self.h0) * (1 + SKEW))
 
     def run(self) -> None:
         mav = self.conn.mav
@@ -58,6 +76,8 @@ class Autopilot(threading.Thread):
             ms = self.boot_ns() // 10**6
             if k % 25 == 0:
                 mav.heartbeat_send(1, 3, 0, 0, 0)
+                if self.system_time:
+                    mav.system_time_send((self.h0 + round(ms * 10**6 / (1 + SKEW))) // 1000, ms)
             vel = (20.0 + 0.01 * k, 1.5, -0.2 * math.sin(k / 9))
             q = euler_to_quat(0.05 * math.sin(k / 11), 0.02, 1.0 + 0.001 * k)
             mav.local_position_ned_send(ms, 0.2 * k, 0.0, -50.0, *vel)
@@ -120,6 +140,175 @@ def test_udp_round_trip_timesync_rates() -> None:
         else:
             assert s.quat == pytest.approx(q, abs=1e-6)
     assert max(errors) < 20e6 and src.time_bound_ns < 20e6  # loopback: well under 20 ms
+
+
+class OtherSystem(threading.Thread):
+    """System 42 on the autopilot's link, from its own socket: random bytes, frames with a
+    broken CRC, a companion computer's HEARTBEAT, and well-formed LOCAL_POSITION_NED and
+    ATTITUDE_QUATERNION with values of its own (99 m/s north); it answers TIMESYNC
+    requests with a boot clock 5 s off. It starts before the autopilot and goes on while
+    the autopilot speaks."""
+
+    SYSID = 42
+
+    def __init__(self, port: int, duration_s: float) -> None:
+        super().__init__()
+        self.conn = mavutil.mavlink_connection(
+            f"udpout:127.0.0.1:{port}", source_system=self.SYSID, source_component=191
+        )
+        self.duration_s = duration_s
+        self.sent = 0
+
+    def run(self) -> None:
+        mav, rng = self.conn.mav, np.random.default_rng(42)
+        end = time.monotonic() + self.duration_s
+        k = 0
+        while time.monotonic() < end:
+            ms = k * 10
+            if k % 10 == 0:
+                mav.heartbeat_send(
+                    mavlink2.MAV_TYPE_ONBOARD_CONTROLLER, mavlink2.MAV_AUTOPILOT_INVALID, 0, 0, 4
+                )
+            self.conn.write(rng.bytes(int(rng.integers(1, 200))))
+            frame = bytearray(mavlink2.MAVLink_local_position_ned_message(
+                ms, 0, 0, 0, 99.0, 0, 0).pack(mav))  # fmt: skip
+            frame[12] ^= 0x10  # a payload bit: the CRC no longer matches
+            self.conn.write(bytes(frame))
+            mav.local_position_ned_send(ms, 1.0 * k, 0.0, -50.0, 99.0, 0.0, 0.0)
+            mav.attitude_quaternion_send(ms, 0.0, 1.0, 0.0, 0.0, 0, 0, 0)
+            self.sent += 3
+            while (m := self.conn.recv_match(blocking=False)) is not None:
+                if m.get_type() == "TIMESYNC" and m.tc1 == 0:
+                    mav.timesync_send(time.time_ns() + 5 * 10**9, m.ts1)
+            k += 1
+            time.sleep(0.01)
+
+
+def test_the_autopilot_is_chosen_not_the_first_system_heard(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """System 42 talks first and throughout; the HEARTBEAT of system 1 says it is an
+    autopilot: its navigation is decoded, its time mapped within the stated bounds, the
+    rate requests go to it, and system 42 is named in the log and its messages counted."""
+    src = MavlinkSource("udpin:127.0.0.1:0", timesync_period_s=0.1)
+    bound_at_map = observe_map_bounds(src)
+    port = src._conn.port.getsockname()[1]
+    other = OtherSystem(port, duration_s=3.2)
+    got: list[Any] = []
+    with caplog.at_level(logging.INFO, logger="sarmoco.drivers.mavlink"):
+        other.start()
+        t_end = time.monotonic() + 0.5  # system 42 alone on the link
+        while time.monotonic() < t_end:
+            got += src.poll(0.02)
+        assert got == [] and src.system_id == 0
+        ap = Autopilot(port)
+        ap.start()
+        while ap.is_alive():
+            got += src.poll(0.02)
+        ap.join()
+        other.join()
+        src.close()
+    vel = [s for s in got if isinstance(s, VelocitySample)]
+    att = [s for s in got if isinstance(s, AttitudeSample)]
+    assert len(vel) > 100 and len(att) > 100
+    assert src.system_id == 1
+    assert (mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, 32.0) in ap.commands
+    for s in vel[len(vel) // 2 :] + att[len(att) // 2 :]:
+        t, v, q = ap.truth[s.device_time_ns // 10**6]
+        assert abs(s.t_gps_ns - t) <= bound_at_map[s.device_time_ns]
+        if isinstance(s, VelocitySample):
+            assert s.vel_ned == pytest.approx(v, abs=1e-5)
+        else:
+            assert s.quat == pytest.approx(q, abs=1e-6)
+    assert src.time_bound_ns < 20e6
+    assert other.sent / 3 < src.other_systems[42] <= other.sent  # good frames, some eaten
+    assert src.counters.rejected >= src.other_systems[42]
+    assert src.counters.parse_errors + src.counters.crc_errors > 0
+    assert "listening to the autopilot of system 1 (component 1" in caplog.text
+    assert "system 42 also speaks on the link" in caplog.text
+    assert f"system 42: {src.other_systems[42]}" in caplog.text
+
+
+@pytest.mark.parametrize(
+    ("wrong_s", "step_s", "verdict"),
+    [(0, 10, "ignored"), (0, -10, "ignored"), (0, 3600, "ignored"), (0, -3600, "ignored"),
+     (-3600, 3600, "taken")],
+)  # fmt: skip
+def test_a_wall_clock_step_moves_no_sample(
+    monkeypatch: pytest.MonkeyPatch,
+    caplog: pytest.LogCaptureFixture,
+    wrong_s: int,
+    step_s: int,
+    verdict: str,
+) -> None:
+    """The host's wall clock, ``wrong_s`` off GPS time at first, steps by ``step_s`` 1.2 s
+    into the link and stays there; the autopilot's clock and GPS time do not. A step away
+    from the autopilot's SYSTEM_TIME is ignored (TIMESYNC goes on, on the monotonic clock),
+    one towards it (chrony correcting a wrong clock) is taken; either way every sample from
+    0.5 s after it (the first half second: TIMESYNC's settling, as in the round trip above)
+    keeps its GPS time within the stated bound, and the log says what happened."""
+    wall = time.time_ns
+    offset = {"ns": wrong_s * 10**9}
+    monkeypatch.setattr(time, "time_ns", lambda: wall() + offset["ns"])
+    src = MavlinkSource("udpin:127.0.0.1:0", timesync_period_s=0.05)
+    bound_at_map = observe_map_bounds(src)
+    ap = Autopilot(src._conn.port.getsockname()[1], duration_s=3.5, system_time=True)
+    ap.start()
+    t_step = time.monotonic() + 1.2
+    got: list[Any] = []
+    with caplog.at_level(logging.WARNING, logger="sarmoco.drivers.mavlink"):
+        while ap.is_alive():
+            if offset["ns"] == wrong_s * 10**9 and time.monotonic() >= t_step:
+                offset["ns"] += step_s * 10**9
+            got += [(s, time.monotonic()) for s in src.poll(0.02)]
+    ap.join()
+    src.close()
+    late = [t for t in ap.timesync_requests if t > t_step + 0.5]
+    assert len(late) > 10  # TIMESYNC goes on after the step
+    after = [s for s, t in got if isinstance(s, VelocitySample | AttitudeSample) and
+             t > t_step + 0.5]  # fmt: skip
+    assert len(after) > 200
+    for s in after:
+        t = ap.truth[s.device_time_ns // 10**6][0]
+        assert abs(s.t_gps_ns - t) <= bound_at_map[s.device_time_ns], s.t_gps_ns - t
+    assert src.time_bound_ns < 20e6
+    steps = [r.getMessage() for r in caplog.records if "wall clock stepped" in r.getMessage()]
+    assert len(steps) == 1 and f"stepped by {step_s:+.3f} s" in steps[0]
+    assert f"the step is {verdict}" in steps[0]
+
+
+@pytest.mark.parametrize("n_messages", [300, 2500])
+def test_a_log_without_an_autopilot_heartbeat_uses_the_first_system(
+    tmp_path: Path, caplog: pytest.LogCaptureFixture, n_messages: int
+) -> None:
+    """A telemetry log with no HEARTBEAT at all (system 5, then system 9 too): every
+    sample of system 5 is decoded, whether the log ends before a system's hold is full
+    or after; system 9 is counted."""
+    out = bytearray()
+    mav5 = mavlink2.MAVLink(None, srcSystem=5, srcComponent=1)
+    mav9 = mavlink2.MAVLink(None, srcSystem=9, srcComponent=1)
+    unix0 = 1_700_000_000_000_000  # µs
+    for k in range(n_messages):
+        ms = 1000 + 10 * k
+        records = [(mav5, mavlink2.MAVLink_local_position_ned_message(ms, 0, 0, 0, 1.0, 0, 0))]
+        if k % 50 == 0:
+            records.append((mav5, mavlink2.MAVLink_system_time_message(unix0 + ms * 1000, ms)))
+        if k > 10:
+            records.append(
+                (mav9, mavlink2.MAVLink_local_position_ned_message(ms, 0, 0, 0, 9.0, 0, 0))
+            )
+        for mav, msg in records:
+            out += struct.pack(">Q", unix0 + ms * 1000) + msg.pack(mav)
+    path = tmp_path / "nohb.tlog"
+    path.write_bytes(bytes(out))
+    with (
+        caplog.at_level(logging.WARNING, logger="sarmoco.drivers.mavlink"),
+        MavlinkSource(str(path)) as src,
+    ):
+        vel = [s for s in src.samples() if isinstance(s, VelocitySample)]
+    assert len(vel) == n_messages and {s.vel_ned[0] for s in vel} == {1.0}
+    assert src.system_id == 5 and src.other_systems[9] == n_messages - 11
+    assert "no HEARTBEAT of an autopilot in the log: using system 5" in caplog.text
 
 
 def test_timesync_settles_quickly_then_slows_down() -> None:

@@ -1,0 +1,204 @@
+"""What a configuration will ask of the machine: the memory of its buffers, its data rate.
+
+A run allocates its large buffers when it starts: the echo ring, the read scratch, the
+focus backlog, the blocks the focuser works on, an image tile, the recorder's waiting
+chunk. Their sizes follow from a few keys (samples per pulse, PRF, block size, tile and
+pixel size, swath, chunk size). :func:`plan` computes each one in bytes from the same
+constants the pipeline sizes them with; :func:`check_resources` refuses a configuration
+whose buffers do not fit the memory limit (``limits.memory_mib``, or the machine's
+memory), or whose echo data rate exceeds ``limits.data_rate_mbps``, naming the keys, the
+bytes and the limit, before anything is allocated. The figures are lower bounds: the
+processing's own temporaries come on top.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from sarmoco.daemon.array_pipeline import READ_PACKETS, RING_PULSES
+from sarmoco.daemon.config import Config
+from sarmoco.daemon.echoring import sample_dtype, sample_shape
+from sarmoco.daemon.pipeline import FOCUS_BACKLOG_S, READ_BLOCK_PULSES, RING_SECONDS, ring_format
+from sarmoco.errors import ConfigError
+
+PULSE_META_BYTES = 8 + 8 + 4 + 4 + 1
+"""Bytes the echo ring keeps per pulse beside its samples (time, id, channel, flags, state)."""
+COMPLEX64_BYTES = 8
+"""Bytes of one complex64 sample or pixel."""
+
+
+@dataclass(frozen=True)
+class Buffer:
+    """One buffer a run allocates.
+
+    Attributes
+    ----------
+    name : str
+        What it is, in words.
+    keys : tuple of str
+        The configuration keys that size it (the first is the one to change first).
+    nbytes : int
+        Its size, bytes.
+    how : str
+        The product that gives ``nbytes`` (for the error message).
+    """
+
+    name: str
+    keys: tuple[str, ...]
+    nbytes: int
+    how: str
+
+
+def echo_bytes_per_pulse(cfg: Config) -> int:
+    """Bytes of one pulse's samples as the ring holds them (int16 I/Q or complex64), all
+    channels."""
+    fmt = ring_format(cfg)
+    shape = sample_shape(cfg.radar.n_samples, fmt)
+    return math.prod(shape) * sample_dtype(fmt).itemsize * cfg.radar.channels
+
+
+def data_rate_bytes_s(cfg: Config) -> float:
+    """Echo data rate the radar keys imply: PRF times the bytes of a pulse, bytes/s."""
+    return cfg.radar.prf_hz * echo_bytes_per_pulse(cfg)
+
+
+def plan(cfg: Config) -> list[Buffer]:
+    """The large buffers of a run of ``cfg``, each with the keys that size it.
+
+    Returns
+    -------
+    list of Buffer
+        Single mode: echo ring, read scratch, focus backlog, focusing block, image tile,
+        recorder's waiting chunk and writer queue; array mode: echo ring, read scratch and
+        the recorder's.
+    """
+    r, im, rec = cfg.radar, cfg.imaging, cfg.recorder
+    pulse = echo_bytes_per_pulse(cfg)
+    size = f"{r.n_samples} samples x {pulse // (r.n_samples * r.channels)} B"
+    if r.channels > 1:
+        size += f" x {r.channels} channels"
+    buffers: list[Buffer] = []
+    if r.mode == "array":
+        buffers += [
+            Buffer("echo ring", ("radar.n_samples", "radar.channels"),
+                   RING_PULSES * (pulse + PULSE_META_BYTES), f"{RING_PULSES} pulses x {size}"),
+            Buffer("read scratch", ("radar.n_samples",), READ_PACKETS * pulse // r.channels,
+                   f"{READ_PACKETS} packets x {r.n_samples} samples"),
+        ]  # fmt: skip
+    else:
+        ring = max(1024, math.ceil(RING_SECONDS * r.prf_hz))
+        backlog = max(math.ceil(FOCUS_BACKLOG_S * r.prf_hz), 2 * im.block_pulses)
+        nx = math.ceil(im.tile_length_m / im.pixel_m)
+        ny = math.ceil(im.swath_m / im.pixel_m)
+        buffers += [
+            Buffer("echo ring", ("radar.n_samples", "radar.prf_hz"),
+                   ring * (pulse + PULSE_META_BYTES),
+                   f"{ring} pulses (at least {RING_SECONDS:g} s at radar.prf_hz) x {size}"),
+            Buffer("read scratch", ("radar.n_samples",), READ_BLOCK_PULSES * pulse,
+                   f"{READ_BLOCK_PULSES} pulses x {size}"),
+            Buffer("focus backlog", ("radar.n_samples", "radar.prf_hz", "imaging.block_pulses"),
+                   backlog * pulse, f"{backlog} pulses ({FOCUS_BACKLOG_S:g} s) x {size}"),
+            Buffer("focusing block", ("imaging.block_pulses", "radar.n_samples"),
+                   2 * im.block_pulses * r.n_samples * COMPLEX64_BYTES,
+                   f"2 x {im.block_pulses} pulses x {r.n_samples} complex64 samples "
+                   "(the block and its range compression)"),
+            Buffer("image tile", ("imaging.pixel_m", "imaging.tile_length_m", "imaging.swath_m"),
+                   nx * ny * COMPLEX64_BYTES, f"{nx} x {ny} complex64 pixels"),
+        ]  # fmt: skip
+    if rec.raw_echoes:
+        buffers.append(
+            Buffer("recorder chunk", ("recorder.chunk_pulses", "radar.n_samples"),
+                   rec.chunk_pulses * pulse, f"{rec.chunk_pulses} pulses x {size}")
+        )  # fmt: skip
+    if rec.writer_queue and r.mode != "array":
+        buffers.append(
+            Buffer("writer queue", ("recorder.writer_queue", "imaging.block_pulses"),
+                   rec.writer_queue * im.block_pulses * pulse,
+                   f"{rec.writer_queue} blocks x {im.block_pulses} pulses x {size}")
+        )  # fmt: skip
+    return buffers
+
+
+def machine_memory_bytes() -> int:
+    """Memory this process may use: physical memory, or the cgroup's limit when lower, bytes."""
+    total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    for limit_file in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = Path(limit_file).read_text().strip()
+        except OSError:
+            continue
+        if text.isdigit():
+            total = min(total, int(text))
+    return total
+
+
+def memory_limit(cfg: Config) -> tuple[int, str]:
+    """The memory limit a run is held to, bytes, and where it comes from (in words)."""
+    if cfg.limits.memory_mib:
+        return round(cfg.limits.memory_mib * 2**20), "limits.memory_mib"
+    return machine_memory_bytes(), "the machine's memory; limits.memory_mib sets another"
+
+
+def human_bytes(n: float) -> str:
+    """``n`` bytes as B, KiB, MiB, GiB or TiB with three significant digits."""
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
+        if abs(n) < 1024 or unit == "TiB":
+            return f"{n:.3g} {unit}"
+        n /= 1024
+    raise AssertionError("unreachable")
+
+
+_RATE_KEYS = ("radar.prf_hz", "radar.n_samples", "radar.sample_format", "radar.channels")
+"""The keys that set the echo data rate."""
+
+
+def _values(cfg: Config, keys: tuple[str, ...]) -> str:
+    parts = []
+    for key in keys:
+        section, name = key.split(".")
+        parts.append(f"{key} = {getattr(getattr(cfg, section), name)!r}")
+    return ", ".join(parts)
+
+
+def check_resources(cfg: Config, limit_bytes: int | None = None) -> list[Buffer]:
+    """Refuse a configuration whose buffers do not fit the memory limit, or whose data
+    rate exceeds ``limits.data_rate_mbps``; return its buffers otherwise.
+
+    Parameters
+    ----------
+    cfg : Config
+        The configuration.
+    limit_bytes : int, optional
+        Memory limit, bytes (default :func:`memory_limit`).
+
+    Raises
+    ------
+    ConfigError
+        Naming the keys of the largest buffer, its bytes and the product that gives them,
+        the total and the limit; or the radar keys, the data rate and its limit.
+    """
+    where = "limits.memory_mib"
+    if limit_bytes is None:
+        limit_bytes, where = memory_limit(cfg)
+    buffers = plan(cfg)
+    total = sum(b.nbytes for b in buffers)
+    if total > limit_bytes:
+        big = max(buffers, key=lambda b: b.nbytes)
+        raise ConfigError(
+            f"{big.keys[0]}: {_values(cfg, big.keys)}: the {big.name} takes "
+            f"{big.nbytes} B ({human_bytes(big.nbytes)}: {big.how}), the run's buffers "
+            f"{total} B ({human_bytes(total)}) in all, more than the memory limit "
+            f"{limit_bytes} B ({human_bytes(limit_bytes)}, {where})"
+        )
+    rate_limit = cfg.limits.data_rate_mbps * 1e6 / 8
+    rate = data_rate_bytes_s(cfg)
+    if rate_limit and rate > rate_limit:
+        raise ConfigError(
+            f"radar.prf_hz: {_values(cfg, _RATE_KEYS)} make {rate * 8e-6:.6g} Mbit/s of "
+            f"echoes ({human_bytes(rate)}/s), more than "
+            f"limits.data_rate_mbps = {cfg.limits.data_rate_mbps:g}"
+        )
+    return buffers
