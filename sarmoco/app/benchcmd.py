@@ -461,7 +461,7 @@ def bench(
     presum_first : bool
         Pre-filter before range compression (``imaging.presum_first``).
     method : str
-        Tile image formation (``imaging.method``: direct, ffbp or rda).
+        Tile image formation (``imaging.method``: direct, ffbp, rda or pfa).
     work : Path, optional
         Where the temporary run folder is made (default: the system's temporary folder).
     keep : bool
@@ -551,7 +551,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--method",
-        choices=("direct", "ffbp", "rda"),
+        choices=("direct", "ffbp", "rda", "pfa"),
         default="direct",
         help="tile image formation, imaging.method (default direct)",
     )
