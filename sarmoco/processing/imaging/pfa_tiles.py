@@ -180,9 +180,11 @@ class PfaTileImager:
 
     def close(self) -> list[Tile]:
         """Form every tile whose aperture the held pulses reach (end of the segment)."""
-        if self._next is None or not self._apc:
+        held = np.concatenate(self._apc) if self._apc else np.zeros((0, 3))
+        if self._next is None or held.shape[0] == 0:
+            self._rc, self._apc, self._t = [], [], []
             return []
-        x_last = float(self._apc[-1][-1, 0])
+        x_last = float(held[-1, 0])
         tiles: list[Tile] = []
         while self.aperture_m(self._next)[0] <= x_last:
             tiles += self._form(self._next, self._next + 1)
@@ -258,13 +260,13 @@ class PfaTileImager:
         g = polar_to_rect(ph, freq, apc, frame, kr, kc, TAPS)
         # where each pixel's point lies in the polar format image (step 3): a0' at the
         # tile's pixels; a1' at the image's rows (apparent a0) and the pixels' columns
-        dx, dy = np.meshgrid(grid.axis0_m - x_c, grid.axis1_m - y_c, indexing="ij")
+        dx, dy = (grid.axis0_m - x_c)[:, None], (grid.axis1_m - y_c)[None, :]
         a0, a1_pix = _apparent(apc, centre, dx, dy)
         b0 = float(np.min(a0)) - TAPS * pix
         m0 = min(math.ceil((float(np.max(a0)) - b0) / pix) + TAPS + 1, n0)
-        scale0 = _apparent(apc, centre, np.ones_like(dy[0]), dy[0])[0]  # a0' per m of dx
-        rows_x = (b0 + pix * np.arange(m0))[:, None] / scale0[None, :]
-        _, a1 = _apparent(apc, centre, rows_x, np.broadcast_to(dy[0], rows_x.shape))
+        scale0 = _apparent(apc, centre, np.ones(1), dy)[0]  # a0' per m of dx, (1, columns)
+        rows_x = (b0 + pix * np.arange(m0))[:, None] / scale0
+        _, a1 = _apparent(apc, centre, rows_x, dy)
         b1 = float(np.min(a1)) - TAPS * pix
         m1 = min(math.ceil((float(np.max(a1)) - b1) / pix) + TAPS + 1, n1)
         # the image basebanded, I(b0, b1) exp(-j (kr_m b1 - kc_m b0)) with I = sum G(kr, kc)
@@ -300,9 +302,9 @@ def _samples(lo: float, hi: float, step: float, pixel_m: float) -> FloatArray:
 def _apparent(
     apc: FloatArray, centre: FloatArray, dx: FloatArray, dy: FloatArray
 ) -> tuple[FloatArray, FloatArray]:
-    """Where the points at ground offsets ``(dx, dy)`` (axis 0, axis 1; arrays of one
-    shape) from ``centre`` (m) lie in the polar format image of pulses at ``apc`` (m):
-    ``(a0', a1')``, of that shape, m.
+    """Where the points at ground offsets ``(dx, dy)`` (axis 0, axis 1; arrays that
+    broadcast together) from ``centre`` (m) lie in the polar format image of pulses at
+    ``apc`` (m): ``(a0', a1')``, of the broadcast shape, m.
 
     The deramped phase ``-k (R_t - R_c)`` of a point is ``kc a0' - kr a1'`` to first order:
     ``a0'`` is its slope over the aperture per unit of ``g_c`` (first to last pulse), and
@@ -310,16 +312,16 @@ def _apparent(
     first, middle and last pulse), so that the point's peak has the phase of
     backprojection's.
     """
-    pts = np.stack([dx, dy, np.zeros_like(dx)], axis=-1) + centre
-    ends = (apc[0], apc[apc.shape[0] // 2], apc[-1])
     delta, g_r, g_c = [], [], []
-    for p in ends:
-        r_c = float(np.linalg.norm(centre - p))
-        delta.append(np.linalg.norm(pts - p, axis=-1) - r_c)
-        g_r.append(float(centre[1] - p[1]) / r_c)  # -u . e1, u from the centre to the APC
-        g_c.append(float(p[0] - centre[0]) / r_c)
+    for p in (apc[0], apc[apc.shape[0] // 2], apc[-1]):
+        d = centre - p
+        r_c = math.sqrt(float(d @ d))
+        r_t = np.sqrt((d[0] + dx) ** 2 + (d[1] + dy) ** 2 + d[2] ** 2)
+        delta.append(r_t - r_c)
+        g_r.append(float(d[1]) / r_c)  # -u . e1, u from the centre to the APC
+        g_c.append(float(-d[0]) / r_c)
     a0 = -(delta[2] - delta[0]) / (g_c[2] - g_c[0])
     weights = (1.0 / 6.0, 4.0 / 6.0, 1.0 / 6.0)
     num = sum(w * (d + c * a0) for w, d, c in zip(weights, delta, g_c, strict=True))
     den = sum(w * r for w, r in zip(weights, g_r, strict=True))
-    return a0, num / den
+    return np.asarray(a0), np.asarray(num / den)

@@ -117,3 +117,18 @@ def test_pfa_tiles_focus_to_theory(run: dict[str, object]) -> None:
         got = img.data[i, j]
         assert abs(got) == pytest.approx(abs(ref), rel=0.03), f"target {tgt[:2]}"
         assert abs(np.angle(got / ref)) < 0.1, f"target {tgt[:2]}"
+
+
+def test_close_after_every_pulse_was_used_forms_nothing_more() -> None:
+    """Pulses that end between one tile's aperture and the next: the first tile takes them
+    all, none are held, and the segment closes with no more tiles (it raised)."""
+    layout = TileLayout(1000.0, 1118.0, 13.0, 10.0, 0.04, 0.015)
+    axis = 1400.0 + 0.1 * np.arange(2048)
+    imager = PfaTileImager(layout, axis, 1.5e-3, 1.1e9, 4.7e-3)
+    lo, hi = imager.aperture_m(0)
+    assert hi + 1.0 < imager.aperture_m(1)[0]
+    x = np.linspace(lo - 1.0, hi + 1.0, 200)
+    apc = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1)
+    rc = np.zeros((200, 2048), np.complex64)
+    imager.add(rc, np.arange(200, dtype=np.int64), apc)
+    assert imager.close() == []
