@@ -22,10 +22,10 @@ Per tile:
    (zero padded to the scene the pulses see after the pre-filter, so nothing wraps onto
    the tile) give pixels at the tile's spacing;
 3. the planar-wavefront distortion is undone: a point at ground offset
-   ``(dx, dy)`` from the centre lies in the polar format image at
-   ``a1' = (R_t - R_c) / g_r`` (from the aperture-centre APC, ``g_r`` the cosine of the
-   grazing angle there) and ``a0'`` = the phase slope across the aperture (about
-   ``dx rho_c / rho_t``); the image is read there (separable 16-tap interpolation, along
+   ``(dx, dy)`` from the centre lies in the polar format image at ``a0'``, the slope of
+   its deramped phase across the aperture (about ``dx rho_c / rho_t``), and
+   ``a1' ~ (R_t - R_c) / g_r`` averaged over the aperture (``g_r`` the cosine of the
+   grazing angle); the image (basebanded) is read there (separable 16-tap interpolation, along
    range then along track), so targets land on the pixels backprojection puts them on,
    with its phase; the amplitude is scaled to backprojection's (``a`` per pulse times
    the pulses of the aperture).
@@ -170,9 +170,8 @@ class PfaTileImager:
         self._apc.append(apc.copy())
         self._t.append(np.asarray(t_ns, dtype=np.int64).copy())
         length = self.layout.tile_length_m
-        if self._next is None:
-            first = self.aperture_m(0)[1] - length / 2.0  # tile k's aperture ends here + k L
-            self._next = math.ceil((float(apc[0, 0]) - first) / length)
+        if self._next is None:  # the first tile whose aperture ends after the first pulse
+            self._next = math.ceil((float(apc[0, 0]) - self.aperture_m(0)[1]) / length)
         tiles: list[Tile] = []
         while float(apc[-1, 0]) >= self.aperture_m(self._next)[1]:
             tiles += self._form(self._next, self._next + 1)
