@@ -25,9 +25,9 @@ import pytest
 from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.store import open_store
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec
 from tests.daemon.test_pipeline import _target_metrics, feed
 
 
