@@ -47,9 +47,15 @@ What is measured (one JSON line with ``--json``):
     the cores the stage needs at the radar's rate; the bounding stage is the one with
     the highest load (above 1 it cannot keep up on any number of cores; the ingest
     stages together must also fit beside it).
-``peak_rss_mb``, ``rss_growth_mb_per_min``
+``tile_latency_p50_s``, ``tile_latency_p99_s``
+    Pulse to live tile: the store's ``images`` ``committed`` counter is polled with the
+    pulses'; a tile that became committed gets the poll's host GPS time, less the time of
+    the first pulse that formed it (its ``t0_ns``: the longest wait of its pulses), over
+    the tiles.
+``peak_rss_mb``, ``rss_growth_mb_per_min``, ``rss_mb_start``, ``rss_mb_middle``, ``rss_mb_end``
     The daemon's peak VmHWM, and the slope of a line fitted to its VmRSS (sampled every
-    second) after a warm-up of a third of the stream (30 s at most).
+    second) after a warm-up of a third of the stream (30 s at most); VmRSS at the first
+    sample after the ready line, at the middle of the stream and at its end.
 
 The simulator holds every echo of the run in memory before it plays (about 90 kB per
 full-size ``thz-spotlight`` pulse while it synthesises): ``--duration`` is bounded by
@@ -79,6 +85,7 @@ import scipy.fft
 
 from sarmoco.app.demo import free_udp_port, read_json_line
 from sarmoco.app.simconfig import config_table, write_config
+from sarmoco.daemon.config import live_imaging, parse_config
 from sarmoco.daemon.status import LIVE_PAGE_POLL_S
 from sarmoco.daemon.store import open_store
 from sarmoco.daemon.threadcpu import STAGES
@@ -112,9 +119,14 @@ KEYS = (
     "fft_floor_ratio",
     "latency_p50_s",
     "latency_p99_s",
+    "tile_latency_p50_s",
+    "tile_latency_p99_s",
     "lost_pulses",
     "peak_rss_mb",
     "rss_growth_mb_per_min",
+    "rss_mb_start",
+    "rss_mb_middle",
+    "rss_mb_end",
     "live_page_share",
 )
 """The figures ``sarmoco bench`` prints (``--json``: with the run's description)."""
@@ -138,10 +150,10 @@ def proc_cpu_s(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def committed_now(store: Path) -> int:
-    """The ``committed`` attribute of the store's pulses (0 before the group exists)."""
+def committed_now(store: Path, group: str = "pulses") -> int:
+    """The ``committed`` attribute of a group of the store (0 before the group exists)."""
     try:
-        meta = json.loads((store / "pulses" / "zarr.json").read_text())
+        meta = json.loads((store / group / "zarr.json").read_text())
     except (FileNotFoundError, json.JSONDecodeError):
         return 0
     return int(meta["attributes"]["committed"])
@@ -157,6 +169,8 @@ class Watch:
     """(s since the watch began, VmRSS kB)."""
     last_commit_mono: float = 0.0
     """Host monotonic time of the last change of the committed counter, s."""
+    tiles: list[tuple[int, int, int]] = field(default_factory=list)
+    """(host GPS ns at the poll, tiles committed before, after) for each change."""
 
     def committed(self) -> int:
         """Pulses committed at the last poll that saw a change."""
@@ -166,13 +180,17 @@ class Watch:
 def watch(pid: int, store: Path, seen: Watch, stop: threading.Event) -> None:
     """Poll the committed counter every :data:`POLL_S` and VmRSS every second until ``stop``."""
     t0 = time.monotonic()
-    last, next_rss = 0, t0
+    last, tiles, next_rss = 0, 0, t0
     while not stop.is_set():
         n = committed_now(store)
         if n > last:
             seen.commits.append((host_gps_ns(GPS_LEAP_SECONDS_DEFAULT), last, n))
             seen.last_commit_mono = time.monotonic()
             last = n
+        k = committed_now(store, "images")
+        if k > tiles:
+            seen.tiles.append((host_gps_ns(GPS_LEAP_SECONDS_DEFAULT), tiles, k))
+            tiles = k
         now = time.monotonic()
         if now >= next_rss:
             try:
@@ -187,6 +205,29 @@ def latencies_s(commits: list[tuple[int, int, int]], t_ns: np.ndarray) -> np.nda
     """Pulse-to-record latency of every committed pulse seen by :func:`watch`, s."""
     lat = [(t_poll - t_ns[a:b]) / 1e9 for t_poll, a, b in commits if b <= t_ns.size]
     return np.concatenate(lat) if lat else np.zeros(0)
+
+
+def tile_first_pulses_ns(store: Path, n_tiles: int) -> np.ndarray:
+    """The ``t0_ns`` attribute (first pulse, GPS ns) of the store's first ``n_tiles`` tiles."""
+    t0 = []
+    for i in range(n_tiles):
+        meta = json.loads((store / "images" / f"tile_{i:06d}" / "zarr.json").read_text())
+        t0.append(int(meta["attributes"]["t0_ns"]))
+    return np.array(t0, dtype=np.int64)
+
+
+def tile_latencies_s(tiles: list[tuple[int, int, int]], t0_ns: np.ndarray) -> np.ndarray:
+    """Pulse-to-tile latency of every tile committed while :func:`watch` polled: the poll's
+    time less the tile's first pulse time ``t0_ns`` (GPS ns, by tile), s."""
+    lat = [(t_poll - t0_ns[a:b]) / 1e9 for t_poll, a, b in tiles if b <= t0_ns.size]
+    return np.concatenate(lat) if lat else np.zeros(0)
+
+
+def rss_at_mb(rss: list[tuple[float, int]], fraction: float) -> float:
+    """VmRSS at ``fraction`` (0: first, 1: last) of the samples, MB (NaN: none)."""
+    if not rss:
+        return float("nan")
+    return rss[round(fraction * (len(rss) - 1))][1] / 1024.0
 
 
 def rss_trend_mb_per_min(rss: list[tuple[float, int]], warmup_s: float) -> float:
@@ -249,6 +290,8 @@ class BenchRun:
     store: Path
     t_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     """Times of the recorded pulses, GPS ns."""
+    tile_t0_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    """First pulse time of each tile seen committed, GPS ns."""
     live: dict[str, Any] = field(default_factory=dict)
     """The daemon's ``/live.json`` at the end of the stream (the live page's rendering)."""
 
@@ -382,6 +425,7 @@ def live_run(
         store=store,
         live=live,
         t_ns=open_store(store).read("pulses", ["t_ns"])["t_ns"],
+        tile_t0_ns=tile_first_pulses_ns(store, seen.tiles[-1][2] if seen.tiles else 0),
     )
 
 
@@ -414,15 +458,23 @@ def figures(run: BenchRun, fft_s_per_pulse: float) -> dict[str, float]:
     busy = c.get("processing_busy_seconds", 0.0)
     lat = latencies_s(run.watch.commits, run.t_ns)
     p50, p99 = np.percentile(lat, [50, 99]) if lat.size else (float("nan"), float("nan"))
+    tile_lat = tile_latencies_s(run.watch.tiles, run.tile_t0_ns)
+    nan2 = (float("nan"), float("nan"))
+    tile_p50, tile_p99 = np.percentile(tile_lat, [50, 99]) if tile_lat.size else nan2
     warmup = min(RSS_WARMUP_MAX_S, run.duration_s / 3.0)
     return {
         "realtime_ratio": focused / run.prf_hz / busy if busy > 0 else float("nan"),
         "fft_floor_ratio": run.cpu_s / taken / fft_s_per_pulse if taken else float("nan"),
         "latency_p50_s": float(p50),
         "latency_p99_s": float(p99),
+        "tile_latency_p50_s": float(tile_p50),
+        "tile_latency_p99_s": float(tile_p99),
         "lost_pulses": float(run.pulses_sent - run.t_ns.size),
         "peak_rss_mb": run.peak_rss_kb / 1024.0,
         "rss_growth_mb_per_min": rss_trend_mb_per_min(run.watch.rss, warmup),
+        "rss_mb_start": rss_at_mb(run.watch.rss, 0.0),
+        "rss_mb_middle": rss_at_mb(run.watch.rss, 0.5),
+        "rss_mb_end": rss_at_mb(run.watch.rss, 1.0),
         "live_page_share": run.live.get("png_render_cpu_s", 0.0) / busy
         if busy > 0
         else float("nan"),
@@ -437,7 +489,7 @@ def bench(
     record: bool = True,
     autofocus: bool = True,
     presum_first: bool = False,
-    method: str = "direct",
+    method: str | None = None,
     work: Path | None = None,
     keep: bool = False,
 ) -> dict[str, Any]:
@@ -458,8 +510,10 @@ def bench(
         aperture holds fewer than two subapertures).
     presum_first : bool
         Pre-filter before range compression (``imaging.presum_first``).
-    method : str
-        Tile image formation (``imaging.method``: direct, ffbp or rda).
+    method : str, optional
+        Tile image formation of the live run (``imaging.method``: direct, ffbp, rda or
+        pfa, with ``imaging.live_method = "method"``); default: the scenario's
+        configuration (``imaging.live_method``: pfa for spotlight; else ``imaging.method``).
     work : Path, optional
         Where the temporary run folder is made (default: the system's temporary folder).
     keep : bool
@@ -481,7 +535,8 @@ def bench(
     out = Path(tempfile.mkdtemp(prefix=f"sarmoco-bench-{preset}-", dir=work))
     sections: dict[str, dict[str, Any]] = {
         "recorder": {"raw_echoes": record},
-        "imaging": {"presum_first": presum_first, "method": method},
+        "imaging": {"presum_first": presum_first}
+        | ({} if method is None else {"method": method, "live_method": "method"}),
     }
     if not autofocus:
         sections["autofocus"] = {"enabled": False}
@@ -520,7 +575,9 @@ def bench(
             "fft_cpu_s_per_pulse": fft_s,
             "record_raw_echoes": record,
             "presum_first": presum_first,
-            "method": method,
+            "method": live_imaging(
+                parse_config(config_table(load_preset(preset, scale), **sections))
+            ).imaging.method,
             "live_image_level": run.status.get("gauges", {}).get("live_image_level"),
             "bytes_written": written,
             "exit_status": run.exit_status,
@@ -549,9 +606,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--method",
-        choices=("direct", "ffbp", "rda"),
-        default="direct",
-        help="tile image formation, imaging.method (default direct)",
+        choices=("direct", "ffbp", "rda", "pfa"),
+        help="tile image formation of the live run, imaging.method (default: the scenario's "
+        "live imager, imaging.live_method: pfa for spotlight, direct otherwise)",
     )
     p.add_argument("--work", type=Path, help="folder for the temporary run folder")
 

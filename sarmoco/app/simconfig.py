@@ -19,6 +19,10 @@ aperture time (and never longer than the ``autofocus.subaperture_s`` default).""
 MIN_SUBAPERTURE_PULSES = 32
 """Fewest pulses in a subaperture: the Doppler-rate estimators need some Doppler resolution."""
 
+LIVE_METHOD = {"spotlight": "pfa", "stripmap": "method"}
+"""``imaging.live_method`` of a simulated scene by its mode: the polar format live image for
+spotlight; stripmap live runs keep ``imaging.method``."""
+
 
 def synthetic_aperture_s(scn: Scenario) -> float:
     """Time the scene centre spends in the synthetic aperture, ``2 R_c tan(theta/2) / v``, s.
@@ -77,6 +81,7 @@ def config_table(scn: Scenario, **sections: dict[str, Any]) -> dict[str, Any]:
             "tile_length_m": TILE_LENGTH_M,
             "pixel_m": 0.5 * scn.azimuth_resolution_m,
             "azimuth_beamwidth_deg": math.degrees(scn.integration_angle_rad),
+            "live_method": LIVE_METHOD[scn.mode],
         },
         "autofocus": autofocus_table(scn),
     }

@@ -339,17 +339,25 @@ class ImagingConfig:
         "and before range compression: range compression, envelope shift, per-bin D_los, "
         "autofocus and imaging then run at the decimated pulse rate (with prefilter on)",
     )
-    method: Literal["direct", "ffbp", "rda"] = _key(
+    method: Literal["direct", "ffbp", "rda", "pfa"] = _key(
         "direct",
         "Tile image formation: direct backprojection, fast factorised backprojection "
         "(polar subimages merged in stages, factorisation set by ffbp_max_phase_error_rad), "
-        "or the range-Doppler algorithm on blocks of tiles (frequency domain, the live "
-        "imager: its cost is per sample, not per pixel and pulse; resampled onto the same "
-        "ground tiles)",
+        "the range-Doppler algorithm on blocks of tiles (stripmap), or the polar format "
+        "algorithm per tile (spotlight: each tile a scene of its own, its aperture "
+        "azimuth_beamwidth_deg about the beam centre). The last two work in the frequency "
+        "domain (the live imagers: their cost is per sample, not per pixel and pulse) and "
+        "resample onto the same ground tiles",
+    )
+    live_method: Literal["method", "rda", "pfa"] = _key(
+        "method",
+        "Tile image formation of a live run (sarmoco run): method (the same as replay "
+        "and batch), or a live imager (rda, pfa) while replay and batch form the full "
+        "image with method",
     )
     live_degrade: bool = _key(
         True,
-        "With method rda in a live run: when focusing needs more than live_budget of real "
+        "With method rda or pfa in a live run: when focusing needs more than live_budget of real "
         "time, form the live tiles at a degraded level (1: twice the pixel spacing; 2: also "
         "half the swath; 3: four times the pixel spacing and half the swath), one level up "
         "at a time, and back down when the level below would fit with a margin; the level "
@@ -920,3 +928,13 @@ def _plain(value: Any) -> Any:
     if isinstance(value, list | tuple):
         return [_plain(v) for v in value]
     return value
+
+
+def live_imaging(cfg: Config) -> Config:
+    """The configuration a live run focuses with: ``imaging.live_method`` as the tile
+    imager (unless it is ``"method"``); the store records ``cfg`` itself, so a replay of it
+    forms the full image with ``imaging.method``."""
+    im = cfg.imaging
+    if im.live_method == "method":
+        return cfg
+    return dataclasses.replace(cfg, imaging=dataclasses.replace(im, method=im.live_method))

@@ -76,10 +76,9 @@ def to_complex64(samples: npt.NDArray[np.generic]) -> npt.NDArray[np.complex64]:
     """
     if samples.dtype == np.complex64:
         return samples  # type: ignore[return-value]
-    out = np.empty(samples.shape[:-1], dtype=np.complex64)
-    out.real = samples[..., 0]
-    out.imag = samples[..., 1]
-    return out
+    # one conversion pass; the (I, Q) float32 pairs are the complex64 values
+    pairs = np.ascontiguousarray(samples, dtype=np.float32)
+    return pairs.view(np.complex64)[..., 0]
 
 
 @dataclass(frozen=True)

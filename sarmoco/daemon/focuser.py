@@ -62,6 +62,7 @@ from sarmoco.processing.beam import (
     squint_interval_rad,
 )
 from sarmoco.processing.geometry import ReferenceTrack, look_angle, vector_to_imaging
+from sarmoco.processing.imaging.pfa_tiles import PfaTileImager
 from sarmoco.processing.imaging.presum import AzimuthPrefilter, fill_slots, slot_steps
 from sarmoco.processing.imaging.rda_tiles import RdaTileImager
 from sarmoco.processing.imaging.tile_pga import StripPga, TilePga
@@ -136,8 +137,11 @@ class TileSink(Protocol):
         """End of the segment: the tiles still open."""
 
 
-TileFormer = TileImager | RdaTileImager
-"""A segment's tile imager: backprojection (direct or FFBP) or range-Doppler."""
+TileFormer = TileImager | RdaTileImager | PfaTileImager
+"""A segment's tile imager: backprojection (direct or FFBP), range-Doppler or polar format."""
+
+LIVE_IMAGERS = (RdaTileImager, PfaTileImager)
+"""The tile imagers whose tiles a live run may degrade (:mod:`sarmoco.daemon.livelevel`)."""
 
 SinkFactory = Callable[[TileFormer, ReferenceTrack], TileSink]
 """Makes a segment's sink from the imager it would use and its reference track."""
@@ -165,6 +169,14 @@ def tile_imaging(cfg: Config, radar: RadarParams) -> tuple[TileFormer, TilePga |
     imager: TileFormer
     if im.method == "rda":
         imager = RdaTileImager(tile_layout(cfg), rangecomp.range_axis_m(radar), radar.wavelength_m)
+    elif im.method == "pfa":
+        imager = PfaTileImager(
+            tile_layout(cfg),
+            rangecomp.range_axis_m(radar),
+            radar.wavelength_m,
+            radar.bandwidth_hz,
+            math.radians(im.azimuth_beamwidth_deg),
+        )
     else:
         imager = TileImager(
             tile_layout(cfg),
@@ -726,7 +738,7 @@ class Focuser:
         im = cfg.imaging
         self.live = (
             LiveLevel(im.live_budget, im.live_window_s)
-            if im.method == "rda" and im.live_degrade
+            if im.method in ("rda", "pfa") and im.live_degrade
             else None
         )
         """The degraded level of the live image (:mod:`sarmoco.daemon.livelevel`); None:
@@ -781,7 +793,7 @@ class Focuser:
             data_s = (int(t_ns[-1]) - self._last_t_ns) * 1e-9
             level = self.live.update(data_s, time.perf_counter() - start)
             for seg in (self.segment, *(tail for tail, _ in self._tails)):
-                if seg is not None and isinstance(seg.tiles, RdaTileImager):
+                if seg is not None and isinstance(seg.tiles, LIVE_IMAGERS):
                     seg.tiles.level = level
         if t_ns.shape[0]:
             self._last_t_ns = int(t_ns[-1])

@@ -1,6 +1,6 @@
 """The rule by which the live image degrades when focusing cannot keep up.
 
-The live imager (``imaging.method = "rda"``) forms tiles at a level of
+The live imager (``imaging.method = "rda"`` or ``"pfa"``) forms tiles at a level of
 :data:`~sarmoco.processing.imaging.rda_tiles.LEVELS` (0: the configured pixel spacing
 and swath; each level about halves the cost of a tile: 1 doubles the pixel spacing,
 2 also halves the swath, 3 doubles the pixel spacing again). Data are never dropped:

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import FrameType
 
-from sarmoco.daemon.config import Config, StatusConfig, config_to_dict
+from sarmoco.daemon.config import Config, StatusConfig, config_to_dict, live_imaging
 from sarmoco.daemon.focuser import SinkFactory
 from sarmoco.daemon.links import open_ins, open_radar
 from sarmoco.daemon.livefeed import LiveFeed
@@ -239,7 +239,8 @@ class _LiveRun:
         self.cfg = cfg
         self.path = path
         self.notifier = Notifier()
-        warm_up_kernels(cfg, self.notifier)  # before the links: nothing waits for a compile
+        # before the links: nothing waits for a compile
+        warm_up_kernels(live_imaging(cfg), self.notifier)
         self.counters, self.health = Counters(), Health()
         self.st = _LiveState(stop)
         live = LiveFeed()
@@ -249,8 +250,9 @@ class _LiveRun:
         ins = open_ins(cfg, keep_raw=cfg.recorder.raw_ins)
         network = not isinstance(radar, RadarFileSource)
         self.pipe = Pipeline(
-            cfg, self.recorder, self.counters, refuse_jumps=network, focus_skips=network
-        )
+            live_imaging(cfg), self.recorder, self.counters, refuse_jumps=network,
+            focus_skips=network,
+        )  # fmt: skip
         self._ins_file = Path(cfg.ins.link).is_file()
         """The INS link is a log file, read at its own pace (see :meth:`_now_ns`)."""
         self._ins_backlog: deque[Sample] = deque()

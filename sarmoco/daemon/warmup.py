@@ -35,7 +35,7 @@ def kernel_warm_ups(cfg: Config) -> list[Callable[[], None]]:
 
     The direct backprojection always (FFBP falls back to it when it plans no stage); the
     FFBP kernels with ``imaging.method = "ffbp"``; the interpolation kernel with
-    ``imaging.method = "rda"``; the pre-filter's with
+    ``imaging.method = "rda"`` or ``"pfa"``; the pre-filter's with
     ``imaging.prefilter``; the autofocus phase removal's with ``autofocus.enabled``.
     None in array mode (``radar.mode = "array"``: numpy and scipy only).
     """
@@ -44,7 +44,7 @@ def kernel_warm_ups(cfg: Config) -> list[Callable[[], None]]:
     warm_ups = [backprojection.warm_up]
     if cfg.imaging.method == "ffbp":
         warm_ups.append(ffbp.warm_up)
-    if cfg.imaging.method == "rda":
+    if cfg.imaging.method in ("rda", "pfa"):
         warm_ups.append(interp.warm_up)
     if cfg.imaging.prefilter:
         warm_ups.append(presum.warm_up)

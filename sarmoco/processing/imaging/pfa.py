@@ -102,6 +102,50 @@ def validity_radius_m(freq_hz: FloatArray, apc_m: FloatArray, grid: PlaneGrid) -
     return float(2.0 * rho_c * np.sqrt(r_c / lam))
 
 
+def polar_to_rect(
+    ph: ComplexArray,
+    freq_hz: FloatArray,
+    apc_m: FloatArray,
+    grid: PlaneGrid,
+    kr: FloatArray,
+    kc: FloatArray,
+    taps: int = 16,
+) -> ComplexArray:
+    """Resample a deramped phase history from its polar raster onto a rectangle.
+
+    Parameters
+    ----------
+    ph, freq_hz, apc_m, grid, taps
+        As for :func:`polar_format`.
+    kr, kc : ndarray of float64
+        Range (axis 1) and cross-range (axis 0) spatial frequencies of the rectangle,
+        rad/m, each uniform and ascending (within :func:`pfa_support` for samples that
+        are not to be zero).
+
+    Returns
+    -------
+    ndarray of complex, shape (kr.size, kc.size)
+        The spectrum ``G(kr, kc)``; the image is ``sum G exp(-j (kc a0 - kr a1))``.
+    """
+    p, f = ph.shape
+    if freq_hz.shape != (f,) or apc_m.shape != (p, 3):
+        raise ProcessingError(f"pfa: ph{ph.shape} freq{freq_hz.shape} apc{apc_m.shape}")
+    df = float(freq_hz[-1] - freq_hz[0]) / (f - 1)  # uniform; fitted over the band
+    g_r, g_c = _ground_los(apc_m, grid)
+    # step 1: per pulse, frequency -> uniform kr
+    f_at = kr[None, :] * C_MPS / (4.0 * np.pi * g_r[:, None])
+    a = sinc_interp(np.asarray(ph), (f_at - freq_hz[0]) / df, taps)
+    # step 2: per kr row, pulses -> uniform kc
+    t = g_c / g_r
+    order = np.argsort(t)
+    ts = t[order]
+    at = kc[None, :] / kr[:, None]
+    pulse_at = np.interp(at, ts, order.astype(np.float64))
+    slack = 1e-9 * (ts[-1] - ts[0])
+    pulse_at[(at < ts[0] - slack) | (at > ts[-1] + slack)] = -1.0  # beyond the aperture: zeros
+    return sinc_interp(np.ascontiguousarray(a.T), pulse_at, taps)  # (kr rows, kc columns)
+
+
 def polar_format(
     ph: ComplexArray, freq_hz: FloatArray, apc_m: FloatArray, grid: PlaneGrid, taps: int = 16
 ) -> Image:
@@ -131,19 +175,10 @@ def polar_format(
     p, f = ph.shape
     if freq_hz.shape != (f,) or apc_m.shape != (p, 3):
         raise ProcessingError(f"pfa: ph{ph.shape} freq{freq_hz.shape} apc{apc_m.shape}")
-    df = float(freq_hz[-1] - freq_hz[0]) / (f - 1)  # uniform; fitted over the band
     sup = pfa_support(freq_hz, apc_m, grid)
-    g_r, g_c = _ground_los(apc_m, grid)
-    # step 1: per pulse, frequency -> uniform kr
     kr = np.linspace(sup.kr_lo, sup.kr_hi, f)
-    f_at = kr[None, :] * C_MPS / (4.0 * np.pi * g_r[:, None])
-    a = sinc_interp(np.asarray(ph, dtype=np.complex128), (f_at - freq_hz[0]) / df, taps)
-    # step 2: per kr row, pulses -> uniform kc
-    t = g_c / g_r
-    order = np.argsort(t)
     kc = np.linspace(sup.kc_lo, sup.kc_hi, p)
-    pulse_at = np.interp(kc[None, :] / kr[:, None], t[order], order.astype(np.float64))
-    g = sinc_interp(np.ascontiguousarray(a.T), pulse_at, taps)  # (F rows of kr, P of kc)
+    g = polar_to_rect(np.asarray(ph, dtype=np.complex128), freq_hz, apc_m, grid, kr, kc, taps)
     # image: I(a0, a1) = sum G(kr, kc) exp(-j (kc a0 - kr a1))
     e0 = np.exp(-1j * np.outer(grid.axis0_m, kc))
     e1 = np.exp(1j * np.outer(kr, grid.axis1_m))

@@ -86,6 +86,20 @@ def degraded(layout: TileLayout, level: int) -> TileLayout:
     return replace(layout, pixel_m=layout.pixel_m * pixel, swath_m=layout.swath_m / narrow)
 
 
+def tile_range_bins(layout: TileLayout, axis: FloatArray, squint_rad: float) -> slice:
+    """The bins of the uniform slant-range ``axis`` (m) that the tiles of ``layout`` need:
+    their slant-range span, seen up to ``squint_rad`` (rad) off broadside at the far edge,
+    and :data:`RANGE_GUARD_BINS` each side."""
+    h = layout.height_m
+    y_lo = layout.ground_range_m - layout.swath_m / 2.0
+    y_hi = layout.ground_range_m + layout.swath_m / 2.0
+    r_lo = math.hypot(h, max(y_lo, 0.0))
+    r_hi = math.hypot(h, y_hi) / math.cos(squint_rad)
+    i0 = int(np.searchsorted(axis, r_lo)) - RANGE_GUARD_BINS
+    i1 = int(np.searchsorted(axis, r_hi)) + RANGE_GUARD_BINS
+    return slice(max(i0, 0), min(i1, axis.size))
+
+
 def grid_spacing(dx_m: float) -> float:
     """The along-track grid spacing for pulses ``dx_m`` apart, m: ``dx_m`` rounded down to
     :data:`GRID_DIGITS` significant digits (a grid at most that much finer), so that the
@@ -202,17 +216,9 @@ class RdaTileImager:
         """Form only these tiles (a block of a batch); None: every tile."""
 
     def _range_bins(self, layout: TileLayout, axis: FloatArray) -> slice:
-        """The bins of ``axis`` that the tiles of ``layout`` need: their slant-range span,
-        the range migration of the band's edge and :data:`RANGE_GUARD_BINS` each side."""
-        h = layout.height_m
-        y_lo = layout.ground_range_m - layout.swath_m / 2.0
-        y_hi = layout.ground_range_m + layout.swath_m / 2.0
-        r_lo = math.hypot(h, max(y_lo, 0.0))
+        """The bins of ``axis`` that the tiles of ``layout`` need (:func:`tile_range_bins`)."""
         beam = layout.beamwidth_rad / 2.0 + abs(self.centroid_squint_rad)
-        r_hi = math.hypot(h, y_hi) / math.cos(beam)
-        i0 = int(np.searchsorted(axis, r_lo)) - RANGE_GUARD_BINS
-        i1 = int(np.searchsorted(axis, r_hi)) + RANGE_GUARD_BINS
-        return slice(max(i0, 0), min(i1, axis.size))
+        return tile_range_bins(layout, axis, beam)
 
     def add(
         self,
