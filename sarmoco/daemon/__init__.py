@@ -14,9 +14,11 @@ __all__ = [
     "pipeline",
     "recorder",
     "report",
+    "resources",
     "runner",
     "schema",
     "status",
     "store",
     "threadcpu",
+    "verify",
 ]

@@ -22,6 +22,7 @@ __all__ = [
     "ffbp",
     "grid",
     "interp",
+    "pfa_tiles",
     "pfa_support",
     "phase_history",
     "phase_history_from_compressed",
