@@ -268,6 +268,12 @@ class _LiveRun:
         self.counters.add_source("ins", ins.counters.snapshot)
         self.counters.add_source("cpu_seconds", stage_cpu_seconds)
         self.counters.inc("processing_busy_seconds", 0.0)
+        self.captures: list[dict[str, str | None]] = []
+        """Capture intervals (UTC ISO 8601 start and stop; stop None while capturing)."""
+        self.camera = self._start_camera() if cfg.camera.enabled else None
+        """The MAVLink camera component (None: ``camera.enabled`` off)."""
+        if self.camera is None or self.camera.capturing:
+            self._capture(True)
         self.threads = [
             self._reader(
                 "radar", lambda: open_radar(cfg, decoder=radar.decoder), radar, self._read_radar
@@ -276,12 +282,6 @@ class _LiveRun:
                 "ins", lambda: open_ins(cfg, keep_raw=cfg.recorder.raw_ins), ins, self._read_ins
             ),
         ]
-        self.captures: list[dict[str, str | None]] = []
-        """Capture intervals (UTC ISO 8601 start and stop; stop None while capturing)."""
-        self.camera = self._start_camera() if cfg.camera.enabled else None
-        """The MAVLink camera component (None: ``camera.enabled`` off)."""
-        if self.camera is None or self.camera.capturing:
-            self._capture(True)
         self.recording = threading.Thread(target=self._keep_recording, name="recording",
                                           daemon=True)  # fmt: skip
         self.recording.start()
@@ -335,8 +335,7 @@ class _LiveRun:
             self.captures[-1]["stop_utc"] = now
         log.info("capture started" if on else "capture stopped", extra={"store": str(self.path)})
 
-    @property
-    def capturing(self) -> bool:
+    def _capturing(self) -> bool:
         """Whether pulses are recorded now (always without the camera component)."""
         return self.camera is None or self.camera.capturing
 
@@ -365,7 +364,7 @@ class _LiveRun:
             if not limit:
                 self.st.stop.wait(POLL_S)
                 return 0
-        n = self.pipe.read_radar(link, POLL_S, limit, keep=self.capturing)
+        n = self.pipe.read_radar(link, POLL_S, limit, capturing=self._capturing)
         if n:
             self.st.last_pulse_mono = time.monotonic()
             self.st.first_pulse_mono = self.st.first_pulse_mono or self.st.last_pulse_mono
