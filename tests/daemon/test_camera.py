@@ -109,6 +109,12 @@ def test_ground_station_discovers_the_camera_and_reads_its_information(bench: Be
     assert ack.result == mav.MAV_RESULT_UNSUPPORTED
 
 
+def test_a_single_image_trigger_is_unsupported_and_starts_nothing(bench: Bench) -> None:
+    ack = bench.command(mav.MAV_CMD_IMAGE_START_CAPTURE, 0, 0, 1)  # one image, as CAM_TRIGG_DIST
+    assert ack.result == mav.MAV_RESULT_UNSUPPORTED
+    assert bench.captures == [] and not bench.camera.capturing
+
+
 @pytest.mark.parametrize(
     ("start", "stop"),
     [
