@@ -14,7 +14,10 @@ component ids (``camera.system_id``, ``camera.component_id``):
   CAMERA_CAPTURE_STATUS, acknowledged with COMMAND_ACK.
 - MAV_CMD_IMAGE_START_CAPTURE / MAV_CMD_VIDEO_START_CAPTURE start the capture,
   MAV_CMD_IMAGE_STOP_CAPTURE / MAV_CMD_VIDEO_STOP_CAPTURE stop it (the daemon keeps
-  running; see :class:`sarmoco.daemon.runner` for what capture means to the store).
+  running: outside a capture the live run lets the pulses go, see
+  :mod:`sarmoco.daemon.runner`). MAV_CMD_IMAGE_START_CAPTURE for a single image
+  (``param3`` = 1, what a distance trigger sends) is answered ``MAV_RESULT_UNSUPPORTED``:
+  a strip has no snapshot, and a capture it started would never be stopped.
   Commands are taken only from ``camera.command_system_ids``; a refused one is
   answered ``MAV_RESULT_DENIED``, counted (``camera_commands_refused``) and logged with
   its sender. Other commands addressed to the component are answered
@@ -322,6 +325,8 @@ class CameraComponent:
             answer = self._information
         elif cmd == mav.MAV_CMD_REQUEST_CAMERA_CAPTURE_STATUS:
             answer = self._capture_status
+        elif cmd == mav.MAV_CMD_IMAGE_START_CAPTURE and round(msg.param3) == 1:
+            answer = None  # a single still (a distance trigger): a strip has no snapshot
         elif cmd in START or cmd in STOP:
             self._set_capture(cmd in START, sender)
             answer = self._capture_status
