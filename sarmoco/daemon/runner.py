@@ -227,6 +227,11 @@ class _LiveRun:
     The processing's numba kernels are compiled (or loaded from numba's cache) first,
     before the links open and READY=1 (:func:`~sarmoco.daemon.warmup.warm_up_kernels`).
 
+    With ``camera.enabled`` the MAVLink camera component (:mod:`sarmoco.daemon.camera`)
+    runs beside, and the ground station starts and stops the capture: outside a capture
+    the radar's pulses are read and let go (``pulses_not_captured``). The capture
+    intervals go to the store's ``captures`` attribute at the end of the run.
+
     Parameters
     ----------
     cfg : Config
