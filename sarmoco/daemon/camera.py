@@ -20,7 +20,9 @@ component ids (``camera.system_id``, ``camera.component_id``):
   a strip has no snapshot, and a capture it started would never be stopped.
   Commands are taken only from ``camera.command_system_ids``; a refused one is
   answered ``MAV_RESULT_DENIED``, counted (``camera_commands_refused``) and logged with
-  its sender. Other commands addressed to the component are answered
+  its sender. With ``camera.signing_key_hex`` only signed packets are taken (MAVLink 2
+  signing); the others are dropped unanswered and counted
+  (``camera_unsigned_rejected``). Other commands addressed to the component are answered
   ``MAV_RESULT_UNSUPPORTED``.
 - STATUSTEXT for each fault the operator must act on (:func:`operator_faults`): when it
   appears, again every ``camera.statustext_interval_s`` while it lasts, and once at
@@ -47,7 +49,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from sarmoco.daemon.config import CameraConfig
 from sarmoco.daemon.status import Counters
-from sarmoco.errors import DriverError
+from sarmoco.errors import ConfigError, DriverError
 
 log = logging.getLogger(__name__)
 
@@ -195,6 +197,7 @@ class CameraComponent:
         self._sent_at: dict[str, float] = {}
         for name in ("camera_commands", "camera_commands_refused", "camera_bad_messages"):
             counters.inc(name, 0)
+        key = signing_key(cfg.signing_key_hex)  # before a socket is opened
         try:
             self._conn = mavutil.mavlink_connection(
                 cfg.link, source_system=cfg.system_id, source_component=cfg.component_id,
@@ -202,6 +205,12 @@ class CameraComponent:
             )  # fmt: skip
         except (OSError, ValueError) as exc:
             raise DriverError(f"camera.link {cfg.link}: cannot open: {exc}") from exc
+        if key is not None:
+            self._conn.setup_signing(
+                key, sign_outgoing=True, allow_unsigned_callback=lambda _m, _id: False
+            )
+            signing = self._conn.mav.signing
+            counters.add_source("camera", lambda: {"unsigned_rejected": signing.reject_count})
 
     # -- life -----------------------------------------------------------------------------
 
@@ -345,6 +354,25 @@ class CameraComponent:
 
     def _ack(self, cmd: int, result: int, sender: tuple[int, int]) -> None:
         self._conn.mav.command_ack_send(cmd, result, 0, 0, sender[0], sender[1])
+
+
+def signing_key(text: str) -> bytes | None:
+    """The 32-byte MAVLink 2 signing key of ``camera.signing_key_hex`` (None: empty).
+
+    Raises
+    ------
+    ConfigError
+        If the text is not 64 hexadecimal digits.
+    """
+    if not text:
+        return None
+    try:
+        key = bytes.fromhex(text)
+    except ValueError:
+        key = b""
+    if len(key) != 32:
+        raise ConfigError("camera.signing_key_hex: not 64 hexadecimal digits (32 bytes)")
+    return key
 
 
 def _text32(text: str) -> list[int]:

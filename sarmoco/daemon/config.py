@@ -504,6 +504,12 @@ class CameraConfig:
         "MAVProxy; 245: MAVSDK ground stations; 1: the autopilot); commands from others "
         "are refused, counted and logged",
     )
+    signing_key_hex: str = _key(
+        "",
+        "MAVLink 2 signing key of the camera link (64 hex digits); when set, unsigned and "
+        "badly signed packets are rejected (camera_unsigned_rejected) and the component "
+        "signs what it sends",
+    )
     capture_at_start: bool = _key(
         True,
         "Capture from the start of the daemon to its stop (benches, vehicles without a "

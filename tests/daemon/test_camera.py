@@ -25,6 +25,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mav
 from sarmoco.daemon.camera import CameraComponent, Fault, operator_faults
 from sarmoco.daemon.config import CameraConfig
 from sarmoco.daemon.status import Counters, Health
+from sarmoco.errors import ConfigError
 
 WAIT_S = 5.0
 """Longest wait for one answer of the component, s."""
@@ -150,6 +151,42 @@ def test_commands_from_other_systems_are_refused_counted_and_logged(
     assert bench.counters.snapshot()["counters"]["camera_commands_refused"] == 1
     refused = [r for r in caplog.records if r.getMessage() == "camera command refused"]
     assert [r.__dict__["sender_system"] for r in refused] == [42]
+
+
+KEY = bytes(range(32))
+
+
+def test_with_a_signing_key_only_signed_commands_are_taken() -> None:
+    b = start_bench(CameraConfig(enabled=True, capture_at_start=False, signing_key_hex=KEY.hex()))
+    try:
+        b.gcs.mav.command_long_send(1, 100, mav.MAV_CMD_VIDEO_START_CAPTURE, 0, 0, 0, 0, 0, 0, 0, 0)
+        with pytest.raises(AssertionError, match="no COMMAND_ACK"):
+            b.recv("COMMAND_ACK")
+        assert b.captures == []
+        assert b.counters.snapshot()["counters"]["camera_unsigned_rejected"] >= 1
+        b.gcs.setup_signing(KEY, sign_outgoing=True)
+        assert b.command(mav.MAV_CMD_VIDEO_START_CAPTURE).result == mav.MAV_RESULT_ACCEPTED
+        assert b.captures == [True]
+    finally:
+        b.camera.stop()
+        b.gcs.close()
+
+
+def test_signing_key_must_be_32_bytes() -> None:
+    with pytest.raises(ConfigError, match=r"camera\.signing_key_hex"):
+        start_bench(CameraConfig(enabled=True, signing_key_hex="abcd"))
+
+
+def test_capture_at_start_captures_from_the_start() -> None:
+    b = start_bench(CameraConfig(enabled=True))
+    try:
+        assert b.camera.capturing
+        assert b.recv("HEARTBEAT").system_status == mav.MAV_STATE_ACTIVE
+        assert b.command(mav.MAV_CMD_VIDEO_STOP_CAPTURE).result == mav.MAV_RESULT_ACCEPTED
+        assert b.captures == [False]
+    finally:
+        b.camera.stop()
+        b.gcs.close()
 
 
 def test_an_ins_dropout_is_announced_repeated_at_its_interval_and_cleared(bench: Bench) -> None:
