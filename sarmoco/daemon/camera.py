@@ -329,12 +329,12 @@ class CameraComponent:
             answer = {
                 mav.MAVLINK_MSG_ID_CAMERA_INFORMATION: self._information,
                 mav.MAVLINK_MSG_ID_CAMERA_CAPTURE_STATUS: self._capture_status,
-            }.get(round(msg.param1))
+            }.get(_whole(msg.param1))
         elif cmd == mav.MAV_CMD_REQUEST_CAMERA_INFORMATION:
             answer = self._information
         elif cmd == mav.MAV_CMD_REQUEST_CAMERA_CAPTURE_STATUS:
             answer = self._capture_status
-        elif cmd == mav.MAV_CMD_IMAGE_START_CAPTURE and round(msg.param3) == 1:
+        elif cmd == mav.MAV_CMD_IMAGE_START_CAPTURE and _whole(msg.param3) == 1:
             answer = None  # a single still (a distance trigger): a strip has no snapshot
         elif cmd in START or cmd in STOP:
             self._set_capture(cmd in START, sender)
@@ -373,6 +373,11 @@ def signing_key(text: str) -> bytes | None:
     if len(key) != 32:
         raise ConfigError("camera.signing_key_hex: not 64 hexadecimal digits (32 bytes)")
     return key
+
+
+def _whole(param: float) -> int | None:
+    """A command parameter as a whole number (None: NaN or infinite, as unused ones are)."""
+    return round(param) if math.isfinite(param) else None
 
 
 def _text32(text: str) -> list[int]:

@@ -206,11 +206,16 @@ def test_an_ins_dropout_is_announced_repeated_at_its_interval_and_cleared(bench:
     assert cleared.severity == mav.MAV_SEVERITY_INFO
 
 
-def test_garbage_on_the_link_is_counted_and_the_component_answers_on(bench: Bench) -> None:
+def test_garbage_and_nan_parameters_are_survived_and_the_component_answers_on(bench: Bench) -> None:
     camera_address = bench.camera._conn.port.getsockname()
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
         for junk in (b"\xfd\x09\x00\x00\x00\x01\x01" + bytes(30), b"\xfe" * 40, bytes(300)):
             tx.sendto(junk, camera_address)
+    nan, inf = math.nan, math.inf  # unused parameters are NaN; a hostile sender sends anything
+    assert bench.command(mav.MAV_CMD_REQUEST_MESSAGE, nan).result == mav.MAV_RESULT_UNSUPPORTED
+    assert bench.command(mav.MAV_CMD_IMAGE_START_CAPTURE, nan, nan, inf).result == (
+        mav.MAV_RESULT_ACCEPTED
+    )
     ack = bench.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_CAMERA_INFORMATION)
     assert ack.result == mav.MAV_RESULT_ACCEPTED
     assert bench.counters.snapshot()["counters"]["camera_bad_messages"] >= 1
