@@ -72,6 +72,8 @@ REALTIME: dict[str, tuple[str, ...]] = {
     "tests/app/test_bench.py": ("test_bench_prints_sane_figures_and_removes_its_folder",),
     # `sarmoco run` processes: SIGKILL at random moments, sd_notify watchdog, /status
     "tests/daemon/test_daemon_process.py": (),
+    # `sarmoco run` with its MAVLink camera component, driven by a pymavlink ground station
+    "tests/daemon/test_camera_daemon.py": (),
     # live runs over every link (run_loopback); the replay test reads their stores
     "tests/daemon/test_end_to_end.py": (),
     # daemons under faults: bus-off windows, full or frozen disks, the OOM killer and

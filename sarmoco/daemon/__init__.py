@@ -6,6 +6,7 @@
 __all__ = [
     "array_pipeline",
     "array_report",
+    "camera",
     "config",
     "echoring",
     "focuser",

@@ -508,6 +508,56 @@ class LimitsConfig:
 
 
 @dataclass(frozen=True)
+class CameraConfig:
+    """The radar as a MAVLink camera component (camera protocol v2) for the ground station."""
+
+    enabled: bool = _key(
+        False,
+        "Speak as a MAVLink camera component: HEARTBEAT, CAMERA_INFORMATION, capture "
+        "commands and STATUSTEXT for faults",
+    )
+    link: str = _key(
+        "udpout:127.0.0.1:14550",
+        "pymavlink connection string of the camera component's link (a mavlink-router or "
+        "autopilot endpoint that reaches the ground station)",
+    )
+    system_id: int = _key(1, "MAVLink system id of the camera component (the vehicle's)", ge=1,
+                          le=255)  # fmt: skip
+    component_id: int = _key(
+        100, "MAVLink component id of the camera component (100: MAV_COMP_ID_CAMERA)", ge=1,
+        le=255,
+    )  # fmt: skip
+    model: str = _key(
+        "", "Model name in CAMERA_INFORMATION; empty: 'SAR' with the carrier frequency"
+    )
+    command_system_ids: tuple[int, ...] = _key(
+        (255, 245, 1),
+        "MAVLink system ids whose commands are taken (255: QGroundControl, Mission Planner, "
+        "MAVProxy; 245: MAVSDK ground stations; 1: the autopilot); commands from others "
+        "are refused, counted and logged",
+    )
+    signing_key_hex: str = _key(
+        "",
+        "MAVLink 2 signing key of the camera link (64 hex digits); when set, unsigned and "
+        "badly signed packets are rejected (camera_unsigned_rejected) and the component "
+        "signs what it sends",
+    )
+    capture_at_start: bool = _key(
+        True,
+        "Capture from the start of the daemon to its stop (benches, vehicles without a "
+        "ground station); false: pulses are recorded only between start and stop capture "
+        "commands",
+    )
+    statustext_interval_s: float = _key(
+        10.0, "Interval between repeats of the STATUSTEXT of a fault that lasts", unit="s", gt=0
+    )
+    disk_low_fraction: float = _key(
+        0.05, "Free share of the store's file system below which the disk counts as nearly "
+        "full", gt=0, lt=1,
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
 class Config:
     """The whole daemon configuration."""
 
@@ -521,6 +571,7 @@ class Config:
     recorder: RecorderConfig = field(default_factory=RecorderConfig)
     status: StatusConfig = field(default_factory=StatusConfig)
     limits: LimitsConfig = field(default_factory=LimitsConfig)
+    camera: CameraConfig = field(default_factory=CameraConfig)
 
 
 def load_config(path: str | Path) -> Config:

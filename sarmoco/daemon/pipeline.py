@@ -321,7 +321,11 @@ class Pipeline:
     # -- readers --------------------------------------------------------------------------
 
     def read_radar(
-        self, source: PulseSource, timeout_s: float, max_pulses: int | None = None
+        self,
+        source: PulseSource,
+        timeout_s: float,
+        max_pulses: int | None = None,
+        capturing: Callable[[], bool] | None = None,
     ) -> int:
         """Decode the pulses ``source`` has within ``timeout_s`` into the ring; returns the count.
 
@@ -336,7 +340,9 @@ class Pipeline:
         :data:`TIME_JUMP_S` ahead of the INS and of the radar clock is not taken
         (counted in ``pulses_time_jump``, logged at most once a second): a forged or
         corrupted timestamp must not become the ring's newest time, which would make
-        every real pulse after it look late.
+        every real pulse after it look late. ``capturing`` (None: always) is asked as each
+        read returns: the pulses of a read that returns while it says False are let go,
+        counted in ``pulses_not_captured``.
         """
         n, limit = 0, math.inf if max_pulses is None else max_pulses
         while n < limit:
@@ -345,7 +351,12 @@ class Pipeline:
             rows = self._scratch[:want] if block is None else block.samples
             packets = source.read_into(rows, timeout_s if n == 0 else 0.0)
             n += len(packets)
-            if block is None:
+            if capturing is not None and not capturing():
+                self.counters.inc("pulses_not_captured", len(packets))
+                if block is not None:
+                    none = np.empty(0, np.int64)
+                    self.ring.commit_block(block, none, none, none, none)  # all given back
+            elif block is None:
                 self.ring.note_dropped(len(packets))
             else:
                 self._commit(block, packets)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime
 import logging
 import math
+import shutil
 import signal
 import sys
 import threading
@@ -15,6 +16,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import FrameType
 
+from sarmoco.daemon.camera import CameraComponent, Fault, operator_faults
 from sarmoco.daemon.config import Config, StatusConfig, config_to_dict, live_imaging
 from sarmoco.daemon.focuser import SinkFactory
 from sarmoco.daemon.links import open_ins, open_radar
@@ -225,6 +227,11 @@ class _LiveRun:
     The processing's numba kernels are compiled (or loaded from numba's cache) first,
     before the links open and READY=1 (:func:`~sarmoco.daemon.warmup.warm_up_kernels`).
 
+    With ``camera.enabled`` the MAVLink camera component (:mod:`sarmoco.daemon.camera`)
+    runs beside, and the ground station starts and stops the capture: outside a capture
+    the radar's pulses are read and let go (``pulses_not_captured``). The capture
+    intervals go to the store's ``captures`` attribute at the end of the run.
+
     Parameters
     ----------
     cfg : Config
@@ -268,6 +275,12 @@ class _LiveRun:
         self.counters.add_source("ins", ins.counters.snapshot)
         self.counters.add_source("cpu_seconds", stage_cpu_seconds)
         self.counters.inc("processing_busy_seconds", 0.0)
+        self.captures: list[dict[str, str | None]] = []
+        """Capture intervals (UTC ISO 8601 start and stop; stop None while capturing)."""
+        self.camera = self._start_camera() if cfg.camera.enabled else None
+        """The MAVLink camera component (None: ``camera.enabled`` off)."""
+        if self.camera is None or self.camera.capturing:
+            self._capture(True)
         self.threads = [
             self._reader(
                 "radar", lambda: open_radar(cfg, decoder=radar.decoder), radar, self._read_radar
@@ -288,6 +301,50 @@ class _LiveRun:
         port = self.status.port if self.status else 0
         print(f'{{"store": "{path}", "status_port": {port}}}', flush=True)
         self.notifier.ready(f"recording to {path}")
+
+    # -- the camera component ---------------------------------------------------------------
+
+    def _start_camera(self) -> CameraComponent:
+        """The MAVLink camera component on ``camera.link``, started."""
+        cam = self.cfg.camera
+        carrier_ghz = self.cfg.radar.carrier_hz / 1e9
+        return CameraComponent(
+            cam, cam.model or f"SAR {carrier_ghz:g} GHz", self._operator_faults,
+            self._free_bytes, self._capture, self.counters,
+        ).start()  # fmt: skip
+
+    def _disk_usage(self) -> tuple[int, int] | None:
+        """Free and total bytes of the store's file system (None: unknown)."""
+        try:
+            usage = shutil.disk_usage(self.path.parent)
+        except OSError:
+            return None
+        return usage.free, usage.total
+
+    def _free_bytes(self) -> int | None:
+        usage = self._disk_usage()
+        return None if usage is None else usage[0]
+
+    def _operator_faults(self) -> dict[str, Fault]:
+        """The faults the camera component announces (:func:`operator_faults`)."""
+        usage = self._disk_usage()
+        free = None if usage is None or not usage[1] else usage[0] / usage[1]
+        gauges = self.counters.snapshot()["gauges"]
+        low = self.cfg.camera.disk_low_fraction
+        return operator_faults(self.health.components(), gauges, free, low)
+
+    def _capture(self, on: bool) -> None:
+        """Open (``on``) or close a capture interval: pulses are recorded only within one."""
+        now = datetime.datetime.now(datetime.UTC).isoformat()
+        if on:
+            self.captures.append({"start_utc": now, "stop_utc": None})
+        elif self.captures and self.captures[-1]["stop_utc"] is None:
+            self.captures[-1]["stop_utc"] = now
+        log.info("capture started" if on else "capture stopped", extra={"store": str(self.path)})
+
+    def _capturing(self) -> bool:
+        """Whether pulses are recorded now (always without the camera component)."""
+        return self.camera is None or self.camera.capturing
 
     # -- reader threads ---------------------------------------------------------------------
 
@@ -314,7 +371,7 @@ class _LiveRun:
             if not limit:
                 self.st.stop.wait(POLL_S)
                 return 0
-        n = self.pipe.read_radar(link, POLL_S, limit)
+        n = self.pipe.read_radar(link, POLL_S, limit, capturing=self._capturing)
         if n:
             self.st.last_pulse_mono = time.monotonic()
             self.st.first_pulse_mono = self.st.first_pulse_mono or self.st.last_pulse_mono
@@ -588,8 +645,11 @@ class _LiveRun:
         self.st.stop.set()
         for t in [*self.threads, self.recording, self.monitor]:
             t.join(timeout=5.0)
+        if self.camera is not None:
+            self.camera.stop()
         try:
             summary = self.pipe.finish()
+            self.recorder.set_attribute("captures", {"intervals": self.captures})
         finally:  # a processing error in the last blocks must not leave the store open
             self.recorder.close()
             if self.status is not None:

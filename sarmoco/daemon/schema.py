@@ -13,7 +13,10 @@ dimension, plus a ``committed`` attribute counting the rows that are complete)::
     <run>.zarr/   attrs: sarmoco_store (layout version), created_utc, config, versions,
                          metrics, complete, reference_track, ins_raw (format of ins_bytes),
                          geodetic_origin (:func:`encode_geodetic_origin`: the tangent
-                         point of the NED frame of nav/pos_ned and motion/pos_ned)
+                         point of the NED frame of nav/pos_ned and motion/pos_ned),
+                         captures (live runs: ``intervals``, the capture intervals'
+                         ``start_utc`` and ``stop_utc``, ISO 8601; pulses outside them
+                         are not recorded)
       pulses/     t_ns, pulse_id (pulse) int64    transmit time GPS ns, running number
                   channel (pulse) int32, flags (pulse) uint32 (PulseFlag bits)
                   echo (pulse, sample[, iq])      raw echoes, int16 I/Q or complex64 (optional)

@@ -1,0 +1,386 @@
+"""The radar as a MAVLink camera component (camera protocol v2) for the ground station.
+
+On its own link (``camera.link``, a pymavlink connection string that reaches the ground
+station: a mavlink-router endpoint, or an autopilot port that routes MAVLink) the daemon
+appears as a component of type ``MAV_TYPE_CAMERA`` with the configured system and
+component ids (``camera.system_id``, ``camera.component_id``):
+
+- HEARTBEAT once a second; ``system_status`` says the state: ``MAV_STATE_ACTIVE`` while
+  capturing, ``MAV_STATE_STANDBY`` while idle, ``MAV_STATE_CRITICAL`` while a fault of
+  severity error or worse stands.
+- MAV_CMD_REQUEST_MESSAGE (and the older MAV_CMD_REQUEST_CAMERA_INFORMATION,
+  MAV_CMD_REQUEST_CAMERA_CAPTURE_STATUS) for CAMERA_INFORMATION (vendor ``sarmoco``,
+  ``camera.model``, capability flags: image and video capture) and
+  CAMERA_CAPTURE_STATUS, acknowledged with COMMAND_ACK.
+- MAV_CMD_IMAGE_START_CAPTURE / MAV_CMD_VIDEO_START_CAPTURE start the capture,
+  MAV_CMD_IMAGE_STOP_CAPTURE / MAV_CMD_VIDEO_STOP_CAPTURE stop it (the daemon keeps
+  running: outside a capture the live run lets the pulses go, see
+  :mod:`sarmoco.daemon.runner`). MAV_CMD_IMAGE_START_CAPTURE for a single image
+  (``param3`` = 1, what a distance trigger sends) is answered ``MAV_RESULT_UNSUPPORTED``:
+  a strip has no snapshot, and a capture it started would never be stopped.
+  Commands are taken only from ``camera.command_system_ids``; a refused one is
+  answered ``MAV_RESULT_DENIED``, counted (``camera_commands_refused``) and logged with
+  its sender. With ``camera.signing_key_hex`` only signed packets are taken (MAVLink 2
+  signing); the others are dropped unanswered and counted
+  (``camera_unsigned_rejected``). Other commands addressed to the component are answered
+  ``MAV_RESULT_UNSUPPORTED``.
+- STATUSTEXT for each fault the operator must act on (:func:`operator_faults`): when it
+  appears, again every ``camera.statustext_interval_s`` while it lasts, and once at
+  ``MAV_SEVERITY_INFO`` when it clears.
+
+Everything runs on one thread of its own (:meth:`CameraComponent.start`); a malformed
+or hostile message is counted (``camera_bad_messages``) and never ends it.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import threading
+import time
+from collections.abc import Callable, Mapping
+from typing import Any, NamedTuple
+
+os.environ.setdefault("MAVLINK20", "1")
+
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from sarmoco.daemon.config import CameraConfig
+from sarmoco.daemon.status import Counters
+from sarmoco.errors import ConfigError, DriverError
+
+log = logging.getLogger(__name__)
+
+VENDOR = "sarmoco"
+"""CAMERA_INFORMATION vendor name."""
+
+HEARTBEAT_PERIOD_S = 1.0
+"""Interval between HEARTBEATs and between looks at the faults, s."""
+
+POLL_S = 0.05
+"""Receive timeout of the component's loop, s."""
+
+RADAR_SILENT_S = 2.0
+"""The radar counts as silent when its last pulse is older than this (host clock), s."""
+
+FOCUS_BEHIND_S = 10.0
+"""Focusing counts as behind when it lags the recording by more than this, s."""
+
+STATUSTEXT_CHARS = 50
+"""Characters of one STATUSTEXT (longer texts are cut)."""
+
+CAPABILITIES = (
+    mav.CAMERA_CAP_FLAGS_CAPTURE_VIDEO
+    | mav.CAMERA_CAP_FLAGS_CAPTURE_IMAGE
+    | mav.CAMERA_CAP_FLAGS_HAS_MODES
+)
+"""CAMERA_INFORMATION capability flags: a strip is a video, a focused tile an image."""
+
+START = {mav.MAV_CMD_IMAGE_START_CAPTURE, mav.MAV_CMD_VIDEO_START_CAPTURE}
+STOP = {mav.MAV_CMD_IMAGE_STOP_CAPTURE, mav.MAV_CMD_VIDEO_STOP_CAPTURE}
+
+
+class Fault(NamedTuple):
+    """A fault the operator must act on."""
+
+    severity: int
+    """MAV_SEVERITY (0 emergency … 7 debug)."""
+    text: str
+    """What the ground station shows (at most :data:`STATUSTEXT_CHARS` characters)."""
+
+
+def operator_faults(
+    components: Mapping[str, Mapping[str, Any]],
+    gauges: Mapping[str, float],
+    disk_free_fraction: float | None,
+    disk_low_fraction: float,
+) -> dict[str, Fault]:
+    """The faults the operator must act on, by name, from the daemon's health and gauges.
+
+    Parameters
+    ----------
+    components : mapping
+        :meth:`~sarmoco.daemon.status.Health.components` (``ok`` and ``detail`` each).
+    gauges : mapping
+        The gauges of :meth:`~sarmoco.daemon.status.Counters.snapshot`:
+        ``ins_age_seconds``, ``radar_age_seconds``, ``focus_lag_seconds`` (s).
+    disk_free_fraction : float or None
+        Free share of the store's file system (None: unknown).
+    disk_low_fraction : float
+        Free share below which the disk is nearly full; below a fifth of it, full.
+
+    Returns
+    -------
+    dict of str to Fault
+        ``ins``, ``links``, ``radar``, ``disk``, ``processing``, ``behind``: those that stand.
+    """
+    out: dict[str, Fault] = {}
+    ins = components.get("ins")
+    if ins is not None and not ins["ok"]:
+        age = gauges.get("ins_age_seconds", math.inf)
+        text = "no INS data" if math.isinf(age) else f"INS stale, {age:.1f} s old"
+        out["ins"] = Fault(mav.MAV_SEVERITY_CRITICAL, f"SAR: {text}")
+    links = components.get("links")
+    if links is not None and not links["ok"]:
+        out["links"] = Fault(mav.MAV_SEVERITY_ERROR, f"SAR link down: {links['detail']}")
+    radar_age = gauges.get("radar_age_seconds", 0.0)
+    if math.isfinite(radar_age) and radar_age > RADAR_SILENT_S:
+        out["radar"] = Fault(mav.MAV_SEVERITY_ERROR, f"SAR: radar silent {radar_age:.0f} s")
+    if disk_free_fraction is not None and disk_free_fraction < disk_low_fraction:
+        full = disk_free_fraction < disk_low_fraction / 5
+        state = "full" if full else "nearly full"
+        out["disk"] = Fault(
+            mav.MAV_SEVERITY_CRITICAL if full else mav.MAV_SEVERITY_WARNING,
+            f"SAR: disk {state}, {100 * disk_free_fraction:.1f} % free",
+        )
+    processing = components.get("processing")
+    if processing is not None and not processing["ok"]:
+        out["processing"] = Fault(mav.MAV_SEVERITY_ERROR, f"SAR: {processing['detail']}")
+    lag = gauges.get("focus_lag_seconds", 0.0)
+    if math.isfinite(lag) and lag > FOCUS_BEHIND_S:
+        out["behind"] = Fault(mav.MAV_SEVERITY_WARNING, f"SAR: focusing {lag:.0f} s behind")
+    return {k: Fault(f.severity, f.text[:STATUSTEXT_CHARS]) for k, f in out.items()}
+
+
+class CameraComponent:
+    """The MAVLink camera component on ``cfg.link``.
+
+    Parameters
+    ----------
+    cfg : CameraConfig
+        The ``camera`` section.
+    model : str
+        CAMERA_INFORMATION model name (at most 32 bytes of UTF-8 are sent).
+    faults : callable
+        Returns the faults that stand now (:func:`operator_faults`); called once a second
+        on the component's thread.
+    free_bytes : callable
+        Free space for the store, bytes (None: unknown): CAMERA_CAPTURE_STATUS
+        ``available_capacity``.
+    on_capture : callable
+        Called with True when a start capture command is taken, False for a stop (on the
+        component's thread, before the command is acknowledged).
+    counters : Counters
+        Where ``camera_commands``, ``camera_commands_refused`` and ``camera_bad_messages``
+        are counted.
+
+    Raises
+    ------
+    DriverError
+        If the link cannot be opened.
+    """
+
+    def __init__(
+        self,
+        cfg: CameraConfig,
+        model: str,
+        faults: Callable[[], Mapping[str, Fault]],
+        free_bytes: Callable[[], int | None],
+        on_capture: Callable[[bool], None],
+        counters: Counters,
+    ) -> None:
+        self.cfg = cfg
+        self.model = model
+        self._faults = faults
+        self._free_bytes = free_bytes
+        self._on_capture = on_capture
+        self.counters = counters
+        self.capturing = cfg.capture_at_start
+        """Whether the component captures now."""
+        self._capture_since = time.monotonic()
+        self._boot = time.monotonic()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._standing: dict[str, Fault] = {}
+        self._sent_at: dict[str, float] = {}
+        for name in ("camera_commands", "camera_commands_refused", "camera_bad_messages"):
+            counters.inc(name, 0)
+        key = signing_key(cfg.signing_key_hex)  # before a socket is opened
+        try:
+            self._conn = mavutil.mavlink_connection(
+                cfg.link, source_system=cfg.system_id, source_component=cfg.component_id,
+                dialect="ardupilotmega",
+            )  # fmt: skip
+        except (OSError, ValueError) as exc:
+            raise DriverError(f"camera.link {cfg.link}: cannot open: {exc}") from exc
+        if key is not None:
+            self._conn.setup_signing(
+                key, sign_outgoing=True, allow_unsigned_callback=lambda _m, _id: False
+            )
+            signing = self._conn.mav.signing
+            counters.add_source("camera", lambda: {"unsigned_rejected": signing.reject_count})
+
+    # -- life -----------------------------------------------------------------------------
+
+    def start(self) -> CameraComponent:
+        """Start the component's thread; returns self."""
+        self._thread = threading.Thread(target=self._run, name="camera", daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        """Stop the thread and close the link."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+        try:
+            self._conn.close()
+        except OSError as exc:
+            log.debug("camera.link %s: close: %s", self.cfg.link, exc)
+
+    def _run(self) -> None:
+        next_beat = 0.0
+        while not self._stop.is_set():
+            now = time.monotonic()
+            try:
+                if now >= next_beat:
+                    next_beat = now + HEARTBEAT_PERIOD_S
+                    self._heartbeat()
+                    self._announce(now)
+                self._receive()
+            except OSError as exc:  # the link's socket or port went away: try again
+                log.warning("camera link error", extra={"link": self.cfg.link, "error": str(exc)})
+                self._stop.wait(HEARTBEAT_PERIOD_S)
+
+    def _receive(self) -> None:
+        """Handle what arrives within :data:`POLL_S`."""
+        try:
+            msg = self._conn.recv_match(blocking=True, timeout=POLL_S)
+        except ValueError:  # pymavlink choked on the bytes
+            self.counters.inc("camera_bad_messages")
+            return
+        while msg is not None:
+            kind = msg.get_type()
+            if kind == "BAD_DATA" or kind.startswith("UNKNOWN_"):
+                self.counters.inc("camera_bad_messages")
+            elif kind in ("COMMAND_LONG", "COMMAND_INT"):
+                self._command(msg)
+            try:
+                msg = self._conn.recv_match(blocking=False)
+            except ValueError:
+                self.counters.inc("camera_bad_messages")
+                return
+
+    # -- what the component sends ---------------------------------------------------------
+
+    def _boot_ms(self) -> int:
+        return round((time.monotonic() - self._boot) * 1000) & 0xFFFFFFFF
+
+    def _heartbeat(self) -> None:
+        if any(f.severity <= mav.MAV_SEVERITY_ERROR for f in self._standing.values()):
+            state = mav.MAV_STATE_CRITICAL
+        else:
+            state = mav.MAV_STATE_ACTIVE if self.capturing else mav.MAV_STATE_STANDBY
+        self._conn.mav.heartbeat_send(mav.MAV_TYPE_CAMERA, mav.MAV_AUTOPILOT_INVALID, 0, 0, state)
+
+    def _announce(self, now: float) -> None:
+        """STATUSTEXT for faults that appeared, repeats of those that last, and clearings."""
+        faults = dict(self._faults())
+        for name, fault in faults.items():
+            last = self._sent_at.get(name)
+            if last is None or now - last >= self.cfg.statustext_interval_s:
+                self._statustext(fault)
+                self._sent_at[name] = now
+        for name in set(self._standing) - set(faults):
+            self._statustext(Fault(mav.MAV_SEVERITY_INFO, f"cleared: {self._standing[name].text}"))
+            self._sent_at.pop(name, None)
+        self._standing = faults
+
+    def _statustext(self, fault: Fault) -> None:
+        log.info("statustext", extra={"severity": fault.severity, "text": fault.text})
+        self._conn.mav.statustext_send(fault.severity, fault.text[:STATUSTEXT_CHARS].encode())
+
+    def _information(self) -> None:
+        self._conn.mav.camera_information_send(
+            self._boot_ms(), _text32(VENDOR), _text32(self.model), 0, math.nan, math.nan,
+            math.nan, 0, 0, 0, CAPABILITIES, 0, b"",
+        )  # fmt: skip
+
+    def _capture_status(self) -> None:
+        on = int(self.capturing)
+        recording_ms = round((time.monotonic() - self._capture_since) * 1000) if on else 0
+        free = self._free_bytes()
+        self._conn.mav.camera_capture_status_send(
+            self._boot_ms(), on, on, 0.0, recording_ms & 0xFFFFFFFF,
+            math.nan if free is None else free / 2**20,
+        )  # fmt: skip
+
+    # -- commands -------------------------------------------------------------------------
+
+    def _command(self, msg: Any) -> None:
+        """Take, refuse or answer as unsupported one COMMAND_LONG or COMMAND_INT for us."""
+        if msg.target_system not in (0, self.cfg.system_id) or msg.target_component not in (
+            0,
+            self.cfg.component_id,
+        ):
+            return
+        cmd, sender = msg.command, (msg.get_srcSystem(), msg.get_srcComponent())
+        if sender[0] not in self.cfg.command_system_ids:
+            self.counters.inc("camera_commands_refused")
+            who = {"sender_system": sender[0], "sender_component": sender[1]}
+            log.warning("camera command refused", extra={"command": cmd, **who})
+            self._ack(cmd, mav.MAV_RESULT_DENIED, sender)
+            return
+        self.counters.inc("camera_commands")
+        answer: Callable[[], None] | None = None
+        if cmd == mav.MAV_CMD_REQUEST_MESSAGE:
+            answer = {
+                mav.MAVLINK_MSG_ID_CAMERA_INFORMATION: self._information,
+                mav.MAVLINK_MSG_ID_CAMERA_CAPTURE_STATUS: self._capture_status,
+            }.get(_whole(msg.param1))
+        elif cmd == mav.MAV_CMD_REQUEST_CAMERA_INFORMATION:
+            answer = self._information
+        elif cmd == mav.MAV_CMD_REQUEST_CAMERA_CAPTURE_STATUS:
+            answer = self._capture_status
+        elif cmd == mav.MAV_CMD_IMAGE_START_CAPTURE and _whole(msg.param3) == 1:
+            answer = None  # a single still (a distance trigger): a strip has no snapshot
+        elif cmd in START or cmd in STOP:
+            self._set_capture(cmd in START, sender)
+            answer = self._capture_status
+        result = mav.MAV_RESULT_UNSUPPORTED if answer is None else mav.MAV_RESULT_ACCEPTED
+        self._ack(cmd, result, sender)
+        if answer is not None:
+            answer()
+
+    def _set_capture(self, on: bool, sender: tuple[int, int]) -> None:
+        if on != self.capturing:
+            self._on_capture(on)
+            self.capturing = on
+            self._capture_since = time.monotonic()
+        log.info("camera capture", extra={"capturing": on, "sender_system": sender[0],
+                                          "sender_component": sender[1]})  # fmt: skip
+
+    def _ack(self, cmd: int, result: int, sender: tuple[int, int]) -> None:
+        self._conn.mav.command_ack_send(cmd, result, 0, 0, sender[0], sender[1])
+
+
+def signing_key(text: str) -> bytes | None:
+    """The 32-byte MAVLink 2 signing key of ``camera.signing_key_hex`` (None: empty).
+
+    Raises
+    ------
+    ConfigError
+        If the text is not 64 hexadecimal digits.
+    """
+    if not text:
+        return None
+    try:
+        key = bytes.fromhex(text)
+    except ValueError:
+        key = b""
+    if len(key) != 32:
+        raise ConfigError("camera.signing_key_hex: not 64 hexadecimal digits (32 bytes)")
+    return key
+
+
+def _whole(param: float) -> int | None:
+    """A command parameter as a whole number (None: NaN or infinite, as unused ones are)."""
+    return round(param) if math.isfinite(param) else None
+
+
+def _text32(text: str) -> list[int]:
+    """``text`` as a MAVLink ``uint8_t[32]`` (UTF-8, cut at 32 bytes, zero-padded)."""
+    raw = text.encode()[:32]
+    return [*raw, *bytes(32 - len(raw))]

@@ -1,0 +1,282 @@
+"""The MAVLink camera component against real ground-station clients on 127.0.0.1.
+
+A pymavlink connection (``udpin``, system 255, as QGroundControl or MAVProxy listens)
+plays the ground station: it discovers the component by its HEARTBEAT, requests
+CAMERA_INFORMATION and CAMERA_CAPTURE_STATUS, starts and stops capture, is refused
+from a system id that is not configured, and hears the STATUSTEXT of a fault set on the
+daemon's real :class:`~sarmoco.daemon.status.Health`. MAVSDK (its C++ core, through the
+``mavsdk`` package, when installed) discovers the component as a camera.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import socket
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import pytest
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from sarmoco.daemon.camera import CameraComponent, Fault, operator_faults
+from sarmoco.daemon.config import CameraConfig
+from sarmoco.daemon.status import Counters, Health
+from sarmoco.errors import ConfigError
+
+WAIT_S = 5.0
+"""Longest wait for one answer of the component, s."""
+
+
+def free_udp_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@dataclass
+class Bench:
+    """The component, its daemon-side state and a pymavlink ground station."""
+
+    camera: CameraComponent
+    gcs: Any
+    health: Health
+    counters: Counters
+    gauges: dict[str, float]
+    captures: list[bool] = field(default_factory=list)
+
+    def recv(self, kind: str, check: Callable[[Any], bool] = lambda m: True) -> Any:
+        """The next ``kind`` message from the component that passes ``check``."""
+        deadline = time.monotonic() + WAIT_S
+        while (left := deadline - time.monotonic()) > 0:
+            msg = self.gcs.recv_match(type=kind, blocking=True, timeout=left)
+            if msg is not None and msg.get_srcComponent() == self.camera.cfg.component_id:
+                if check(msg):
+                    return msg
+        raise AssertionError(f"no {kind} from the camera within {WAIT_S} s")
+
+    def command(self, cmd: int, *params: float) -> Any:
+        """Send COMMAND_LONG to the component; return its COMMAND_ACK."""
+        p = [*params, 0, 0, 0, 0, 0, 0, 0][:7]
+        cfg = self.camera.cfg
+        self.gcs.mav.command_long_send(cfg.system_id, cfg.component_id, cmd, 0, *p)
+        return self.recv("COMMAND_ACK", lambda m: m.command == cmd)
+
+
+def start_bench(cfg: CameraConfig) -> Bench:
+    port = free_udp_port()
+    gcs = mavutil.mavlink_connection(
+        f"udpin:127.0.0.1:{port}", source_system=255, source_component=190,
+        dialect="ardupilotmega",
+    )  # fmt: skip
+    health, counters, gauges = Health(), Counters(), {"ins_age_seconds": 0.1}
+    captures: list[bool] = []
+    camera = CameraComponent(
+        replace(cfg, link=f"udpout:127.0.0.1:{port}"), "SAR 15 GHz",
+        lambda: operator_faults(health.components(), gauges, 0.5, cfg.disk_low_fraction),
+        lambda: 2**30, captures.append, counters,
+    ).start()  # fmt: skip
+    b = Bench(camera, gcs, health, counters, gauges, captures)
+    b.recv("HEARTBEAT")  # a udpin ground station answers the address it heard from
+    return b
+
+
+@pytest.fixture
+def bench() -> Iterator[Bench]:
+    b = start_bench(CameraConfig(enabled=True, capture_at_start=False, statustext_interval_s=1.0))
+    yield b
+    b.camera.stop()
+    b.gcs.close()
+
+
+def test_ground_station_discovers_the_camera_and_reads_its_information(bench: Bench) -> None:
+    beat = bench.recv("HEARTBEAT")
+    assert beat.type == mav.MAV_TYPE_CAMERA
+    assert beat.autopilot == mav.MAV_AUTOPILOT_INVALID
+    assert beat.system_status == mav.MAV_STATE_STANDBY  # not capturing
+    assert beat.get_srcSystem() == 1
+    ack = bench.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_CAMERA_INFORMATION)
+    assert ack.result == mav.MAV_RESULT_ACCEPTED
+    assert (ack.target_system, ack.target_component) == (255, 190)
+    info = bench.recv("CAMERA_INFORMATION")
+    assert bytes(info.vendor_name).rstrip(b"\0") == b"sarmoco"
+    assert bytes(info.model_name).rstrip(b"\0") == b"SAR 15 GHz"
+    assert info.flags & mav.CAMERA_CAP_FLAGS_CAPTURE_VIDEO
+    assert info.flags & mav.CAMERA_CAP_FLAGS_CAPTURE_IMAGE
+    ack = bench.command(mav.MAV_CMD_DO_SET_ROI_NONE)
+    assert ack.result == mav.MAV_RESULT_UNSUPPORTED
+
+
+def test_a_single_image_trigger_is_unsupported_and_starts_nothing(bench: Bench) -> None:
+    ack = bench.command(mav.MAV_CMD_IMAGE_START_CAPTURE, 0, 0, 1)  # one image, as CAM_TRIGG_DIST
+    assert ack.result == mav.MAV_RESULT_UNSUPPORTED
+    assert bench.captures == [] and not bench.camera.capturing
+
+
+@pytest.mark.parametrize(
+    ("start", "stop"),
+    [
+        (mav.MAV_CMD_VIDEO_START_CAPTURE, mav.MAV_CMD_VIDEO_STOP_CAPTURE),
+        (mav.MAV_CMD_IMAGE_START_CAPTURE, mav.MAV_CMD_IMAGE_STOP_CAPTURE),
+    ],
+)
+def test_start_and_stop_capture(bench: Bench, start: int, stop: int) -> None:
+    ack = bench.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_CAMERA_CAPTURE_STATUS)
+    assert ack.result == mav.MAV_RESULT_ACCEPTED
+    assert bench.recv("CAMERA_CAPTURE_STATUS").video_status == 0
+    assert bench.command(start).result == mav.MAV_RESULT_ACCEPTED
+    assert bench.captures == [True]
+    status = bench.recv("CAMERA_CAPTURE_STATUS")
+    assert (status.video_status, status.image_status) == (1, 1)
+    assert status.available_capacity == pytest.approx(1024.0)  # MiB
+    assert bench.recv("HEARTBEAT").system_status == mav.MAV_STATE_ACTIVE
+    assert bench.command(stop).result == mav.MAV_RESULT_ACCEPTED
+    assert bench.captures == [True, False]
+    assert bench.recv("CAMERA_CAPTURE_STATUS").video_status == 0
+    assert bench.recv("HEARTBEAT").system_status == mav.MAV_STATE_STANDBY
+
+
+def test_commands_from_other_systems_are_refused_counted_and_logged(
+    bench: Bench, caplog: pytest.LogCaptureFixture
+) -> None:
+    bench.gcs.mav.srcSystem = 42  # a second ground station, not configured
+    with caplog.at_level(logging.WARNING, logger="sarmoco.daemon.camera"):
+        ack = bench.command(mav.MAV_CMD_VIDEO_START_CAPTURE)
+    assert ack.result == mav.MAV_RESULT_DENIED
+    assert bench.captures == []
+    assert not bench.camera.capturing
+    assert bench.counters.snapshot()["counters"]["camera_commands_refused"] == 1
+    refused = [r for r in caplog.records if r.getMessage() == "camera command refused"]
+    assert [r.__dict__["sender_system"] for r in refused] == [42]
+
+
+KEY = bytes(range(32))
+
+
+def test_with_a_signing_key_only_signed_commands_are_taken() -> None:
+    b = start_bench(CameraConfig(enabled=True, capture_at_start=False, signing_key_hex=KEY.hex()))
+    try:
+        b.gcs.mav.command_long_send(1, 100, mav.MAV_CMD_VIDEO_START_CAPTURE, 0, 0, 0, 0, 0, 0, 0, 0)
+        with pytest.raises(AssertionError, match="no COMMAND_ACK"):
+            b.recv("COMMAND_ACK")
+        assert b.captures == []
+        assert b.counters.snapshot()["counters"]["camera_unsigned_rejected"] >= 1
+        b.gcs.setup_signing(KEY, sign_outgoing=True)
+        assert b.command(mav.MAV_CMD_VIDEO_START_CAPTURE).result == mav.MAV_RESULT_ACCEPTED
+        assert b.captures == [True]
+    finally:
+        b.camera.stop()
+        b.gcs.close()
+
+
+def test_signing_key_must_be_32_bytes() -> None:
+    with pytest.raises(ConfigError, match=r"camera\.signing_key_hex"):
+        start_bench(CameraConfig(enabled=True, signing_key_hex="abcd"))
+
+
+def test_capture_at_start_captures_from_the_start() -> None:
+    b = start_bench(CameraConfig(enabled=True))
+    try:
+        assert b.camera.capturing
+        assert b.recv("HEARTBEAT").system_status == mav.MAV_STATE_ACTIVE
+        assert b.command(mav.MAV_CMD_VIDEO_STOP_CAPTURE).result == mav.MAV_RESULT_ACCEPTED
+        assert b.captures == [False]
+    finally:
+        b.camera.stop()
+        b.gcs.close()
+
+
+def test_an_ins_dropout_is_announced_repeated_at_its_interval_and_cleared(bench: Bench) -> None:
+    bench.health.set("ins", True)
+    bench.health.set("ins", False, "newest sample 3.00 s old")
+    bench.gauges["ins_age_seconds"] = 3.0
+    first = bench.recv("STATUSTEXT")
+    t_first = time.monotonic()
+    assert first.severity == mav.MAV_SEVERITY_CRITICAL
+    assert first.text == "SAR: INS stale, 3.0 s old"
+    assert bench.recv("HEARTBEAT").system_status == mav.MAV_STATE_CRITICAL
+    again = bench.recv("STATUSTEXT")
+    assert again.text == first.text
+    assert time.monotonic() - t_first > 0.8  # statustext_interval_s = 1, beats at 1 s
+    bench.health.set("ins", True)
+    cleared = bench.recv("STATUSTEXT", lambda m: m.text.startswith("cleared"))
+    assert cleared.severity == mav.MAV_SEVERITY_INFO
+
+
+def test_garbage_and_nan_parameters_are_survived_and_the_component_answers_on(bench: Bench) -> None:
+    camera_address = bench.camera._conn.port.getsockname()
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+        for junk in (b"\xfd\x09\x00\x00\x00\x01\x01" + bytes(30), b"\xfe" * 40, bytes(300)):
+            tx.sendto(junk, camera_address)
+    nan, inf = math.nan, math.inf  # unused parameters are NaN; a hostile sender sends anything
+    assert bench.command(mav.MAV_CMD_REQUEST_MESSAGE, nan).result == mav.MAV_RESULT_UNSUPPORTED
+    assert bench.command(mav.MAV_CMD_IMAGE_START_CAPTURE, nan, nan, inf).result == (
+        mav.MAV_RESULT_ACCEPTED
+    )
+    ack = bench.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_CAMERA_INFORMATION)
+    assert ack.result == mav.MAV_RESULT_ACCEPTED
+    assert bench.counters.snapshot()["counters"]["camera_bad_messages"] >= 1
+
+
+def test_operator_faults_name_each_fault_with_its_severity() -> None:
+    ok = {"ok": True, "detail": ""}
+    assert operator_faults({"ins": ok, "links": ok, "processing": ok}, {}, 0.5, 0.05) == {}
+    down = {
+        "ins": {"ok": False, "detail": ""},
+        "links": {"ok": False, "detail": "radar: peer closed the link"},
+        "processing": {"ok": False, "detail": "store write refused"},
+    }
+    gauges = {"ins_age_seconds": math.inf, "radar_age_seconds": 4.2, "focus_lag_seconds": 12.0}
+    faults = operator_faults(down, gauges, 0.004, 0.05)
+    assert faults == {
+        "ins": Fault(mav.MAV_SEVERITY_CRITICAL, "SAR: no INS data"),
+        "links": Fault(mav.MAV_SEVERITY_ERROR, "SAR link down: radar: peer closed the link"),
+        "radar": Fault(mav.MAV_SEVERITY_ERROR, "SAR: radar silent 4 s"),
+        "disk": Fault(mav.MAV_SEVERITY_CRITICAL, "SAR: disk full, 0.4 % free"),
+        "processing": Fault(mav.MAV_SEVERITY_ERROR, "SAR: store write refused"),
+        "behind": Fault(mav.MAV_SEVERITY_WARNING, "SAR: focusing 12 s behind"),
+    }
+    nearly = operator_faults({}, {"radar_age_seconds": math.inf}, 0.03, 0.05)
+    assert nearly == {"disk": Fault(mav.MAV_SEVERITY_WARNING, "SAR: disk nearly full, 3.0 % free")}
+
+
+def test_mavsdk_discovers_the_camera_and_starts_and_stops_video() -> None:
+    """MAVSDK's camera plugin (a ground station of system 245) finds the component by its
+    HEARTBEAT, reads CAMERA_INFORMATION, and its start/stop video commands are taken."""
+    from mavsdk import Configuration, Mavsdk
+    from mavsdk.component_type import ComponentType
+    from mavsdk.plugins.camera import Camera
+
+    port = free_udp_port()
+    sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    sdk.add_any_connection(f"udpin://127.0.0.1:{port}")
+    captures: list[bool] = []
+    cfg = CameraConfig(enabled=True, link=f"udpout:127.0.0.1:{port}", capture_at_start=False)
+    camera = CameraComponent(
+        cfg, "SAR 15 GHz", dict, lambda: None, captures.append, Counters()
+    ).start()
+    try:
+        deadline = time.monotonic() + WAIT_S
+        systems: list[Any] = []
+        while not systems and time.monotonic() < deadline:
+            systems = [s for s in sdk.get_systems() if s.has_camera()]
+            time.sleep(0.1)
+        assert systems, "MAVSDK found no camera"
+        plugin = Camera(systems[0])
+        cameras: list[Any] = []
+        while not cameras and time.monotonic() < deadline:
+            cameras = plugin.camera_list().cameras
+            time.sleep(0.1)
+        assert [(c.component_id, c.vendor_name, c.model_name) for c in cameras] == [
+            (100, "sarmoco", "SAR 15 GHz")
+        ]
+        plugin.start_video(100)
+        assert captures == [True]
+        plugin.stop_video(100)
+        assert captures == [True, False]
+    finally:
+        camera.stop()
+        sdk.destroy()

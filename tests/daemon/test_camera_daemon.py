@@ -1,0 +1,134 @@
+"""``sarmoco run`` with its MAVLink camera component, driven by a pymavlink ground station.
+
+The daemon runs with ``camera.capture_at_start`` off on UDP radar and MAVLink links; the
+test sends the simulator's pulses in three thirds and starts capture (VIDEO_START_CAPTURE)
+before the second and stops it (VIDEO_STOP_CAPTURE) after: the store holds exactly the
+pulses of the second third, and its ``captures`` attribute the one interval. Then INS
+frames arrive and stop: the ground station hears the "no INS data" fault cleared, then
+the INS dropout announced at MAV_SEVERITY_CRITICAL.
+"""
+
+from __future__ import annotations
+
+import datetime
+import json
+import socket
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pymavlink import mavutil
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from sarmoco.daemon.store import open_store
+from tests.daemon.test_daemon_process import (
+    N_PULSES,
+    Daemon,
+    SimFiles,
+    daemon_config,
+    free_port,
+    http_get,
+    mavlink_frames,
+    sim,  # noqa: F401 - the module's fixture
+    wait_status,
+)
+
+WAIT_S = 10.0
+"""Longest wait for one message of the component, s."""
+
+
+def recv(gcs: Any, kind: str, text: str = "") -> Any:
+    """The next ``kind`` message from the camera component (a STATUSTEXT starting ``text``)."""
+    deadline = time.monotonic() + WAIT_S
+    while (left := deadline - time.monotonic()) > 0:
+        msg = gcs.recv_match(type=kind, blocking=True, timeout=left)
+        if msg is not None and msg.get_srcComponent() == mav.MAV_COMP_ID_CAMERA:
+            if kind != "STATUSTEXT" or msg.text.startswith(text):
+                return msg
+    raise AssertionError(f"no {kind} {text!r} from the camera within {WAIT_S} s")
+
+
+def command(gcs: Any, cmd: int) -> int:
+    """Send a command to the camera component; return the result of its COMMAND_ACK."""
+    gcs.mav.command_long_send(1, mav.MAV_COMP_ID_CAMERA, cmd, 0, 0, 0, 0, 0, 0, 0, 0)
+    deadline = time.monotonic() + WAIT_S
+    while (left := deadline - time.monotonic()) > 0:
+        ack = gcs.recv_match(type="COMMAND_ACK", blocking=True, timeout=left)
+        if ack is not None and ack.command == cmd:
+            return int(ack.result)
+    raise AssertionError(f"command {cmd} not acknowledged")
+
+
+def wait_accounted(port: int) -> dict[str, float]:
+    """Poll /status until every pulse is recorded or let go (not captured); the counters."""
+    deadline = time.monotonic() + WAIT_S
+    while True:
+        counters: dict[str, float] = json.loads(http_get(port, "/status")[1])["counters"]
+        done = counters["pulses_not_captured"] + counters["pipeline_pulses_received"]
+        if done == N_PULSES:
+            return counters
+        assert time.monotonic() < deadline, counters
+        time.sleep(0.1)
+
+
+def send(tx: socket.socket, packets: list[bytes], port: int) -> None:
+    for k, packet in enumerate(packets):
+        tx.sendto(packet, ("127.0.0.1", port))
+        if k % 50 == 49:
+            time.sleep(0.01)  # bursts well within the socket buffer
+
+
+def test_ground_station_captures_a_strip_and_hears_an_ins_dropout(
+    sim: SimFiles,  # noqa: F811 - the imported fixture
+    tmp_path: Path,
+) -> None:
+    radar_port, ins_port, gcs_port = (free_port(socket.SOCK_DGRAM) for _ in range(3))
+    http_port = free_port(socket.SOCK_STREAM)
+    gcs = mavutil.mavlink_connection(
+        f"udpin:127.0.0.1:{gcs_port}", source_system=255, source_component=190,
+        dialect="ardupilotmega",
+    )  # fmt: skip
+    config = daemon_config(
+        sim, tmp_path / "camera.toml",
+        radar={"link": f"udp://127.0.0.1:{radar_port}"},
+        ins={"link": f"udpin:127.0.0.1:{ins_port}"},
+        status={"http_port": http_port},
+        camera={"enabled": True, "link": f"udpout:127.0.0.1:{gcs_port}",
+                "capture_at_start": False, "statustext_interval_s": 60.0},
+    )  # fmt: skip
+    d = Daemon(config, tmp_path / "camera.zarr")
+    thirds = [sim.packets[:300], sim.packets[300:700], sim.packets[700:]]
+    try:
+        d.started()
+        assert recv(gcs, "HEARTBEAT").type == mav.MAV_TYPE_CAMERA
+        assert recv(gcs, "STATUSTEXT", "SAR: no INS data").severity == mav.MAV_SEVERITY_CRITICAL
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            send(tx, thirds[0], radar_port)
+            before = wait_status(http_port, "counters", "radar_frames", 300)["counters"]
+            assert command(gcs, mav.MAV_CMD_VIDEO_START_CAPTURE) == mav.MAV_RESULT_ACCEPTED
+            send(tx, thirds[1], radar_port)
+            wait_status(http_port, "counters", "radar_frames", 700)  # read: in the ring
+            assert command(gcs, mav.MAV_CMD_VIDEO_STOP_CAPTURE) == mav.MAV_RESULT_ACCEPTED
+            send(tx, thirds[2], radar_port)
+            wait_status(http_port, "counters", "radar_frames", len(sim.packets))
+            after = wait_accounted(http_port)
+            for frame in mavlink_frames(sim.dir / "nav.tlog", 200):
+                tx.sendto(frame, ("127.0.0.1", ins_port))
+                time.sleep(0.002)
+        cleared = recv(gcs, "STATUSTEXT", "cleared: SAR: no INS data")
+        assert cleared.severity == mav.MAV_SEVERITY_INFO
+        dropout = recv(gcs, "STATUSTEXT", "SAR: INS stale")
+        assert dropout.severity == mav.MAV_SEVERITY_CRITICAL
+        assert d.stop() == 0
+    finally:
+        d.kill_if_running()
+        gcs.close()
+    skipped, kept = int(before["pulses_not_captured"]), int(after["pipeline_pulses_received"])
+    assert skipped > 250 and kept > 350  # the pulses of the first and second third
+    store = open_store(d.store)
+    assert store.committed("pulses") == kept
+    np.testing.assert_array_equal(store.read("pulses")["t_ns"], sim.t_ns[skipped : skipped + kept])
+    (interval,) = store.attrs["captures"]["intervals"]
+    start, stop = (datetime.datetime.fromisoformat(interval[k]) for k in ("start_utc", "stop_utc"))
+    assert start < stop
