@@ -84,8 +84,8 @@ import numpy as np
 import scipy.fft
 
 from sarmoco.app.demo import free_udp_port, read_json_line
-from sarmoco.app.simconfig import config_table, write_config
-from sarmoco.daemon.config import live_imaging, parse_config
+from sarmoco.app.simconfig import loopback_config, scenario_config
+from sarmoco.daemon.config import live_imaging
 from sarmoco.daemon.status import LIVE_PAGE_POLL_S
 from sarmoco.daemon.store import open_store
 from sarmoco.daemon.threadcpu import STAGES
@@ -326,6 +326,19 @@ def _fetch_status(port: int, path: str = "/status") -> dict[str, Any]:
     return status
 
 
+def _drain(daemon: subprocess.Popen[str], seen: Watch, n_pulses: int, out: Path) -> None:
+    """Wait while the daemon records what it still holds: until every one of ``n_pulses`` is
+    committed or none was for ``DRAIN_S``; a daemon that died raises :class:`SarmocoError`."""
+    while (
+        daemon.poll() is None
+        and seen.committed() < n_pulses
+        and time.monotonic() - seen.last_commit_mono < DRAIN_S
+    ):
+        time.sleep(0.1)
+    if daemon.poll() is not None:
+        raise SarmocoError(f"bench: the daemon died (status {daemon.returncode}), see {out}")
+
+
 def live_run(
     out: Path,
     preset: str,
@@ -362,16 +375,10 @@ def live_run(
     try:
         hello = read_json_line(sim, "the simulator", START_TIMEOUT_S)
         http_port = _http_port()
-        table = config_table(
-            scn,
-            radar={"link": hello["radar"]["connect"]},
-            ins={"protocol": "mavlink", "link": hello["ins"][0]["connect"]},
-            recorder={"directory": str(out)},
-            status={"http_port": http_port},
-        )
-        for name, values in sections.items():
-            table.setdefault(name, {}).update(values)
-        cfg_path = write_config(out / "sarmoco.toml", table)
+        cfg_path = loopback_config(
+            out, scn, hello["radar"]["connect"], ("mavlink", hello["ins"][0]["connect"]),
+            http_port, sections,
+        )  # fmt: skip
         with (out / "daemon.log").open("w") as err:
             daemon = subprocess.Popen(
                 [*PY, "run", "--config", str(cfg_path), "--store", str(store)],
@@ -386,14 +393,7 @@ def live_run(
         viewer.start()
         if sim.wait(timeout=duration_s + START_TIMEOUT_S) != 0:
             raise SarmocoError(f"bench: the simulator failed (status {sim.returncode})")
-        while (  # the daemon records what it still holds
-            daemon.poll() is None
-            and seen.committed() < n_pulses
-            and time.monotonic() - seen.last_commit_mono < DRAIN_S
-        ):
-            time.sleep(0.1)
-        if daemon.poll() is not None:
-            raise SarmocoError(f"bench: the daemon died (status {daemon.returncode}), see {out}")
+        _drain(daemon, seen, n_pulses, out)
         status = _fetch_status(http_port)
         live = _fetch_status(http_port, "/live.json")
         cpu_s = proc_cpu_s(daemon.pid) - cpu0
@@ -481,6 +481,37 @@ def figures(run: BenchRun, fft_s_per_pulse: float) -> dict[str, float]:
     }
 
 
+def pulse_figures(run: BenchRun) -> dict[str, Any]:
+    """The daemon's pulse and tile counters at the end of ``run``, its CPU and the live
+    page's rendering cost."""
+    c = run.counters
+    return {
+        "pulses_taken": int(c.get("pipeline_pulses_received", 0)),
+        "pulses_focused": int(c.get("pipeline_pulses_processed", 0)),
+        "pulses_focus_skipped": int(c.get("pipeline_pulses_focus_skipped", 0)),
+        "pulses_nav_flagged": int(c.get("pipeline_pulses_nav_flagged", 0)),
+        "pulses_dropped_ring": int(c.get("pipeline_pulses_dropped_ring", 0)),
+        "radar_link_drops": int(c.get("radar_drops", 0)),
+        "tiles": int(c.get("pipeline_tiles", 0)),
+        "processing_busy_s": c.get("processing_busy_seconds", 0.0),
+        "daemon_cpu_s": run.cpu_s,
+        "live_page_renders": int(run.live.get("png_renders", 0)),
+        "live_page_cpu_s": run.live.get("png_render_cpu_s", 0.0),
+        "cpu_realtime_ratio": c.get("pipeline_pulses_received", 0.0) / run.prf_hz / run.cpu_s
+        if run.cpu_s > 0
+        else float("nan"),
+    }
+
+
+def _check_arguments(preset: str, scale: float, duration_s: float) -> None:
+    if preset not in PRESETS:
+        raise ConfigError(f"bench --preset: {preset!r} is not one of {', '.join(PRESETS)}")
+    if not 0.0 < scale <= 1.0:
+        raise ConfigError(f"bench --scale: {scale!r} is not in (0, 1]")
+    if not duration_s > 0.0:
+        raise ConfigError(f"bench --duration: {duration_s!r} s is not > 0")
+
+
 def bench(
     preset: str,
     duration_s: float,
@@ -524,12 +555,7 @@ def bench(
     ConfigError
         For an unknown preset, a scale outside (0, 1] or a duration not > 0.
     """
-    if preset not in PRESETS:
-        raise ConfigError(f"bench --preset: {preset!r} is not one of {', '.join(PRESETS)}")
-    if not 0.0 < scale <= 1.0:
-        raise ConfigError(f"bench --scale: {scale!r} is not in (0, 1]")
-    if not duration_s > 0.0:
-        raise ConfigError(f"bench --duration: {duration_s!r} s is not > 0")
+    _check_arguments(preset, scale, duration_s)
     if work is not None:
         work.mkdir(parents=True, exist_ok=True)
     out = Path(tempfile.mkdtemp(prefix=f"sarmoco-bench-{preset}-", dir=work))
@@ -548,35 +574,21 @@ def bench(
     finally:
         if not keep:
             shutil.rmtree(out, ignore_errors=True)
-    c = run.counters
     return (
         figures(run, fft_s)
         | stage_figures(run)
+        | pulse_figures(run)
         | {
             "preset": preset,
             "scale": scale,
             "duration_s": run.duration_s,
             "pulses_sent": run.pulses_sent,
             "pulses_recorded": int(run.t_ns.size),
-            "pulses_taken": int(c.get("pipeline_pulses_received", 0)),
-            "pulses_focused": int(c.get("pipeline_pulses_processed", 0)),
-            "pulses_focus_skipped": int(c.get("pipeline_pulses_focus_skipped", 0)),
-            "pulses_nav_flagged": int(c.get("pipeline_pulses_nav_flagged", 0)),
-            "pulses_dropped_ring": int(c.get("pipeline_pulses_dropped_ring", 0)),
-            "radar_link_drops": int(c.get("radar_drops", 0)),
-            "tiles": int(c.get("pipeline_tiles", 0)),
-            "processing_busy_s": c.get("processing_busy_seconds", 0.0),
-            "daemon_cpu_s": run.cpu_s,
-            "live_page_renders": int(run.live.get("png_renders", 0)),
-            "live_page_cpu_s": run.live.get("png_render_cpu_s", 0.0),
-            "cpu_realtime_ratio": c.get("pipeline_pulses_received", 0.0) / run.prf_hz / run.cpu_s
-            if run.cpu_s > 0
-            else float("nan"),
             "fft_cpu_s_per_pulse": fft_s,
             "record_raw_echoes": record,
             "presum_first": presum_first,
             "method": live_imaging(
-                parse_config(config_table(load_preset(preset, scale), **sections))
+                scenario_config(load_preset(preset, scale), **sections)
             ).imaging.method,
             "live_image_level": run.status.get("gauges", {}).get("live_image_level"),
             "bytes_written": written,

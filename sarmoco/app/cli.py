@@ -271,6 +271,34 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     return 0
 
 
+def _add_config_verb(sub: Any) -> None:
+    """``sarmoco config check`` and ``sarmoco config keys``."""
+    cfg = sub.add_parser("config", help="check a configuration file or list every key")
+    cfg_sub = cfg.add_subparsers(dest="config_command", required=True, metavar="ACTION")
+    check = cfg_sub.add_parser("check", help="load and validate a TOML configuration")
+    check.add_argument("file", help="TOML configuration file")
+    check.set_defaults(func=_cmd_config_check)
+    keys = cfg_sub.add_parser("keys", help="print every key as a Markdown table")
+    keys.set_defaults(func=_cmd_config_keys)
+
+
+def _add_store_verbs(sub: Any) -> None:
+    """``sarmoco report`` and ``sarmoco verify``: what is read from a store."""
+    report = sub.add_parser("report", help="quicklook PNGs and metrics of a store")
+    report.add_argument("store", help="a run or replay store")
+    report.add_argument("--out", help="output folder (default: STORE with suffix .report)")
+    report.add_argument("--truth", help="array run: truth.json of the simulated run (DEM stats)")
+    report.add_argument("--json", action="store_true", help="print the summary as one JSON")
+    report.set_defaults(func=_cmd_report)
+
+    verify = sub.add_parser(
+        "verify",
+        help="read every chunk of a store and check its checksum; exit 1 when any is damaged",
+    )
+    verify.add_argument("store", help="a run or replay store")
+    verify.set_defaults(func=_cmd_verify)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """Build the argument parser with every subcommand."""
     parser = argparse.ArgumentParser(
@@ -282,14 +310,7 @@ def build_parser() -> argparse.ArgumentParser:
         dest="command", required=True, metavar="COMMAND", parser_class=VerbParser
     )
 
-    cfg = sub.add_parser("config", help="check a configuration file or list every key")
-    cfg_sub = cfg.add_subparsers(dest="config_command", required=True, metavar="ACTION")
-    check = cfg_sub.add_parser("check", help="load and validate a TOML configuration")
-    check.add_argument("file", help="TOML configuration file")
-    check.set_defaults(func=_cmd_config_check)
-    keys = cfg_sub.add_parser("keys", help="print every key as a Markdown table")
-    keys.set_defaults(func=_cmd_config_keys)
-
+    _add_config_verb(sub)
     run = sub.add_parser("run", help="the live daemon: read INS and radar, focus, record")
     run.add_argument("--config", required=True, help="TOML configuration file")
     run.add_argument("--store", help="store to create (default: a new one in recorder.directory)")
@@ -329,19 +350,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     import_cphd.set_defaults(func=_cmd_import_cphd)
 
-    report = sub.add_parser("report", help="quicklook PNGs and metrics of a store")
-    report.add_argument("store", help="a run or replay store")
-    report.add_argument("--out", help="output folder (default: STORE with suffix .report)")
-    report.add_argument("--truth", help="array run: truth.json of the simulated run (DEM stats)")
-    report.add_argument("--json", action="store_true", help="print the summary as one JSON")
-    report.set_defaults(func=_cmd_report)
-
-    verify = sub.add_parser(
-        "verify",
-        help="read every chunk of a store and check its checksum; exit 1 when any is damaged",
-    )
-    verify.add_argument("store", help="a run or replay store")
-    verify.set_defaults(func=_cmd_verify)
+    _add_store_verbs(sub)
 
     sim = sub.add_parser(
         "sim",

@@ -22,12 +22,11 @@ from typing import Any
 import numpy as np
 
 from sarmoco.app.simcommand import platform_arguments, scenario_overrides
-from sarmoco.app.simconfig import config_table, write_config
+from sarmoco.app.simconfig import loopback_config
 from sarmoco.daemon.report import write_report
 from sarmoco.errors import SarmocoError
 from sarmoco.sim.extended import load_scene
 from sarmoco.sim.insemitters import INS_EMITTERS
-from sarmoco.sim.scenario import Scenario
 
 PRESET = "ku-vehicle"
 DAEMON_START_S = 60.0
@@ -74,22 +73,18 @@ def _connect_link(info: dict[str, Any] | str) -> str:
     return f"{info['interface']}:{info['channel']}"
 
 
-def _daemon_config(
-    out: Path, scn: Scenario, hello: dict[str, Any], ins: str, sections: dict[str, Any]
-) -> Path:
-    """Write ``out/sarmoco.toml``: the scenario's radar, the links the simulator announced in
-    ``hello``, the store under ``out``, the status server on any free port, plus
-    ``sections`` (extra keys per section)."""
-    table = config_table(
-        scn,
-        radar={"link": hello["radar"]["connect"]},
-        ins={"protocol": ins, "link": _connect_link(hello["ins"][0]["connect"])},
-        recorder={"directory": str(out)},
-        status={"http_port": 0},
-    )
-    for name, values in sections.items():
-        table.setdefault(name, {}).update(values)
-    return write_config(out / "sarmoco.toml", table)
+def _wait_for_both(sim: subprocess.Popen[str], daemon: subprocess.Popen[str]) -> None:
+    """Wait for the simulator to finish, then for the daemon to stop when idle (SIGTERM after
+    ``DRAIN_TIMEOUT_S``); either failing raises :class:`SarmocoError`."""
+    if sim.wait(timeout=SIM_TIMEOUT_S) != 0:
+        raise SarmocoError(f"demo: the simulator failed (status {sim.returncode})")
+    try:
+        status = daemon.wait(timeout=DRAIN_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        daemon.send_signal(signal.SIGTERM)
+        status = daemon.wait(timeout=120)
+    if status != 0:
+        raise SarmocoError(f"demo: the daemon stopped with status {status}")
 
 
 def run_loopback(
@@ -160,22 +155,17 @@ def run_loopback(
     scn = load_scene(scene, PRESET, scale, **scenario_overrides(platform_arguments(platform)))
     try:
         hello = read_json_line(sim, "the simulator", DAEMON_START_S)
-        cfg_path = _daemon_config(out, scn, hello, ins, sections)
+        cfg_path = loopback_config(
+            out, scn, hello["radar"]["connect"], (ins, _connect_link(hello["ins"][0]["connect"])),
+            0, sections,
+        )  # fmt: skip
         daemon = subprocess.Popen(
             [*py, "run", "--config", str(cfg_path), "--store", str(out / "run.zarr"),
              "--exit-when-idle", str(IDLE_EXIT_S)],
             stdout=subprocess.PIPE, text=True, env={**os.environ, **(daemon_env or {})},
         )  # fmt: skip
         read_json_line(daemon, "the daemon", DAEMON_START_S)
-        if sim.wait(timeout=SIM_TIMEOUT_S) != 0:
-            raise SarmocoError(f"demo: the simulator failed (status {sim.returncode})")
-        try:
-            status = daemon.wait(timeout=DRAIN_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            daemon.send_signal(signal.SIGTERM)
-            status = daemon.wait(timeout=120)
-        if status != 0:
-            raise SarmocoError(f"demo: the daemon stopped with status {status}")
+        _wait_for_both(sim, daemon)
     finally:
         for proc in (sim, daemon):
             if proc is not None and proc.poll() is None:

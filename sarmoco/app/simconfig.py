@@ -109,3 +109,40 @@ def write_config(path: Path, table: dict[str, Any]) -> Path:
         + tomli_w.dumps(written)
     )
     return path
+
+
+def loopback_config(
+    out: Path,
+    scn: Scenario,
+    radar_link: str,
+    ins: tuple[str, str],
+    http_port: int,
+    sections: dict[str, dict[str, Any]],
+) -> Path:
+    """Write ``out/sarmoco.toml`` for a daemon fed by a serving simulator on loopback.
+
+    Parameters
+    ----------
+    out : Path
+        Folder of the configuration and of the daemon's stores (``recorder.directory``).
+    scn : Scenario
+        The simulated scenario (radar, geometry, autofocus keys: :func:`config_table`).
+    radar_link : str
+        ``radar.link`` the simulator announced.
+    ins : tuple of str
+        ``ins.protocol`` and ``ins.link``.
+    http_port : int
+        ``status.http_port`` (0: any free port).
+    sections : dict
+        Extra keys per section, over the above.
+    """
+    table = config_table(
+        scn,
+        radar={"link": radar_link},
+        ins={"protocol": ins[0], "link": ins[1]},
+        recorder={"directory": str(out)},
+        status={"http_port": http_port},
+    )
+    for name, values in sections.items():
+        table.setdefault(name, {}).update(values)
+    return write_config(out / "sarmoco.toml", table)
