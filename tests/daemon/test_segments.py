@@ -21,7 +21,7 @@ import pytest
 
 from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.flags import PulseFlag
-from sarmoco.daemon.focuser import Focuser
+from sarmoco.daemon.focuser import Focuser, segment_limits
 from sarmoco.daemon.report import bright_points, strip
 from sarmoco.daemon.store import open_store
 from sarmoco.processing.geometry import ReferenceTrack
@@ -158,7 +158,12 @@ def test_the_store_flags_the_turn_and_names_each_tiles_track(tmp_path: Path) -> 
     turn = (pulses["flags"] & PulseFlag.TURN) != 0
     pattern = SurveyPattern.of(run.scenario, spec)
     t = (pulses["t_ns"] - run.t_ns[0]) * 1e-9
-    assert turn[(t > pattern.leg_s + 1.0) & (t < pattern.leg_s + pattern.turn_s)].all()
+    # a turn at rate w from t = 0 moves the window mean over the last W against the one
+    # before by w t^2 / (2 W) (t <= W): it crosses the beamwidth at sqrt(2 W beam / w)
+    limits = segment_limits(cfg, run.scenario.speed_mps)
+    onset_s = math.sqrt(2.0 * limits.window_s * limits.turn_rad / pattern.turn_rate_rps)
+    assert onset_s < 1.5
+    assert turn[(t > pattern.leg_s + onset_s + 0.1) & (t < pattern.leg_s + pattern.turn_s)].all()
     assert not turn[t < pattern.leg_s].any()
     assert not turn[t > pattern.leg_s + pattern.turn_s + 2 * 2.6].any()
     motion = store.read("motion", ["t_ns", "d_los_m"])
