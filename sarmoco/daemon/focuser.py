@@ -514,11 +514,7 @@ class _Beam:
         edges = layout.ground_range_m + np.array([-0.5, 0.5]) * layout.swath_m
         self._swath_look_rad = np.arctan2(edges, layout.height_m)
         self._scene_look_rad = float(look_angle(geo.center_slant_range_m, geo.height_m))
-        self._ref_look_rad = (
-            self._scene_look_rad
-            if geo.antenna_depression_deg is None
-            else math.radians(90.0 - geo.antenna_depression_deg)
-        )
+        self._ref_look_rad = reference_look_rad(cfg)
         self._speed_mps, self._wavelength_m = track.v0_mps, radar.wavelength_m
         self.axis = np.array([1.0, 0.0, 0.0])
         """Array axis of the latest block in the imaging frame (broadside: along track)."""
@@ -631,6 +627,16 @@ class _Beam:
         """The centroids recorded since the last call."""
         out, self.centroids = self.centroids, []
         return out
+
+
+def reference_look_rad(cfg: Config) -> float:
+    """Look angle from the vertical at which the store's beam-centre squint and attitude
+    Doppler centroid are given, rad: ``90° - geometry.antenna_depression_deg``, else the
+    scene centre's."""
+    geo = cfg.geometry
+    if geo.antenna_depression_deg is None:
+        return float(look_angle(geo.center_slant_range_m, geo.height_m))
+    return math.radians(90.0 - geo.antenna_depression_deg)
 
 
 def imaged_beam_rad(cfg: Config) -> float:
