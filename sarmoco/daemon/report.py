@@ -226,9 +226,7 @@ def _brightest_window(store: RunStore, half_m: tuple[float, float]) -> tuple[Ima
     return window, _track(attrs["reference_track"])
 
 
-def beam_squint_rad(
-    store: RunStore, track: ReferenceTrack, cfg: Config, look_rad: float
-) -> float:
+def beam_squint_rad(store: RunStore, track: ReferenceTrack, cfg: Config, look_rad: float) -> float:
     """Squint of a segment's beam centre at the look angle ``look_rad`` (rad, from the
     vertical), rad (positive: ahead along the track; 0 for a store without a ``doppler``
     table).
