@@ -138,7 +138,7 @@ def bright_points(image: Image, n: int = BRIGHT_POINTS) -> list[dict[str, float]
         taken.append((x, y))
         sub = Image(image.data[rows, cols], image.axis0_m[rows], image.axis1_m[cols], image.frame)
         try:
-            m = point_target_metrics(sub)
+            m = point_target_metrics(sub, through_peak=True)
         except ProcessingError:
             continue
         found.append(
@@ -387,7 +387,7 @@ def write_comparison(
             "peak_db": float(20 * np.log10(np.abs(im.data).max() / top))
         }
         try:
-            m = point_target_metrics(im)
+            m = point_target_metrics(im, through_peak=True)
             entry.update(pslr_az_db=m.axis0.pslr_db, irw_az_m=m.axis0.irw_m,
                          pslr_rg_db=m.axis1.pslr_db, irw_rg_m=m.axis1.irw_m)  # fmt: skip
         except ProcessingError:
