@@ -31,7 +31,7 @@ import numpy.typing as npt
 
 from sarmoco.daemon.config import Config, parse_config
 from sarmoco.daemon.echoring import to_complex64
-from sarmoco.daemon.focuser import imaged_beam_rad, radar_params
+from sarmoco.daemon.focuser import imaged_beam_rad, radar_params, reference_look_rad
 from sarmoco.daemon.geotiff import write_geotiffs
 from sarmoco.daemon.quicklook import (
     plot_cuts,
@@ -137,7 +137,7 @@ def bright_points(image: Image, n: int = BRIGHT_POINTS) -> list[dict[str, float]
         taken.append((x, y))
         sub = Image(image.data[rows, cols], image.axis0_m[rows], image.axis1_m[cols], image.frame)
         try:
-            m = point_target_metrics(sub)
+            m = point_target_metrics(sub, through_peak=True)
         except ProcessingError:
             continue
         found.append(
@@ -224,6 +224,34 @@ def _brightest_window(store: RunStore, half_m: tuple[float, float]) -> tuple[Ima
     return window, _track(attrs["reference_track"])
 
 
+def beam_squint_rad(store: RunStore, track: ReferenceTrack, cfg: Config, look_rad: float) -> float:
+    """Squint of a segment's beam centre at the look angle ``look_rad`` (rad, from the
+    vertical), rad (positive: ahead along the track; 0 for a store without a ``doppler``
+    table).
+
+    The median over the segment's processing blocks (from ``track.t0_ns`` on) of the
+    attitude's beam-centre squint (``doppler/squint_rad``, at the antenna's reference look
+    angle, :func:`~sarmoco.daemon.focuser.reference_look_rad`), carried to
+    ``look_rad``: the ground squint of a cone about a level array axis turned by a crab
+    ``c`` is ``asin(sin β tan c)`` (:mod:`sarmoco.processing.beam`), so its sine scales with
+    ``sin β``.
+    """
+    try:
+        d = store.read("doppler", ["t_ns", "squint_rad"])
+    except RecorderError:
+        return 0.0
+    rows = d["t_ns"] >= track.t0_ns
+    if not rows.any():
+        rows = d["t_ns"] == d["t_ns"].max()
+    squint = np.asarray(d["squint_rad"])[rows]
+    squint = squint[np.isfinite(squint)]
+    if squint.size == 0:
+        return 0.0
+    ref = reference_look_rad(cfg)
+    sine = math.sin(float(np.median(squint))) * math.sin(look_rad) / math.sin(ref)
+    return math.asin(max(-1.0, min(1.0, sine)))
+
+
 def focus_comparison(
     store: RunStore, half_m: tuple[float, float] = (COMPARE_HALF_M, COMPARE_HALF_M)
 ) -> tuple[dict[str, Image], int]:
@@ -235,8 +263,9 @@ def focus_comparison(
     NED m/s, integrated by the trapezoid rule in the imaging frame from the segment's
     first pulse, as the daemon's LOS compensation does for ΔY, ΔZ) put it. INS + autofocus:
     the recorded tile. Only the pulses whose beam (``imaging.azimuth_beamwidth_deg`` plus
-    the squint tolerance) covers the window are used, every k-th (``COMPARE_OVERSAMPLING``),
-    and a pixel takes a pulse only within that beam, as in the daemon.
+    the squint tolerance, about the squint of the segment's beam centre, :func:`beam_squint_rad`)
+    covers the window are used, every k-th (``COMPARE_OVERSAMPLING``), and a pixel takes a
+    pulse only within that beam, as in the daemon.
     The two re-focused windows are scaled to the recorded one's energy, so that on one dB
     scale a defocused target shows as a lower, wider peak.
 
@@ -275,10 +304,13 @@ def focus_comparison(
     # pulses whose beam sees the window, every k-th
     beam = imaged_beam_rad(cfg)
     y_c = float(np.mean(window.axis1_m))
-    half_aperture = math.hypot(y_c, cfg.geometry.height_m) * math.tan(beam / 2.0)
+    rho = math.hypot(y_c, cfg.geometry.height_m)
+    centre = beam_squint_rad(store, track, cfg, math.atan2(y_c, cfg.geometry.height_m))
+    squint = (centre - beam / 2.0, centre + beam / 2.0)
     x_lo, x_hi = float(window.axis0_m[0]), float(window.axis0_m[-1])
     near = np.flatnonzero(
-        (nominal[:, 0] >= x_lo - half_aperture) & (nominal[:, 0] <= x_hi + half_aperture)
+        (nominal[:, 0] >= x_lo - rho * math.tan(squint[1]))
+        & (nominal[:, 0] <= x_hi - rho * math.tan(squint[0]))
     )
     if near.size < 4:
         raise RecorderError(f"{store.path}: no recorded pulse sees the brightest target")
@@ -302,7 +334,10 @@ def focus_comparison(
     lines = RangeLines.upsample(rc, range_m, DEFAULT_UPSAMPLE)
     for name, apc in zip(PANELS[:2], (nominal[near], ins[near]), strict=True):
         data = np.zeros((window.axis0_m.size, window.axis1_m.size), dtype=np.complex64)
-        backproject_into(data, lines, apc, radar.wavelength_m, grid, beam_half_angle_rad=beam / 2)
+        backproject_into(
+            data, lines, apc, radar.wavelength_m, grid,
+            beam_squint_rad=np.tile(squint, (apc.shape[0], 1)),
+        )  # fmt: skip
         scale = math.sqrt(energy / max(float(np.sum(np.abs(data) ** 2)), 1e-30))
         panels[name] = Image(data * scale, window.axis0_m, window.axis1_m, window.frame)
     panels[PANELS[2]] = window
@@ -355,7 +390,7 @@ def write_comparison(
             "peak_db": float(20 * np.log10(np.abs(im.data).max() / top))
         }
         try:
-            m = point_target_metrics(im)
+            m = point_target_metrics(im, through_peak=True)
             entry.update(pslr_az_db=m.axis0.pslr_db, irw_az_m=m.axis0.irw_m,
                          pslr_rg_db=m.axis1.pslr_db, irw_rg_m=m.axis1.irw_m)  # fmt: skip
         except ProcessingError:

@@ -7,13 +7,14 @@ segments, each with its own straight track (from the INS velocity where it start
 and its own D_los starting at 0:
 
 - **Turn**: the heading of the INS velocity, averaged over the last ``window_s``
-  (a synthetic aperture), changed by more than ``turn_rad`` (half the azimuth beam)
-  against the same average one window earlier. A target's aperture then spans a
-  heading change that sweeps the beam by half its width: the pulse is flagged and not
-  imaged. Averaging over an aperture keeps turbulence (cross-track velocity wander of
-  a few tenths of m/s, i.e. about 1° of instantaneous ground-track heading at 17 m/s)
-  from being taken for a turn, while a coordinated turn (about 12°/s in the real
-  ArduPilot log) crosses the limit within a fraction of a second. The test needs the
+  (a synthetic aperture), changed by more than ``turn_rad`` (the daemon takes the azimuth
+  beamwidth) against the same average one window earlier. A target's aperture then
+  spans a heading change that sweeps the beam across its width: the pulse is flagged and
+  not imaged. Averaging over an aperture keeps turbulence (cross-track velocity wander of
+  a few tenths of m/s, i.e. about 1° of instantaneous ground-track heading at 17 m/s;
+  up to 1.35° between consecutive 1.7 s averages in a real ArduPilot flight) from being
+  taken for a turn, while a coordinated turn (about 12°/s in the real ArduPilot log)
+  crosses the limit within about a second. The test needs the
   window one earlier to be whole (the first ``2 window_s`` of a run are never a turn):
   at the start it held fewer pulses, down to the first pulse's heading alone: on
   ku-vehicle x0.1 with turbulence seed 3 the mean heading of 0-1.01 s (-16.0 mrad)

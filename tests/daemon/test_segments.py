@@ -21,12 +21,13 @@ import pytest
 
 from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.flags import PulseFlag
-from sarmoco.daemon.focuser import Focuser
+from sarmoco.daemon.focuser import Focuser, segment_limits
 from sarmoco.daemon.report import bright_points, strip
 from sarmoco.daemon.store import open_store
 from sarmoco.processing.geometry import ReferenceTrack
 from sarmoco.processing.imaging.tiles import Tile
 from sarmoco.processing.metrics import point_target_metrics
+from sarmoco.processing.segments import Segmenter
 from sarmoco.processing.types import Image
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
@@ -158,7 +159,12 @@ def test_the_store_flags_the_turn_and_names_each_tiles_track(tmp_path: Path) -> 
     turn = (pulses["flags"] & PulseFlag.TURN) != 0
     pattern = SurveyPattern.of(run.scenario, spec)
     t = (pulses["t_ns"] - run.t_ns[0]) * 1e-9
-    assert turn[(t > pattern.leg_s + 1.0) & (t < pattern.leg_s + pattern.turn_s)].all()
+    # a turn at rate w from t = 0 moves the window mean over the last W against the one
+    # before by w t^2 / (2 W) (t <= W): it crosses the beamwidth at sqrt(2 W beam / w)
+    limits = segment_limits(cfg, run.scenario.speed_mps)
+    onset_s = math.sqrt(2.0 * limits.window_s * limits.turn_rad / pattern.turn_rate_rps)
+    assert onset_s < 1.5
+    assert turn[(t > pattern.leg_s + onset_s + 0.1) & (t < pattern.leg_s + pattern.turn_s)].all()
     assert not turn[t < pattern.leg_s].any()
     assert not turn[t > pattern.leg_s + pattern.turn_s + 2 * 2.6].any()
     motion = store.read("motion", ["t_ns", "d_los_m"])
@@ -203,3 +209,33 @@ def test_a_deviation_cut_inside_an_aperture_leaves_the_target_whole() -> None:
     assert image is not None
     last = point_target_metrics(image).axis0
     assert last is not None and last.pslr_db <= -12.5
+
+
+def test_turbulence_of_a_straight_flight_is_not_a_turn() -> None:
+    """The daemon's turn limit on a straight leg whose ground track swings as a real
+    flight's does: the heading averaged over one aperture moves by 0.71 of the azimuth
+    beamwidth from one aperture to the next (1.35° on a 1.91° beam in a real ArduPilot
+    flight; here a cross-track velocity of period two apertures, 0.8 m peak to peak). No
+    pulse is a turn (with half the beam as the limit, some are)."""
+    cfg = scenario_config(load_preset("ku-vehicle", 0.1, snr_db=None))
+    v0 = 17.5
+    limits = segment_limits(cfg, v0)
+    beam = math.radians(cfg.imaging.azimuth_beamwidth_deg)
+    period = 2.0 * limits.window_s
+    # consecutive half-period means of A sin differ by 4 A / pi: a heading step of 0.71 beam
+    amp = 0.71 * beam * v0 * math.pi / 4.0
+    t = np.arange(0.0, 20.0, 1.0 / 175.0)
+    cross = amp * np.sin(2.0 * math.pi * t / period)
+    psi = math.radians(62.0)
+    vel = np.stack(
+        [v0 * math.cos(psi) - cross * math.sin(psi), v0 * math.sin(psi) + cross * math.cos(psi),
+         np.zeros_like(t)], axis=1,
+    )  # fmt: skip
+    t_ns = (10**18 + np.round(t * 1e9)).astype(np.int64)
+    heading = np.unwrap(np.arctan2(vel[:, 1], vel[:, 0]))
+    n = round(limits.window_s * 175.0)
+    means = np.convolve(heading, np.ones(n) / n, "valid")
+    assert np.abs(means[n:] - means[:-n]).max() == pytest.approx(0.71 * beam, rel=0.05)
+    track = ReferenceTrack.from_velocity(np.zeros(3), vel[0], int(t_ns[0]))
+    plan = Segmenter(limits, track, "right").plan(t_ns, vel)
+    assert not plan.turn.any()
