@@ -657,8 +657,9 @@ def segment_limits(cfg: Config, v0_mps: float) -> SegmentLimits:
     )
 
 
-def _nan_motion(t_ns: IntArray) -> MocompSolution:
-    """Motion rows of pulses that were not compensated (turns): NaN, no shift."""
+def nan_motion(t_ns: IntArray) -> MocompSolution:
+    """Motion rows of pulses that were not compensated (turns, pulses without navigation):
+    NaN, no shift."""
     n = t_ns.shape[0]
     nan = np.full(n, math.nan)
     return MocompSolution(
@@ -832,14 +833,14 @@ class Focuser:
                 self.segments += 1
             if plan.turn[a]:
                 self._close(out)
-                motion.append(_nan_motion(t_ns[a:b]))
+                motion.append(nan_motion(t_ns[a:b]))
                 continue
             assert self.segment is not None
             m, tiles = self.segment.push(rc[a:b], t_ns[a:b], vel_ned[a:b], q[a:b])
             motion.append(m)
             self._emit(out, self.segment, tiles)
             self._run_on(out, rc[a:b], t_ns[a:b], vel_ned[a:b], q[a:b])
-        out.motion = _join(motion) if motion else _nan_motion(t_ns)
+        out.motion = _join(motion) if motion else nan_motion(t_ns)
         return out
 
     def _hand_over(
