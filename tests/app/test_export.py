@@ -107,6 +107,9 @@ def test_the_store_keeps_the_sbg_position_and_the_geodetic_origin(scene: Scene) 
     origin = schema.decode_geodetic_origin(scene.store.attrs, "run")
     first = int(np.argmax(vel & (nav["result"] == 0)))
     assert origin.t_ns == nav["t_ns"][first] and origin.source == "sbg.EKF_NAV"
+    # EKF_NAV's altitude above mean sea level plus its undulation: the ellipsoid height
+    assert origin.ellipsoid_height
+    assert scene.store.attrs["geodetic_origin"]["height"] == schema.HEIGHT_ELLIPSOID
     assert origin.lla == tuple(nav["lla"][first])
     assert np.allclose(nav["pos_ned"][first], 0.0)  # NED about the first fix
     # the origin is where the simulator's INS was at its first sample (scenario NED)
@@ -176,6 +179,7 @@ def test_sicd_export_passes_the_consistency_check_and_holds_our_pixels(
     }
     origin = schema.decode_geodetic_origin(scene.store.attrs, "run")
     assert stated["geodetic_origin_source"] == origin.source == "sbg.EKF_NAV"
+    assert stated["geodetic_origin_height"] == schema.HEIGHT_ELLIPSOID
     lat, lon, _ = (float(v.split()[0]) for v in stated["geodetic_origin"].split(","))
     assert (lat, lon) == pytest.approx(origin.lla[:2], abs=1e-9)
     # the scene centre point is the pixel at SCPPixel, on the ground below the track
@@ -250,6 +254,7 @@ def test_a_mavlink_run_states_the_ekf_origin_and_exports_to_sicd(
     store = open_store(path)
     origin = schema.decode_geodetic_origin(store.attrs, "run")
     assert origin.source == "mavlink.GPS_GLOBAL_ORIGIN"
+    assert store.attrs["geodetic_origin"]["height"] == schema.HEIGHT_MSL  # no undulation
     assert geodetic_to_ned(np.asarray(origin.lla), GEODETIC_ORIGIN) == pytest.approx(
         np.zeros(3), abs=0.01
     )
