@@ -320,9 +320,9 @@ class ImagingConfig:
         0.3,
         "Extra squint on each side of the beam that pixels still take, and the pre-filter "
         "passes: covers the heading error of the INS-only reference track against the beam "
-        "and spotlight targets off the aperture centre; raise it for crab (the first track "
-        "follows one processing block: 3-23 mrad off under the simulator's turbulence, 1.2-1.5 "
-        "x azimuth IRW beyond 5 mrad; 0.6 deg gave 1.0 x, about 0.7 dB more noise)",
+        "and spotlight targets off the aperture centre; raise it for crab (a track 5-23 mrad "
+        "off the beam cut the aperture to 1.2-1.5 x azimuth IRW; 0.6 deg gave 1.0 x, about "
+        "0.7 dB more noise)",
         unit="deg",
         ge=0,
         lt=45,

@@ -8,8 +8,8 @@ processing object with its own carried state, so a live run and a replay of the
 same pulses give the same products.
 
 The strip is cut into segments (:mod:`sarmoco.processing.segments`): the first
-reference track is the straight line at the mean INS velocity of the first block
-(docs/methods.md §1); after each turn, and wherever the INS track leaves the current line by
+reference track is the straight line at the velocity it is given (the pipeline's mean
+over ``mocomp.heading_window_s`` of flight, docs/methods.md §1); after each turn, and wherever the INS track leaves the current line by
 ``mocomp.segment_tolerance_m``, the segment's autofocus is flushed, its tiles are
 closed, and a new segment starts with a new track, a new D_los (from 0), a new
 autofocus and a new tile imager. Pulses in turns are not imaged (the pipeline flags
@@ -688,8 +688,8 @@ class Focuser:
     t0_ns : int
         GPS time of the first pulse: the first reference track starts there, ns.
     velocity_ned : ndarray, shape (3,)
-        Mean INS velocity at the start, NED, m/s: fixes the first track's heading and
-        speed v0.
+        Mean antenna velocity of the flight from the start, NED, m/s: fixes the first
+        track's heading (the image grid's along-track axis) and speed v0.
     sink : SinkFactory, optional
         Hand every segment's pulses ready for backprojection to a sink made by this
         instead of imaging them (no tiles come out; see :class:`TileSink`).
