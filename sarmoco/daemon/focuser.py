@@ -9,11 +9,11 @@ same pulses give the same products.
 
 The strip is cut into segments (:mod:`sarmoco.processing.segments`): the first
 reference track is the straight line at the velocity it is given (the pipeline's mean
-over ``mocomp.heading_window_s`` of flight, docs/methods.md §1); after each turn, and wherever the INS track leaves the current line by
-``mocomp.segment_tolerance_m``, the segment's autofocus is flushed, its tiles are
-closed, and a new segment starts with a new track, a new D_los (from 0), a new
-autofocus and a new tile imager. Pulses in turns are not imaged (the pipeline flags
-them ``TURN``).
+over ``mocomp.heading_window_s`` of flight, docs/methods.md §1); after each turn, and
+wherever the INS track leaves the current line by ``mocomp.segment_tolerance_m``, the
+segment's autofocus is flushed, its tiles are closed, and a new segment starts with a new
+track, a new D_los (from 0), a new autofocus and a new tile imager. Pulses in turns are
+not imaged (the pipeline flags them ``TURN``).
 
 At a deviation cut (not after a turn or a navigation gap) the two segments overlap, so
 that a target whose aperture straddles the cut is still imaged from one track with its
