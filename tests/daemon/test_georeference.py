@@ -152,17 +152,17 @@ def test_sbg_positions_are_ned_about_the_first_valid_fix() -> None:
     valid = OK_STATUS | codec.SOL_POSITION_VALID
     first = codec.EkfNav(d1 + 10_000, (1.0, 0, 0), (0,) * 3, msl[0], undulation, (0,) * 3, valid)
     second = codec.EkfNav(d1 + 20_000, (1.0, 0, 0), (0,) * 3, msl[1], undulation, (0,) * 3, valid)
-    frames = [utc_msg(d1 - 300_000), utc_msg(d1 - 100_000), no_fix, first, second]
+    frames: list[codec.Message] = [utc_msg(d1 - 300_000), utc_msg(d1 - 100_000)]
+    frames += [no_fix, first, second]
     out = dec.feed(b"".join(codec.encode_message(m) for m in frames))
     vel = [s for s in out if isinstance(s, VelocitySample)]
     assert len(vel) == 3
     assert vel[0].pos_ned is None and vel[0].lat_lon_alt is None  # position not valid
     assert vel[1].pos_ned == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
     assert vel[2].pos_ned == pytest.approx((12.0, -3.0, -5.0), abs=1e-4)  # float32 undulation
-    assert vel[1].lat_lon_alt == pytest.approx(origin, abs=1e-4)
-    assert dec.positions.frame == TangentFrame(
-        vel[1].lat_lon_alt, "sbg.EKF_NAV", ellipsoid_height=True
-    )
+    fix = vel[1].lat_lon_alt
+    assert fix is not None and fix == pytest.approx(origin, abs=1e-4)
+    assert dec.positions.frame == TangentFrame(fix, "sbg.EKF_NAV", ellipsoid_height=True)
     assert vel[1].pos_frame == vel[2].pos_frame == dec.positions.frame
 
 
