@@ -4,11 +4,11 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench figures clean install uninstall
+.PHONY: demo test docs bench figures clean install uninstall
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
-	$(BIN)/pip install --quiet -e '.[test]'
+	$(BIN)/pip install --quiet -e '.[test,docs]'
 	touch $(STAMP)
 
 demo: $(STAMP)
@@ -26,15 +26,21 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q --durations=15 \
 	  -m "realtime and not bench and not fuzz_long" && exit $$status
 
+# The documentation site (docs/, mkdocs.yml) into site/: the generated reference pages
+# first, then a strict build (a broken link or anchor fails). The test suite checks both.
+docs: $(STAMP)
+	$(BIN)/python docs/gen_reference.py
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict
+
 BENCHES := bench_mocomp bench_imaging bench_autofocus bench_drivers bench_sim thz_table2 ku_vehicle_table
 
 bench: $(STAMP)
 	for b in $(BENCHES); do $(BIN)/python -m bench.$$b || exit 1; done
 
-# Print the README's "Measured" figures of issues 3 to 6 (focusing core, range compression,
+# Print the measured figures of docs/measurements (focusing core, range compression,
 # GOTCHA, THz Table 2, throughput, the autofocus tables and CPU time, tile PGA, TIMESYNC, replay,
-# along-track placement), each by the command the README names beside it (about 15 minutes on
-# 2 cores). The longer runs the README cites (bench_daemon --live-s 600, bench_drivers,
+# along-track placement), each by the command named beside it (about 15 minutes on
+# 2 cores). The longer runs the pages cite (bench_daemon --live-s 600, bench_drivers,
 # bench_tile_pga, bench_survey, the end-to-end tests) are not in it.
 figures: $(STAMP)
 	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/processing/imaging/test_imaging_acceptance.py
@@ -55,9 +61,9 @@ figures: $(STAMP)
 	$(BIN)/python -m pytest -q -s -p no:cacheprovider tests/daemon/test_focuser.py -k "along_track or absorbs"
 
 clean:
-	rm -rf $(VENV) demo-out
+	rm -rf $(VENV) demo-out site
 
-# Onboard install (README "Installing on the payload computer"). DESTDIR stages the tree
+# Onboard install (docs/integrator.md, "Installing on the payload computer"). DESTDIR stages the tree
 # for a package; the virtual environment's scripts are then rewritten to run from PREFIX.
 PREFIX ?= /opt/sarmoco
 SYSCONFDIR ?= /etc

@@ -17,7 +17,6 @@ import time
 
 import pytest
 
-from bench.ku_vehicle_table import Case, scenario
 from sarmoco.processing import rangecomp
 from sarmoco.processing.autofocus import (
     AutofocusConfig,
@@ -27,8 +26,9 @@ from sarmoco.processing.autofocus import (
 )
 from sarmoco.processing.autofocus.pga import pga_stripmap
 from sarmoco.processing.geometry import fit_reference_track
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
-from sarmoco.sim.trajectory import MotionSpec
+from tests.workloads.ku_vehicle import Case, scenario
 
 
 def measure(seconds: float) -> dict[str, float]:

@@ -1,6 +1,6 @@
 """Ground reprocessing with dask (issue 15): wall time against workers and block size.
 
-Run as ``.venv/bin/python -m bench.bench_batch [--scale 0.05] [--pulses 3000]``.
+Run as ``.venv/bin/python -m bench.bench_batch [--scale 0.05] [--pulses 3000] [--separate]``.
 
 A ku-vehicle run is simulated as files (``sarmoco sim --out``), replayed once in one
 process (the reference and the baseline), then reprocessed by :func:`run_batch` on a
@@ -8,7 +8,11 @@ local cluster of 1 and of 2 worker processes (one thread each, 127.0.0.1) at sev
 tile counts per imaging block. Each batch store is compared with the single-process
 replay (largest relative L2 difference of a tile). The cluster is started before the
 clock starts (its start-up is printed apart); worker processes load the numba kernels
-from the on-disk cache on their first block.
+from the on-disk cache on their first block. With ``--separate`` the cluster is a
+``dask scheduler`` process and ``dask worker`` processes on 127.0.0.1
+(:mod:`tests.workloads.dask_cluster`), reached by address as ``sarmoco batch --scheduler`` does.
+Each line also gives the seconds the workers spent computing the front end and the
+imaging blocks (dask's task stream): the terms of the wall-time model ``F + I / W``.
 """
 
 from __future__ import annotations
@@ -20,14 +24,33 @@ import subprocess
 import sys
 import tempfile
 import time
+from contextlib import ExitStack
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+from distributed import get_task_stream
 
 from sarmoco.app.batch import Recording, cluster_client, run_batch
 from sarmoco.daemon.config import load_config
 from sarmoco.daemon.runner import replay_files
 from sarmoco.daemon.store import open_store
+from tests.workloads.dask_cluster import separate_cluster
+
+PREFIXES = ("front_end", "image_block")
+"""Task-name prefixes of a recording's front end and of its imaging blocks."""
+
+
+def task_seconds(stream: list[dict[str, Any]], prefix: str) -> float:
+    """Seconds the workers spent computing the tasks whose key starts with ``prefix``
+    (dask's task stream: the ``compute`` spans of each task)."""
+    return sum(
+        span["stop"] - span["start"]
+        for task in stream
+        if str(task["key"]).startswith(prefix)
+        for span in task["startstops"]
+        if span["action"] == "compute"
+    )
 
 
 def worst_difference(single: Path, batch: Path) -> float:
@@ -50,6 +73,10 @@ def main() -> None:
     ap.add_argument("--pulses", type=int, default=3000)
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--tiles-per-block", type=int, nargs="+", default=[1, 4, 16])
+    ap.add_argument(
+        "--separate", action="store_true",
+        help="a cluster of `dask scheduler` and `dask worker` processes on 127.0.0.1",
+    )  # fmt: skip
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
@@ -70,18 +97,30 @@ def main() -> None:
                           "pulses": args.pulses, "scale": args.scale}), flush=True)  # fmt: skip
         for workers in args.workers:
             start = time.perf_counter()
-            with cluster_client(None, workers, dashboard=False) as client:
+            with ExitStack() as stack:
+                if args.separate:
+                    folder = work / f"cluster-{workers}"
+                    folder.mkdir()
+                    address, _ = stack.enter_context(separate_cluster(folder, workers))
+                    client = stack.enter_context(cluster_client(address, workers))
+                    client.wait_for_workers(workers, timeout=120)
+                else:
+                    client = stack.enter_context(cluster_client(None, workers, dashboard=False))
                 startup_s = time.perf_counter() - start
                 for tiles_per_block in args.tiles_per_block:
                     out = work / f"batch-{workers}-{tiles_per_block}.zarr"
                     start = time.perf_counter()
-                    run_batch(client, cfg, [Recording(out, radar=radar, nav=nav)],
-                              tiles_per_block, progress=False)  # fmt: skip
+                    with get_task_stream(client) as stream:
+                        run_batch(client, cfg, [Recording(out, radar=radar, nav=nav)],
+                                  tiles_per_block, progress=False)  # fmt: skip
                     wall_s = time.perf_counter() - start
+                    front_s, imaging_s = (task_seconds(stream.data, p) for p in PREFIXES)
                     print(json.dumps({
                         "workers": workers, "tiles_per_block": tiles_per_block,
                         "wall_s": round(wall_s, 2), "cluster_start_s": round(startup_s, 2),
                         "speedup_vs_single": round(single_s / wall_s, 2),
+                        "front_end_task_s": round(front_s, 2),
+                        "imaging_task_s": round(imaging_s, 2),
                         "worst_tile_rel_l2": worst_difference(single, out),
                     }), flush=True)  # fmt: skip
                     shutil.rmtree(out)

@@ -39,6 +39,7 @@ from pathlib import Path
 from sarmoco.app.benchcmd import KEYS, PY, SIM_ARGS, bench
 from sarmoco.daemon.config import load_config
 from sarmoco.daemon.runner import replay_files
+from tests.workloads.soak import load_average
 
 LIVE_SCALE = 0.1
 STAGES = {
@@ -55,11 +56,6 @@ STAGES = {
     "recording image tiles": ("recorder.py", "add_image"),
 }
 """Functions whose cumulative time the profile reports: (file name, function name)."""
-
-
-def load_average() -> str:
-    """The 1-minute load average and the core count, for the record."""
-    return f"load {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores"
 
 
 def simulate_files(out: Path, preset: str, scale: float) -> Path:

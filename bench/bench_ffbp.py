@@ -40,9 +40,9 @@ from sarmoco.processing.imaging.ffbp import ffbp_into
 from sarmoco.processing.imaging.tiles import Tile, TileImager, TileLayout
 from sarmoco.processing.metrics import image_entropy, point_target_metrics
 from sarmoco.processing.types import C_MPS, ComplexArray, FloatArray, Image, IntArray
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import Target, load_preset
-from sarmoco.sim.trajectory import MotionSpec
 
 PRESETS = ("ku-vehicle", "thz-spotlight", "ku-microuav")
 GOTCHA = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "gotcha"

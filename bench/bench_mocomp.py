@@ -28,8 +28,9 @@ import scipy.fft
 from sarmoco.processing import rangecomp
 from sarmoco.processing.geometry import reference_track_from_velocity
 from sarmoco.processing.mocomp import InsMotionCompensator, LosGeometry
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec, true_trajectory
+from sarmoco.sim.trajectory import true_trajectory
 
 
 def _paired_times(

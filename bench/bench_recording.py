@@ -38,9 +38,9 @@ from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.schema import ECHO_COMPRESSION
 from sarmoco.sim.echostream import EchoStream
 from sarmoco.sim.emit_radar import int16_scale
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec
 
 N_SAMPLES = 4096
 PRF_HZ = 20_000.0

@@ -13,9 +13,9 @@ from __future__ import annotations
 import argparse
 import time
 
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import PRESETS, load_preset
-from sarmoco.sim.trajectory import MotionSpec
 
 
 def simulate_seconds(name: str, scale: float, repeat: int) -> tuple[int, float]:

@@ -49,12 +49,13 @@ from sarmoco.processing.metrics import point_target_metrics
 from sarmoco.processing.rangecomp import compress, range_axis_m
 from sarmoco.processing.types import Image
 from sarmoco.sim.echo import synthesize
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import pulse_times_ns
 from sarmoco.sim.scenario import Scenario, load_preset
 from sarmoco.sim.survey import SurveyPattern, survey_scenario, survey_spec
-from sarmoco.sim.trajectory import MotionSpec, apc_trajectory, true_trajectory
+from sarmoco.sim.trajectory import apc_trajectory, true_trajectory
 
-CHUNK_PULSES = 2048
+RANGE_CHUNK_PULSES = 2048
 """Pulses generated and played per chunk."""
 INS_RATE_HZ = 200.0
 """Rate of the exact INS samples, Hz."""
@@ -93,8 +94,8 @@ def play(scn: Scenario, spec: MotionSpec, store: Path, seed: int) -> list[tuple[
     t_nav_s = -0.5
     with open_recorder(cfg, store) as rec:
         pipe = Pipeline(cfg, rec, Counters())
-        for a in range(0, t_all.size, CHUNK_PULSES):
-            t_ns = t_all[a : a + CHUNK_PULSES]
+        for a in range(0, t_all.size, RANGE_CHUNK_PULSES):
+            t_ns = t_all[a : a + RANGE_CHUNK_PULSES]
             t_s = (t_ns - scn.t0_ns) * 1e-9
             apc = apc_trajectory(scn, t_s, spec)
             near = np.linalg.norm(targets[None] - apc.pos_ned[:, None], axis=2).min(axis=0)

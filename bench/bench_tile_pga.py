@@ -1,4 +1,4 @@
-"""Tile PGA end to end (README "Autofocus", tile PGA table): worst target without and with.
+"""Tile PGA end to end (docs/measurements/autofocus.md): worst target without and with.
 
 Run as ``.venv/bin/python -m bench.bench_tile_pga [--seeds 0 1 2] [--skip-live]``.
 

@@ -1,4 +1,4 @@
-"""Quicklook of the AFRL GOTCHA 2-deg phase history for the README: docs/img/gotcha.png.
+"""Quicklook of the AFRL GOTCHA 2-deg phase history: docs/img/gotcha.png.
 
 Backprojection and polar format of the same 100 m x 100 m ground grid (axis 1
 along the mean look direction), each in dB over 50 dB, with its image entropy;

@@ -1,4 +1,4 @@
-"""Ends of runs with the autofocus on (README "Real flights (issue 10)", item 8).
+"""Ends of runs with the autofocus on (docs/measurements/flights.md).
 
 Run as ``.venv/bin/python -m bench.run_ends [--seeds 0 1 2] [--uniform] [--no-autofocus]``.
 
@@ -14,51 +14,10 @@ points, as the report measures them.
 from __future__ import annotations
 
 import argparse
-import math
 import tempfile
 from pathlib import Path
 
-from sarmoco.app.simconfig import config_table, write_config
-from sarmoco.daemon.config import load_config
-from sarmoco.daemon.report import bright_points, strip
-from sarmoco.daemon.runner import replay_files
-from sarmoco.daemon.store import open_store
-from sarmoco.sim.faults import Faults
-from sarmoco.sim.outfiles import NAV_FILES, RADAR_FILE, write_run
-from sarmoco.sim.run import simulate
-from sarmoco.sim.scenario import Target, load_preset
-from sarmoco.sim.trajectory import MotionSpec
-
-LOG = Path(__file__).resolve().parents[2] / "shared/data/mavlink/arduplane_quadplane_sitl.tlog"
-"""The real ArduPilot flight log whose motion the run flies."""
-
-
-def one(seed: int, along_track: bool, autofocus: bool, out: Path) -> list[list[float]]:
-    """Simulate, replay and measure one seed; azimuth PSLR (dB) of start, middle, end."""
-    ground = math.sqrt(900.0**2 - 100.0**2)
-    targets = [Target((n, ground + e, 0.0)) for n in (-15.0, 0.0, 15.0) for e in (-10.0, 0, 10)]
-    scn = load_preset("ku-vehicle", 0.1, targets=targets)
-    run = simulate(scn, MotionSpec("flightlog", seed=seed, log_path=LOG), "tactical", seed=seed)
-    write_run(run, Faults(), out, nav=["mavlink"], seed=seed)
-    table = config_table(
-        scn,
-        radar={"link": str(out / RADAR_FILE)},
-        ins={"protocol": "mavlink", "link": str(out / NAV_FILES["mavlink"])},
-        recorder={"directory": str(out)},
-    )
-    table["autofocus"]["enabled"] = autofocus
-    table.setdefault("mocomp", {})["along_track"] = along_track
-    write_config(out / "sarmoco.toml", table)
-    cfg = load_config(out / "sarmoco.toml")
-    replay_files(cfg, out / RADAR_FILE, out / NAV_FILES["mavlink"], out / "run.zarr", False)
-    # the nine brightest points of the strip (the report lists fewer), by along-track place
-    image = strip(open_store(out / "run.zarr"))
-    if image is None:
-        raise RuntimeError(f"seed {seed}: the run made no image")
-    points = bright_points(image, 9)
-    ordered = sorted(points, key=lambda q: (round(q["x_m"]), q["y_m"]))
-    values = [round(q["pslr_az_db"], 2) for q in ordered]
-    return [values[0:3], values[3:6], values[6:9]]
+from tests.workloads.run_ends import one
 
 
 def main() -> None:

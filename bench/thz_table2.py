@@ -64,9 +64,10 @@ from sarmoco.processing.mocomp import (
 from sarmoco.processing.navinterp import interpolate_nav
 from sarmoco.processing.types import ComplexArray, FloatArray, NavSamples
 from sarmoco.sim.ins import GRADES, measure_ins
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import INS_MARGIN_S, SimRun, simulate
 from sarmoco.sim.scenario import Scenario, Target, load_preset
-from sarmoco.sim.trajectory import MotionSpec, true_trajectory
+from sarmoco.sim.trajectory import true_trajectory
 
 PAPER_TABLE2 = {
     "raw": (-8.3447, -3.4372),

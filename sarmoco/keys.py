@@ -2,8 +2,8 @@
 
 Any layer may declare settings this way (the daemon's configuration sections, the
 autofocus settings of ``processing``); the daemon's loader (``daemon/config.py``) reads
-the metadata to check values and to write the README's key table, so a key's meaning,
-unit and limits live beside its default.
+the metadata to check values and to write the key table of docs/configuration.md, so a
+key's meaning, unit and limits live beside its default.
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ def key(
     default : Any
         The value when the key is not given (immutable: no list or dict).
     doc : str
-        One-sentence meaning of the key (the README table's last column).
+        One-sentence meaning of the key (the key table's last column).
     unit : str
         Physical unit of the value, e.g. ``"s"``, ``"m"``; empty for counts and flags.
     gt, ge, le, lt : float or None

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import pytest
 
+from tests.conftest import unavailable
 from tests.test_systemd import _analyze
 
 PYTHON = f"PYTHON={Path(sys.executable).resolve()}"
@@ -106,4 +107,4 @@ def test_installed_unit_verifies(repo_root: Path, tmp_path: Path) -> None:
     _make(repo_root, "uninstall", *where)
     assert _files(tmp_path) == set()
     if tool is None:
-        pytest.skip("systemd-analyze not installed: the unit was not verified")
+        unavailable("systemd-analyze not installed: the unit was not verified")

@@ -23,7 +23,7 @@ from pymavlink import mavutil
 
 from sarmoco.app.simconfig import write_config
 from sarmoco.daemon.config import Config, InsConfig, RadarConfig, config_to_dict
-from sarmoco.daemon.status import LOOPBACK_HOSTS
+from sarmoco.daemon.status import STATUS_HOSTS
 from sarmoco.drivers.mavlink import MavlinkSource, mavlink2
 from sarmoco.errors import ConfigError
 from tests.daemon.test_daemon_process import Daemon, free_port
@@ -35,7 +35,7 @@ KEY = bytes(range(1, 33))
 def test_defaults_name_the_loopback_only() -> None:
     assert RadarConfig().link.startswith("udp://127.0.0.1:")
     assert InsConfig().link.startswith("udpin:127.0.0.1:")
-    assert LOOPBACK_HOSTS == ("127.0.0.1", "::1", "localhost")
+    assert STATUS_HOSTS == ("127.0.0.1", "::1", "localhost")
 
 
 def _inet_sockets(pid: int) -> list[tuple[str, str, int, int]]:

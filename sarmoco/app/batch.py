@@ -25,6 +25,14 @@ file with its INS log) is reprocessed in two kinds of task:
 
 Backprojection is the bulk of the work in a full-size run; the front ends of many
 recordings also run side by side.
+
+A worker that dies (killed, out of memory, its machine lost) costs only the tasks it
+held: the scheduler runs them again on another worker (or on the one its nanny
+restarts). A front end run again starts its output and scratch stores anew (the batch
+refuses outputs that exist before it starts, so what it finds there is its own
+unfinished attempt); an imaging block run again rewrites its own tiles. A front end's
+result is released once its blocks are planned, so a later worker death never runs it
+again under blocks that are writing. The stores come out as from an undisturbed run.
 """
 
 from __future__ import annotations
@@ -115,7 +123,14 @@ class ImageBlock:
 def front_end(cfg: Config, recording: Recording) -> FrontEnd:
     """Replay a recording with imaging deferred (a task): tables into the output store,
     the pulses to image into its scratch store. The output store is marked not
-    ``complete`` until its tiles are written (:func:`finish_store`)."""
+    ``complete`` until its tiles are written (:func:`finish_store`).
+
+    Stores left at ``recording.out`` and its scratch path by an earlier attempt of this
+    task (on a worker that died) are removed first: :func:`run_batch` refuses outputs
+    that exist before the batch, so only an attempt of the batch can have left them.
+    """
+    for leftover in (recording.out, recording.scratch):
+        shutil.rmtree(leftover, ignore_errors=True)
     sink = StreamRecorder(recording.scratch)
     if recording.store is not None:
         summary = replay_store(cfg, recording.store, recording.out, False, sink)
@@ -227,19 +242,29 @@ def run_batch(
     """Reprocess recordings on a dask.distributed client; their summaries, in order.
 
     Front ends are submitted at once; each recording's imaging blocks as soon as its
-    front end is done.
+    front end is done. Each task's future is released as soon as its result is read, so
+    the scheduler never recomputes a finished task whose worker dies later (a front end
+    run again would start its store anew under the blocks writing into it).
+
+    Raises
+    ------
+    ConfigError
+        An output store (or its scratch store) exists already.
     """
     from distributed import as_completed
 
     at_least_one("--tiles-per-block", tiles_per_block)
+    refuse_existing(recordings)
     fronts = [client.submit(front_end, cfg, r, pure=False) for r in recordings]
     owner: dict[Any, int] = {f: i for i, f in enumerate(fronts)}
     results: list[FrontEnd | None] = [None] * len(recordings)
     written: list[dict[int, dict[str, float]]] = [{} for _ in recordings]
     pending = as_completed(fronts)
-    total, done = len(fronts), 0
+    del fronts
+    total, done = len(recordings), 0
     for future in pending:
-        i, value = owner[future], future.result()
+        i, value = owner.pop(future), future.result()
+        future.release()
         done += 1
         if isinstance(value, FrontEnd):
             results[i] = value
@@ -288,6 +313,13 @@ def cluster_client(scheduler: str | None, workers: int, dashboard: bool = True) 
         yield client
 
 
+def refuse_existing(recordings: Sequence[Recording]) -> None:
+    """Refuse output (or scratch) stores that exist (ConfigError naming them)."""
+    taken = [p for r in recordings for p in (r.out, r.scratch) if p.exists()]
+    if taken:
+        raise ConfigError(f"batch: {', '.join(map(str, taken))} exist(s); a batch never overwrites")
+
+
 def at_least_one(option: str, value: int) -> None:
     """Refuse a count below 1 (ConfigError naming the option)."""
     if value < 1:
@@ -295,13 +327,26 @@ def at_least_one(option: str, value: int) -> None:
 
 
 def dashboard_text(client: Any) -> str:
-    """Where the cluster's dashboard is, or why there is none."""
-    try:
-        import bokeh  # noqa: F401
-    except ImportError:
-        return "dashboard: none (bokeh is not installed; pip install bokeh to serve it)"
-    link = client.dashboard_link
-    return f"dashboard: {link}" if link else "dashboard: off"
+    """Where the scheduler serves its dashboard, or why it serves none.
+
+    Without bokeh in the scheduler's environment its HTTP server answers ``/health`` and
+    ``/metrics`` only; the text says so rather than give a link to pages that are not there.
+    """
+    if "dashboard" not in client.scheduler_info().get("services", {}):
+        return "dashboard: none (the scheduler was started without one)"
+    if not client.run_on_scheduler(_has_bokeh):
+        return (
+            f"dashboard: none (bokeh is not installed where the scheduler runs; pip install"
+            f" bokeh to serve it at {client.dashboard_link})"
+        )
+    return f"dashboard: {client.dashboard_link}"
+
+
+def _has_bokeh() -> bool:
+    """Whether bokeh can be imported here (run on the scheduler)."""
+    import importlib.util
+
+    return importlib.util.find_spec("bokeh") is not None
 
 
 def _progress(done: int, total: int) -> None:
@@ -324,7 +369,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
         "--out", required=True, type=Path,
         help="store to create (one recording) or folder of RECORDING-NAME.zarr stores",
     )  # fmt: skip
-    parser.add_argument("--scheduler", help="dask scheduler address (default: a local cluster)")
+    parser.add_argument(
+        "--scheduler", metavar="tcp://HOST:PORT",
+        help="address of a running dask scheduler (`dask scheduler`, its workers started by "
+        "`dask worker`); default: a local cluster of --workers processes on 127.0.0.1",
+    )  # fmt: skip
     parser.add_argument("--workers", type=int, default=2, help="local worker processes")
     parser.add_argument(
         "--tiles-per-block", type=int, default=16, help="tiles per imaging task (default 16)"
@@ -356,6 +405,7 @@ def run_command(args: argparse.Namespace) -> int:
     recordings = recordings_of(args)
     at_least_one("--tiles-per-block", args.tiles_per_block)
     at_least_one("--workers", args.workers)
+    refuse_existing(recordings)
     cfg = load_config(args.config)
     start = time.monotonic()
     with cluster_client(args.scheduler, args.workers) as client:

@@ -86,6 +86,7 @@ import scipy.fft
 from sarmoco.app.demo import free_udp_port, read_json_line
 from sarmoco.app.simconfig import config_table, write_config
 from sarmoco.daemon.config import parse_config
+from sarmoco.daemon.status import LIVE_PAGE_POLL_S
 from sarmoco.daemon.store import open_store
 from sarmoco.daemon.threadcpu import STAGES
 from sarmoco.drivers.clock import GPS_LEAP_SECONDS_DEFAULT
@@ -109,9 +110,6 @@ or when no pulse was recorded for this long, s."""
 
 RSS_WARMUP_MAX_S = 30.0
 """Longest warm-up left out of the RSS trend, s."""
-
-LIVE_PAGE_POLL_S = 2.0
-"""The live page's refresh interval (its script's timer), s."""
 
 LIVE_PAGE_PATHS = ("/tiles/latest.png", "/status", "/live.json")
 """What the live page fetches at each refresh."""

@@ -135,13 +135,13 @@ def _cmd_export(args: argparse.Namespace) -> int:
 
 
 def _add_import_cphd_arguments(parser: argparse.ArgumentParser) -> None:
-    from sarmoco.app.cphd import add_arguments
+    from sarmoco.app.import_cphd import add_arguments
 
     add_arguments(parser)
 
 
 def _cmd_import_cphd(args: argparse.Namespace) -> int:
-    from sarmoco.app.cphd import run_command
+    from sarmoco.app.import_cphd import run_command
 
     return run_command(args)
 
@@ -194,6 +194,19 @@ def _cmd_sim(args: argparse.Namespace) -> int:
     return status
 
 
+def _add_demo_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--out", default="demo-out", help="output folder (default demo-out)")
+    parser.add_argument("--scale", type=float, default=0.1, help="ku-vehicle scenario scale")
+    parser.add_argument(
+        "--scene", default="extended", choices=("points", "extended"),
+        help="extended (default): terrain clutter and corner reflectors; points: 3 targets",
+    )  # fmt: skip
+    parser.add_argument(
+        "--status-port", type=int, metavar="PORT",
+        help="serve the daemon's /status and live page on 127.0.0.1:PORT (default: a free port)",
+    )  # fmt: skip
+
+
 def _add_bench_arguments(parser: argparse.ArgumentParser) -> None:
     from sarmoco.app.benchcmd import add_arguments
 
@@ -212,7 +225,12 @@ def _cmd_demo(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if (out / "truth.json").exists():  # an earlier demo's output: replace it
         shutil.rmtree(out)
-    run_loopback(out, args.scale, scene=args.scene)
+    if args.status_port is None:
+        run_loopback(out, args.scale, scene=args.scene)
+    else:
+        print(f"live page: http://127.0.0.1:{args.status_port}/ while the daemon runs",
+              file=sys.stderr)  # fmt: skip
+        run_loopback(out, args.scale, scene=args.scene, status={"http_port": args.status_port})
     print((out / "report" / "report.txt").read_text(), end="")
     print(f"store {out / 'run.zarr'}, quicklooks in {out / 'report'}")
     return 0
@@ -264,7 +282,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     export = sub.add_parser(
         "export",
-        help="a store's image and phase history as SICD / CPHD / CRSD (sarkit-checked)",
+        help="a store's image as SICD and its phase history as CPHD (sarkit-checked)",
         add_arguments=_add_export_arguments,
     )
     export.set_defaults(func=_cmd_export)
@@ -301,14 +319,10 @@ def build_parser() -> argparse.ArgumentParser:
     bench.set_defaults(func=_cmd_bench)
 
     demo = sub.add_parser(
-        "demo", help="simulated hardware + daemon on loopback, then the report (the main job)"
+        "demo",
+        help="simulated hardware + daemon on loopback, then the report (the main job)",
+        add_arguments=_add_demo_arguments,
     )
-    demo.add_argument("--out", default="demo-out", help="output folder (default demo-out)")
-    demo.add_argument("--scale", type=float, default=0.1, help="ku-vehicle scenario scale")
-    demo.add_argument(
-        "--scene", default="extended", choices=("points", "extended"),
-        help="extended (default): terrain clutter and corner reflectors; points: 3 targets",
-    )  # fmt: skip
     demo.set_defaults(func=_cmd_demo)
     return parser
 

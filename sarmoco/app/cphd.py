@@ -13,12 +13,12 @@ our backprojection of a phase history takes, :mod:`sarmoco.processing.imaging`).
   is kept exactly by a per-vector SRP on the line from the antenna to the scene centre.
 * :func:`read_cphd` reads a CPHD back into the same form, and :func:`focus` backprojects it
   on a ground grid of the scene frame (east, north, up about the image-area reference
-  point, IARP): ``sarmoco import-cphd FILE --out STORE`` stores that image.
+  point, IARP): ``sarmoco import-cphd FILE --out STORE`` (:mod:`sarmoco.app.import_cphd`)
+  stores that image.
 """
 
 from __future__ import annotations
 
-import argparse
 import datetime
 from dataclasses import dataclass
 from pathlib import Path
@@ -31,7 +31,7 @@ import sarkit.cphd as skcphd
 
 from sarmoco import __version__
 from sarmoco.daemon.store import RunStore
-from sarmoco.drivers.clock import gps_ns_to_unix_ns, unix_ns_to_gps_ns
+from sarmoco.drivers.clock import gps_ns_to_unix_ns
 from sarmoco.drivers.gotcha import GotchaPass
 from sarmoco.errors import DataFileError, RecorderError
 from sarmoco.geodesy import ecef_to_geodetic, geodetic_to_ecef, ned_rotation
@@ -256,18 +256,34 @@ def _pvp_xml() -> dict[str, Any]:
     return out
 
 
+def _scene_xml(ph: FxPhaseHistory) -> dict[str, Any]:
+    """The ``SceneCoordinates`` of a phase history: a square image area of
+    ``2 IMAGE_AREA_HALF_M`` on the plane tangent to the Earth at the IARP (east, north)."""
+    iarp = geodetic_to_ecef(np.asarray(ph.iarp_lla))
+    rot = ned_rotation(ph.iarp_lla[0], ph.iarp_lla[1])
+    half = IMAGE_AREA_HALF_M
+    n_grid = round(2 * half / GRID_M) + 1
+    square = [(-half, -half), (-half, half), (half, half), (half, -half)]
+    corners = [_scene_to_ecef(np.array([x, y, 0.0]), ph.iarp_lla) for x, y in square]
+    return {
+        "EarthModel": "WGS_84",
+        "IARP": {"ECF": iarp, "LLH": np.asarray(ph.iarp_lla)},
+        "ReferenceSurface": {"Planar": {"uIAX": rot[1], "uIAY": rot[0]}},
+        "ImageArea": {"X1Y1": [-half, -half], "X2Y2": [half, half]},
+        "ImageAreaCornerPoints": np.array([ecef_to_geodetic(c)[:2] for c in corners]),
+        "ImageGrid": {
+            "IARPLocation": [n_grid // 2, n_grid // 2],
+            "IAXExtent": {"LineSpacing": GRID_M, "FirstLine": 0, "NumLines": n_grid},
+            "IAYExtent": {"SampleSpacing": GRID_M, "FirstSample": 0, "NumSamples": n_grid},
+        },
+    }
+
+
 def _xml(ph: FxPhaseHistory, pvps: npt.NDArray[Any], core_name: str) -> Any:
     v, s = ph.signal.shape
     fx1, fx2 = float(ph.freq_hz[0]), float(ph.freq_hz[-1])
     toa1, toa2 = ph.toa_span()
     srp_fixed = bool(np.all(ph.srp_ecef_m == ph.srp_ecef_m[0]))
-    iarp = geodetic_to_ecef(np.asarray(ph.iarp_lla))
-    rot = ned_rotation(ph.iarp_lla[0], ph.iarp_lla[1])
-    east, north = rot[1], rot[0]
-    half = IMAGE_AREA_HALF_M
-    n_grid = round(2 * half / GRID_M) + 1
-    square = [(-half, -half), (-half, half), (half, half), (half, -half)]
-    corners = [_scene_to_ecef(np.array([x, y, 0.0]), ph.iarp_lla) for x, y in square]
     duration = float(ph.tx_time_s[-1])
     root = lxml.etree.Element(f"{{{CPHD_NS}}}CPHD")
     cphd = skcphd.ElementWrapper(root)
@@ -291,18 +307,7 @@ def _xml(ph: FxPhaseHistory, pvps: npt.NDArray[Any], core_name: str) -> Any:
         "FxBand": {"FxMin": fx1, "FxMax": fx2},
         "TOASwath": {"TOAMin": toa1, "TOAMax": toa2},
     }
-    cphd["SceneCoordinates"] = {
-        "EarthModel": "WGS_84",
-        "IARP": {"ECF": iarp, "LLH": np.asarray(ph.iarp_lla)},
-        "ReferenceSurface": {"Planar": {"uIAX": east, "uIAY": north}},
-        "ImageArea": {"X1Y1": [-half, -half], "X2Y2": [half, half]},
-        "ImageAreaCornerPoints": np.array([ecef_to_geodetic(c)[:2] for c in corners]),
-        "ImageGrid": {
-            "IARPLocation": [n_grid // 2, n_grid // 2],
-            "IAXExtent": {"LineSpacing": GRID_M, "FirstLine": 0, "NumLines": n_grid},
-            "IAYExtent": {"SampleSpacing": GRID_M, "FirstSample": 0, "NumSamples": n_grid},
-        },
-    }
+    cphd["SceneCoordinates"] = _scene_xml(ph)
     cphd["Data"] = {
         "SignalArrayFormat": "CF8",
         "NumBytesPVP": pvps.dtype.itemsize,
@@ -442,48 +447,3 @@ def grid_heading(ph: FxPhaseHistory) -> float:
     """Heading of :func:`focus`'s grid: axis 1 along the mean look direction to the IARP
     (axis 0 from east toward north), rad."""
     return facing_heading(ph.scene(ph.apc_ecef_m), (0.0, 0.0, 0.0))
-
-
-def add_arguments(parser: argparse.ArgumentParser) -> None:
-    """The arguments of ``sarmoco import-cphd``."""
-    parser.add_argument("cphd", help="CPHD file (FX domain, monostatic)")
-    parser.add_argument("--out", required=True, help="store to create")
-    parser.add_argument("--size", type=int, default=256, help="image pixels per side")
-    parser.add_argument("--pixel-m", type=float, default=0.2, help="ground pixel spacing, m")
-    parser.add_argument("--sicd", metavar="OUT.nitf", help="also write the image as SICD")
-
-
-def run_command(args: argparse.Namespace) -> int:
-    """Read a CPHD, focus it, store the image and optionally write it as SICD
-    (``sarmoco import-cphd``); the SICD must pass sarkit's check with no error."""
-    import sarkit.verification as skver
-
-    from sarmoco.app.export import checked
-    from sarmoco.app.sicd import spotlight_product, write_sicd
-    from sarmoco.daemon.recorder import Recorder
-
-    path = Path(args.cphd)
-    ph = read_cphd(path)
-    image = focus(ph, args.size, args.pixel_m)
-    if args.sicd is not None:
-        write_sicd(spotlight_product(ph, image, grid_heading(ph)), Path(args.sicd))
-        checked(skver.SicdConsistency.from_file, Path(args.sicd))
-    start_ns = unix_ns_to_gps_ns(round(ph.collection_start.timestamp() * 1e9))
-    with Recorder(Path(args.out), n_samples=ph.signal.shape[1], raw_echoes=False) as rec:
-        rec.set_attribute(
-            "imported_from",
-            {
-                "file": str(path),
-                "format": "CPHD 1.1.0 (FX domain)",
-                "iarp_lla": list(ph.iarp_lla),
-                "frame": "image axes on a ground grid of the IARP's east-north-up frame",
-                "vectors": ph.signal.shape[0],
-            },
-        )
-        rec.add_image(
-            image,
-            start_ns + round(ph.tx_time_s[0] * 1e9),
-            start_ns + round(ph.tx_time_s[-1] * 1e9),
-        )
-    print(f"{args.out}: image {args.size} x {args.size} at {args.pixel_m} m from {path}")
-    return 0

@@ -26,6 +26,7 @@ from sarmoco.daemon.report import write_report
 from sarmoco.errors import SarmocoError
 from sarmoco.sim.extended import load_scene
 from sarmoco.sim.insemitters import INS_EMITTERS
+from sarmoco.sim.scenario import Scenario
 
 PRESET = "ku-vehicle"
 DAEMON_START_S = 60.0
@@ -70,6 +71,24 @@ def _connect_link(info: dict[str, Any] | str) -> str:
     if isinstance(info, str):
         return info
     return f"{info['interface']}:{info['channel']}"
+
+
+def _daemon_config(
+    out: Path, scn: Scenario, hello: dict[str, Any], ins: str, sections: dict[str, Any]
+) -> Path:
+    """Write ``out/sarmoco.toml``: the scenario's radar, the links the simulator announced in
+    ``hello``, the store under ``out``, the status server on any free port, plus
+    ``sections`` (extra keys per section)."""
+    table = config_table(
+        scn,
+        radar={"link": hello["radar"]["connect"]},
+        ins={"protocol": ins, "link": _connect_link(hello["ins"][0]["connect"])},
+        recorder={"directory": str(out)},
+        status={"http_port": 0},
+    )
+    for name, values in sections.items():
+        table.setdefault(name, {}).update(values)
+    return write_config(out / "sarmoco.toml", table)
 
 
 def run_loopback(
@@ -136,16 +155,7 @@ def run_loopback(
     scn = load_scene(scene, PRESET, scale, **scenario_overrides(platform_arguments(platform)))
     try:
         hello = read_json_line(sim, "the simulator", DAEMON_START_S)
-        table = config_table(
-            scn,
-            radar={"link": hello["radar"]["connect"]},
-            ins={"protocol": ins, "link": _connect_link(hello["ins"][0]["connect"])},
-            recorder={"directory": str(out)},
-            status={"http_port": 0},
-        )
-        for name, values in sections.items():
-            table.setdefault(name, {}).update(values)
-        cfg_path = write_config(out / "sarmoco.toml", table)
+        cfg_path = _daemon_config(out, scn, hello, ins, sections)
         daemon = subprocess.Popen(
             [*py, "run", "--config", str(cfg_path), "--store", str(out / "run.zarr"),
              "--exit-when-idle", str(IDLE_EXIT_S)],

@@ -34,7 +34,7 @@ from sarmoco.processing.geometry import ReferenceTrack
 from sarmoco.processing.imaging.tiles import Tile, TileLayout
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 
-CHUNK_PULSES = 256
+SCRATCH_CHUNK_PULSES = 256
 """Pulses per chunk of the scratch arrays."""
 
 
@@ -173,7 +173,7 @@ class StreamSink:
             group.create_array(
                 name,
                 shape=(0, *shape),
-                chunks=(CHUNK_PULSES, *shape),
+                chunks=(SCRATCH_CHUNK_PULSES, *shape),
                 dtype=dtype,
                 dimension_names=dims,
                 compressors=None,

@@ -64,12 +64,12 @@ from sarmoco.sim.faults import Faults, parse_faults
 from sarmoco.sim.ins import GRADES
 from sarmoco.sim.insemitters import host_port, live_ins_emitter
 from sarmoco.sim.insfeed import InsFeed
-from sarmoco.sim.links import Link, TcpServerLink, UdpOutLink
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.outfiles import NAV_FILES, TRUTH_FILE, TruthWriter, write_run
 from sarmoco.sim.player import Pacing, play_emitters
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import DEFAULT_LEVER_ARM_M, PRESETS, radar_table
-from sarmoco.sim.trajectory import MotionSpec
+from sarmoco.sim.transports import Link, TcpServerLink, UdpOutLink
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:

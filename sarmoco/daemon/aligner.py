@@ -120,14 +120,14 @@ class Aligner:
         periods).
     latency_budget_ns : int
         Longest a pulse waits for the INS, ns.
+    max_block : int
+        Most pulses released by one :meth:`poll` (the daemon's ``imaging.block_pulses``).
     bridge_gap_ns : int, optional
         Longest INS silence interpolated across, flagged ``NAV_BRIDGED``, ns (default, or
         anything up to ``max_gap_ns``: no bridging).
     lever_arm_body_m : tuple of 3 float, optional
         APC minus IMU in the body frame (x forward, y right, z down), m. With it,
         positions and velocities are of the antenna phase centre.
-    max_block : int
-        Most pulses released by one :meth:`poll`.
 
     Attributes
     ----------
@@ -141,8 +141,8 @@ class Aligner:
         nav: NavBuffer,
         max_gap_ns: int,
         latency_budget_ns: int,
+        max_block: int,
         lever_arm_body_m: tuple[float, float, float] | None = None,
-        max_block: int = 256,
         bridge_gap_ns: int = 0,
     ) -> None:
         if max_gap_ns <= 0 or latency_budget_ns < 0 or max_block < 1:

@@ -2,7 +2,8 @@
 
 Every section is a frozen dataclass; every field carries its unit, its
 documentation and its constraints in ``dataclasses.field`` metadata, so the
-loader, the error messages and the README's key table all come from one place.
+loader, the error messages and the key table of docs/configuration.md all come from one
+place.
 Errors name the key path, the bad value and what is allowed
 (``radar.prf_hz: -3 is not > 0``); unknown keys are errors.
 """
@@ -20,11 +21,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from sarmoco.daemon.links import INS_OPENERS
 from sarmoco.daemon.schema import ECHO_COMPRESSION
 from sarmoco.errors import ConfigError, ProcessingError
 from sarmoco.keys import key as _key
 from sarmoco.processing.autofocus.settings import AutofocusConfig
+from sarmoco.processing.imaging.presum import PREFILTER_OVERSAMPLING
+from sarmoco.processing.imaging.tile_pga import StripPga
 from sarmoco.processing.mocomp import DEFAULT_ENVELOPE_FRACTION
 from sarmoco.processing.types import C_MPS
 
@@ -112,11 +114,17 @@ class RadarConfig:
         )
 
 
+InsProtocol = Literal["mavlink", "sbg", "sbg-can"]
+"""Every INS wire protocol the daemon speaks (opened by ``links.INS_OPENERS``)."""
+
+
 @dataclass(frozen=True)
 class InsConfig:
     """Navigation source (INS velocity and attitude)."""
 
-    protocol: str = _key("mavlink", "Wire protocol of the INS", choices=tuple(INS_OPENERS))
+    protocol: str = _key(
+        "mavlink", "Wire protocol of the INS", choices=typing.get_args(InsProtocol)
+    )
     link: str = _key(
         "udpin:127.0.0.1:14550",
         "MAVLink: a pymavlink connection string (udpin:, tcp:, /dev/tty..., .tlog, .bin); "
@@ -220,8 +228,8 @@ class MocompConfig:
             (
                 1,
                 "the scene-centre look angle for every bin leaves a look-angle error across "
-                "the swath that the autofocus does not remove (acceptance reference case: "
-                "worst azimuth PSLR -10.6 dB against -12.5 dB with 2); use 2",
+                "the swath that the autofocus does not remove (measured in "
+                "docs/measurements/acceptance.md); use 2",
             ),
         ),
     )
@@ -236,10 +244,9 @@ class MocompConfig:
     along_track: bool = _key(
         True,
         "Place each pulse at its INS along-track position (slow time resampled to "
-        "x / v0) for autofocus and image formation (INS-only focus: ku-vehicle x0.1 "
-        "-9.6 -> -13.0 dB PSLR; with the autofocus on as good as or better than uniform "
-        "speed, see README); false: uniform speed v0, the autofocus then has to absorb "
-        "the speed error as a rate error",
+        "x / v0) for autofocus and image formation, so along-track speed changes come "
+        "from the INS; false: uniform speed v0, the autofocus then has to absorb the "
+        "speed error as a rate error",
     )
     segments: bool = _key(
         True,
@@ -285,9 +292,9 @@ class AutofocusSection(AutofocusConfig):
         "autofocus): removes phase errors shorter than a subaperture; tiles come out one "
         "tile later",
     )
-    pga_iterations: int = _key(6, "Tile PGA iterations at most", gt=0)
+    pga_iterations: int = _key(StripPga.max_iter, "Tile PGA iterations at most", gt=0)
     pga_window_m: float = _key(
-        12.0,
+        StripPga.window_m,
         "Along-track width of tile PGA's first window around each target; it must hold the "
         "paired echoes (lambda R f / (2 v) from the peak) of the fastest phase error to remove",
         unit="m",
@@ -320,9 +327,8 @@ class ImagingConfig:
         0.3,
         "Extra squint on each side of the beam that pixels still take, and the pre-filter "
         "passes: covers the heading error of the INS-only reference track against the beam "
-        "and spotlight targets off the aperture centre; raise it for crab (a track 5-23 mrad "
-        "off the beam cut the aperture to 1.2-1.5 x azimuth IRW; 0.6 deg gave 1.0 x, about "
-        "0.7 dB more noise)",
+        "and spotlight targets off the aperture centre; a wider margin gives each pixel "
+        "more pulses of noise beyond its aperture",
         unit="deg",
         ge=0,
         lt=45,
@@ -333,7 +339,9 @@ class ImagingConfig:
         "those squints before backprojection",
     )
     prefilter_oversampling: float = _key(
-        1.25, "Pulse rate after the pre-filter over the two-sided Doppler band it keeps", gt=1
+        PREFILTER_OVERSAMPLING,
+        "Pulse rate after the pre-filter over the two-sided Doppler band it keeps",
+        gt=1,
     )
     presum_first: bool = _key(
         False,
@@ -444,8 +452,8 @@ class RecorderConfig:
     echo_compression: str = _key(
         "none",
         "Lossless compression of the raw echoes: 'lz4-bitshuffle' stores noise-like int16 "
-        "echoes in about 10 % less space (README, recording) for about a quarter of a core "
-        "at 330 MB/s; 'none' stores them as they are",
+        "echoes in less space at the cost of CPU on the recording path (both measured in "
+        "docs/measurements/ingest.md); 'none' stores them as they are",
         choices=tuple(ECHO_COMPRESSION),
     )
     fsync_interval_s: float = _key(1.0, "Interval between fsyncs of committed data", unit="s", gt=0)
@@ -759,7 +767,7 @@ def _scalar(tp: type, value: Any, path: str, meta: Mapping[str, Any]) -> Any:
 
 
 def describe_keys() -> list[dict[str, str]]:
-    """List every key with its type, unit, default and constraints (for the README).
+    """List every key with its type, unit, default and constraints (for docs/configuration.md).
 
     Returns
     -------
@@ -788,13 +796,15 @@ def describe_keys() -> list[dict[str, str]]:
 
 
 def keys_markdown() -> str:
-    """Every key as a Markdown table (the README's "Configuration" table)."""
+    """Every key as a Markdown table (the table of docs/configuration.md); a ``|`` in a
+    key's meaning (``|d_los|``) is escaped so that it stays in its cell."""
     lines = ["| key | type | unit | default | allowed | meaning |", "|---|---|---|---|---|---|"]
-    lines += [
-        f"| `{r['key']}` | {r['type']} | {r['unit']} | `{r['default']}` | {r['allowed']} | "
-        f"{r['doc']} |"
-        for r in describe_keys()
-    ]
+    for r in describe_keys():
+        doc = r["doc"].replace("|", r"\|")
+        lines.append(
+            f"| `{r['key']}` | {r['type']} | {r['unit']} | `{r['default']}` | {r['allowed']} | "
+            f"{doc} |"
+        )
     return "\n".join(lines) + "\n"
 
 

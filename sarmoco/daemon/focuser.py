@@ -32,6 +32,7 @@ segment, as a batch stores them).
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 import time
@@ -80,19 +81,10 @@ from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, IntArr
 
 
 def radar_params(cfg: Config) -> RadarParams:
-    """The :class:`RadarParams` of the configured radar."""
-    r = cfg.radar
+    """The :class:`RadarParams` of the configured radar: each of its fields is the
+    ``radar`` key of the same name."""
     return RadarParams(
-        carrier_hz=r.carrier_hz,
-        bandwidth_hz=r.bandwidth_hz,
-        pulse_width_s=r.pulse_width_s,
-        sample_rate_hz=r.sample_rate_hz,
-        prf_hz=r.prf_hz,
-        n_samples=r.n_samples,
-        range_gate_delay_s=r.range_gate_delay_s,
-        receive=r.receive,
-        chirp_direction=r.chirp_direction,
-        iq_conjugate=r.iq_conjugate,
+        **{f.name: getattr(cfg.radar, f.name) for f in dataclasses.fields(RadarParams)}
     )
 
 

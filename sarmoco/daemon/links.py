@@ -1,8 +1,8 @@
 """Open the configured radar and INS links (live or from files) as driver sources.
 
-INS protocols are a registry, :data:`INS_OPENERS`: protocol name (the values of
-``ins.protocol``, which :mod:`sarmoco.daemon.config` takes from its keys) to the
-function that opens ``ins.link`` with that protocol. Each opener imports its driver
+INS protocols are a registry, :data:`INS_OPENERS`: protocol name (a value of
+``ins.protocol``, :data:`sarmoco.daemon.config.InsProtocol`) to the function that opens
+``ins.link`` with that protocol. Each opener imports its driver
 when called (as python-can loads its interfaces), so the configuration, which needs
 only the names, does not load pymavlink or python-can. A new protocol is one opener
 here and its emitter in the simulator (``INS_EMITTERS``, which the tests hold to these names).
@@ -12,16 +12,13 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
 from urllib.parse import urlsplit
 
+from sarmoco.daemon.config import Config, InsConfig
 from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource, RadarUdpSource
 from sarmoco.drivers.source import Source
 from sarmoco.drivers.vita49 import ContextExpectation, VitaDecoder
 from sarmoco.errors import ConfigError
-
-if TYPE_CHECKING:  # config imports this module for the protocol names
-    from sarmoco.daemon.config import Config, InsConfig
 
 CAN_LOG_SUFFIXES = (".log", ".asc", ".blf", ".trc", ".csv")
 """File suffixes that name a CAN log (replayed through ``can.LogReader``)."""
@@ -153,7 +150,7 @@ def _mavlink_rates(rate_hz: float) -> dict[str, float]:
     }
 
 
-InsOpener = Callable[["InsConfig", str], Source]
+InsOpener = Callable[[InsConfig, str], Source]
 """Opens an INS link (``ins.link`` or a replayed file) with the ``ins`` settings."""
 
 INS_OPENERS: dict[str, InsOpener] = {

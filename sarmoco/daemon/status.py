@@ -42,7 +42,7 @@ from sarmoco.daemon.livelevel import level_names
 from sarmoco.daemon.quicklook import gray_of, peak_blocks, png_gray
 from sarmoco.errors import ConfigError
 
-LOOPBACK_HOSTS = ("127.0.0.1", "::1", "localhost")
+STATUS_HOSTS = ("127.0.0.1", "::1", "localhost")
 """The only addresses the status server binds to."""
 
 REQUEST_TIMEOUT_S = 5.0
@@ -246,6 +246,9 @@ class LiveView:
         return out
 
 
+LIVE_PAGE_POLL_S = 2.0
+"""The live page's refresh interval (its script's timer), s."""
+
 LIVE_PAGE = """<!DOCTYPE html>
 <html lang="en"><head><meta charset="utf-8"><title>sarmoco live</title>
 <style>
@@ -314,9 +317,11 @@ function tick() {
   document.getElementById("strip").src = "tiles/latest.png?" + Date.now();
 }
 tick();
-setInterval(tick, 2000);
+setInterval(tick, @POLL_MS@);
 </script></body></html>
-""".replace("__LIVE_LEVELS__", json.dumps(level_names()))
+""".replace("@POLL_MS@", str(round(LIVE_PAGE_POLL_S * 1000))).replace(
+    "__LIVE_LEVELS__", json.dumps(level_names())
+)
 """``GET /``: the operator's live page (no external assets; data from /status, /live.json;
 the live image's degraded level, :mod:`sarmoco.daemon.livelevel`, in words)."""
 
@@ -354,8 +359,8 @@ class StatusServer:
         request_timeout_s: float = REQUEST_TIMEOUT_S,
         live: LiveView | None = None,
     ) -> None:
-        if host not in LOOPBACK_HOSTS:
-            raise ConfigError(f"status.host: {host!r} is not one of {', '.join(LOOPBACK_HOSTS)}")
+        if host not in STATUS_HOSTS:
+            raise ConfigError(f"status.host: {host!r} is not one of {', '.join(STATUS_HOSTS)}")
         self.counters = counters
         self.health = health
         self.live = live

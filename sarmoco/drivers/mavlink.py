@@ -82,7 +82,7 @@ from sarmoco.geodesy import tangent_origin
 
 log = logging.getLogger(__name__)
 
-DEFAULT_RATES_HZ: dict[str, float] = {
+REQUESTED_RATES_HZ: dict[str, float] = {
     "LOCAL_POSITION_NED": 50.0,
     "ATTITUDE_QUATERNION": 50.0,
     "SYSTEM_TIME": 2.0,
@@ -461,7 +461,7 @@ class MavlinkSource(Source):
         except (OSError, ValueError) as exc:
             raise DriverError(f"mavlink {url}: cannot open: {exc}") from exc
         self.decoder = MavlinkDecoder(leap_s, host_clock_is_utc and not self.is_file, url, self)
-        self.rates_hz = dict(DEFAULT_RATES_HZ if rates_hz is None else rates_hz)
+        self.rates_hz = dict(REQUESTED_RATES_HZ if rates_hz is None else rates_hz)
         self._timesync_period_ns = round(timesync_period_s * 1e9)
         self._next_timesync_ns = 0
         self._outstanding: dict[int, int] = {}

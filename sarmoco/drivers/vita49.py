@@ -1,6 +1,7 @@
 """VITA 49.2 radar echo packets: the pure encoder and decoder (no I/O).
 
-Profile (what sarmoco reads and what its simulator writes; README "Radar wire format"):
+Profile (what sarmoco reads and what its simulator writes; docs/integrator.md, "The radar:
+VITA 49.2 profile"):
 
 * Signal data packet with stream ID (packet type 1), one pulse per packet,
   stream ID = receive channel. Class ID present (any OUI accepted), trailer present.

@@ -31,11 +31,11 @@ from sarmoco.sim.ins import InsMeasurement, measure_ins
 from sarmoco.sim.insclock import InsClock
 from sarmoco.sim.insemitters import INS_EMITTERS
 from sarmoco.sim.insfeed import InsFeed
-from sarmoco.sim.links import FileLink
 from sarmoco.sim.outfiles import RADAR_FILE, TRUTH_FILE, write_truth
 from sarmoco.sim.player import Pacing, play_emitters
 from sarmoco.sim.run import INS_MARGIN_S, pulse_times_ns
 from sarmoco.sim.trajectory import Trajectory
+from sarmoco.sim.transports import FileLink
 
 NAV_PROTOCOL = "mavlink"
 """The INS recording written for array runs (its file: ``INS_EMITTERS[...].file``)."""

@@ -32,7 +32,8 @@ from sarmoco.processing.array.geometry import ArrayLayout, mimo_layout
 from sarmoco.processing.types import C_MPS, FloatArray, RadarParams
 from sarmoco.sim.array_echo import peaks_dem
 from sarmoco.sim.scenario import DEFAULT_T0_NS, level_track, radar_table
-from sarmoco.sim.trajectory import SinusoidSum, Trajectory, euler_to_quat
+from sarmoco.sim.trajectory import Trajectory, euler_to_quat
+from sarmoco.sim.turbulence import SinusoidSum
 
 ARRAY_PRESET = "mimo-array"
 """Name of the array preset (``sarmoco sim --preset mimo-array``)."""
@@ -214,6 +215,59 @@ def _cut(height: FloatArray, spacing: float, n_north: int, n_east: int, where: s
     return np.ascontiguousarray(height[i0 : i0 + n_north, j0 : j0 + n_east])
 
 
+def _user_dem(dem: Path, spacing_m: float) -> FloatArray:
+    """Heights (m) of the DEM file ``dem``, which must be on the preset's grid spacing (m)."""
+    user_h, user_dx = read_dem(dem)
+    if not math.isclose(user_dx, spacing_m, rel_tol=1e-6):
+        raise DataFileError(
+            f"--dem {dem}: spacing_m {user_dx:g} m is not the preset's terrain grid "
+            f"{spacing_m:g} m (resample it)"
+        )
+    return user_h
+
+
+def _gated_radar(rr: dict[str, Any], near_m: float, far_m: float) -> RadarParams:
+    """The preset's ``[radar]`` table with a range gate from ``near_m`` to ``far_m`` (slant, m)."""
+    fs, tp = float(rr["sample_rate_hz"]), float(rr["pulse_width_s"])
+    return RadarParams(
+        carrier_hz=float(rr["carrier_hz"]),
+        bandwidth_hz=float(rr["bandwidth_hz"]),
+        pulse_width_s=tp,
+        sample_rate_hz=fs,
+        prf_hz=float(rr["prf_hz"]),
+        n_samples=2 * math.ceil((2.0 * (far_m - near_m) / C_MPS + tp) * fs / 2.0),
+        range_gate_delay_s=2.0 * near_m / C_MPS,
+        receive="matched",
+        chirp_direction=rr.get("chirp_direction", "up"),
+    )
+
+
+def _range_span(
+    altitude_m: float, half_width_m: float, user_h: FloatArray | None
+) -> tuple[float, float, float]:
+    """Flight altitude (m, raised by a user DEM's mean height), nearest and farthest slant
+    range (m) to the terrain within ``half_width_m`` of the track, with the range margin."""
+    if user_h is None:
+        lo_h, hi_h = -39.2977, 48.6260  # sarmoco.sim.array_echo.PAPER_DEM_RANGE_M
+    else:
+        altitude_m += float(user_h.mean())
+        lo_h, hi_h = float(user_h.min()), float(user_h.max())
+    far_m = math.hypot(half_width_m, altitude_m - lo_h) + RANGE_MARGIN_M
+    near_m = altitude_m - hi_h - RANGE_MARGIN_M
+    if near_m <= 0.0:
+        raise DataFileError(f"terrain: its highest point {hi_h:.1f} m reaches the flight")
+    return altitude_m, near_m, far_m
+
+
+def _roll_series(raw: dict[str, Any], seed: int) -> SinusoidSum:
+    """The preset's low-pass random roll (rad) about the mean, seeded by ``seed``."""
+    return SinusoidSum.coloured(
+        math.radians(float(raw["roll_series_rms_deg"])),
+        float(raw["roll_series_corner_hz"]),
+        np.random.default_rng(np.random.SeedSequence([seed, 13])),
+    )
+
+
 def load_array_preset(
     scale: float = 1.0,
     *,
@@ -258,24 +312,10 @@ def load_array_preset(
     d_len = float(ar["antenna_length_m"])
     speed = float(raw["speed_mps"])
 
-    altitude = float(raw["altitude_m"])
-    half_width = altitude * math.tan(max_look)
+    half_width = float(raw["altitude_m"]) * math.tan(max_look)
     full_length = 2.0 * half_width
-    if dem is None:
-        lo_h, hi_h = -39.2977, 48.6260  # sarmoco.sim.array_echo.PAPER_DEM_RANGE_M
-    else:
-        user_h, user_dx = read_dem(dem)
-        if not math.isclose(user_dx, spacing, rel_tol=1e-6):
-            raise DataFileError(
-                f"--dem {dem}: spacing_m {user_dx:g} m is not the preset's terrain grid "
-                f"{spacing:g} m (resample it)"
-            )
-        altitude += float(user_h.mean())
-        lo_h, hi_h = float(user_h.min()), float(user_h.max())
-    far_m = math.hypot(half_width, altitude - lo_h) + RANGE_MARGIN_M
-    near_m = altitude - hi_h - RANGE_MARGIN_M
-    if near_m <= 0.0:
-        raise DataFileError(f"terrain: its highest point {hi_h:.1f} m reaches the flight")
+    user_h = None if dem is None else _user_dem(dem, spacing)
+    altitude, near_m, far_m = _range_span(float(raw["altitude_m"]), half_width, user_h)
     half_ap = far_m * math.tan(math.asin(min(lam / d_len, 0.5)))
     strip = scale * full_length
     ground_along = strip + 4.0 * half_ap
@@ -283,38 +323,19 @@ def load_array_preset(
     half_east = half_width + far_m * math.tan(math.radians(abs(roll)))  # the rolled beam's edge
     n_east = math.ceil(2.0 * half_east / spacing)
     n_east += 1 + n_east % 2  # odd: a sample on the track
-    if dem is None:
+    if user_h is None:
         n_full = math.ceil((full_length + 4.0 * half_ap) / spacing) + 1
-        height = _cut(peaks_dem(n_full, n_east), spacing, n_north, n_east, "terrain")
+        user_h, dem_name = peaks_dem(n_full, n_east), "terrain"
     else:
-        height = _cut(user_h, spacing, n_north, n_east, f"--dem {dem}")
+        dem_name = f"--dem {dem}"
+    height = _cut(user_h, spacing, n_north, n_east, dem_name)
     terrain = Terrain(
         height, spacing, (-0.5 * (n_north - 1) * spacing, -0.5 * (n_east - 1) * spacing)
     )
 
-    fs, tp = float(rr["sample_rate_hz"]), float(rr["pulse_width_s"])
-    n_samples = 2 * math.ceil((2.0 * (far_m - near_m) / C_MPS + tp) * fs / 2.0)
-    radar = RadarParams(
-        carrier_hz=float(rr["carrier_hz"]),
-        bandwidth_hz=float(rr["bandwidth_hz"]),
-        pulse_width_s=tp,
-        sample_rate_hz=fs,
-        prf_hz=float(rr["prf_hz"]),
-        n_samples=n_samples,
-        range_gate_delay_s=2.0 * near_m / C_MPS,
-        receive="matched",
-        chirp_direction=rr.get("chirp_direction", "up"),
-    )
+    radar = _gated_radar(rr, near_m, far_m)
     flight = strip + 2.0 * half_ap
     n_pulses = math.floor(flight / speed * radar.prf_hz) + 1
-    series = None
-    if roll_series:
-        rng = np.random.default_rng(np.random.SeedSequence([seed, 13]))
-        series = SinusoidSum.coloured(
-            math.radians(float(raw["roll_series_rms_deg"])),
-            float(raw["roll_series_corner_hz"]),
-            rng,
-        )
     epc = float(ar["epc_spacing_m"])
     return ArrayScenario(
         radar=radar,
@@ -331,7 +352,7 @@ def load_array_preset(
         track_start_north_m=-0.5 * flight,
         n_pulses=n_pulses,
         roll_rad=math.radians(roll),
-        roll_series=series,
+        roll_series=_roll_series(raw, seed) if roll_series else None,
         snr_db=None if raw.get("snr_db") is None else float(raw["snr_db"]),
         scatterers_per_cell=int(tr["scatterers_per_cell"]),
         scale=scale,

@@ -15,7 +15,7 @@ from typing import Any
 from sarmoco.drivers.vita49 import PayloadFormat, encode_signal_packet
 from sarmoco.processing.types import ComplexArray, IntArray, RadarParams
 from sarmoco.sim.emit_radar import OUI_SIM, RadarEmitter
-from sarmoco.sim.links import Link
+from sarmoco.sim.transports import Link
 
 
 class ArrayRadarEmitter(RadarEmitter):

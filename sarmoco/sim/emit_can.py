@@ -44,8 +44,8 @@ from sarmoco.sim.emit_sbg import (
     vec4,
 )
 from sarmoco.sim.insfeed import InsFeed
-from sarmoco.sim.links import Link, TcpServerLink
 from sarmoco.sim.pacing import Event, merge
+from sarmoco.sim.transports import Link, TcpServerLink
 
 Framing = Literal["slcan", "socketcand", "candump"]
 CHANNEL = "can0"

@@ -48,8 +48,8 @@ from sarmoco.processing.types import FloatArray
 from sarmoco.sim.emitter import Emitter
 from sarmoco.sim.faults import PacketFaults
 from sarmoco.sim.insfeed import GEODETIC_ORIGIN, InsFeed
-from sarmoco.sim.links import FileLink, Link
 from sarmoco.sim.pacing import Event
+from sarmoco.sim.transports import FileLink, Link
 
 SYSTEM_ID = 1
 COMPONENT_ID = mavlink2.MAV_COMP_ID_AUTOPILOT1
@@ -63,7 +63,7 @@ STREAMS = (
     "SYSTEM_TIME",
 )
 """Messages whose rate MAV_CMD_SET_MESSAGE_INTERVAL sets."""
-DEFAULT_RATES_HZ: dict[str, float] = {
+AUTOPILOT_RATES_HZ: dict[str, float] = {
     "LOCAL_POSITION_NED": 4.0,
     "GLOBAL_POSITION_INT": 4.0,
     "ATTITUDE_QUATERNION": 4.0,
@@ -124,7 +124,7 @@ class MavlinkEmitter(Emitter):
     feed : InsFeed
         Samples and the autopilot boot clock.
     rates_hz : mapping of str to float, optional
-        Initial rates of :data:`STREAMS`, Hz (default :data:`DEFAULT_RATES_HZ`;
+        Initial rates of :data:`STREAMS`, Hz (default :data:`AUTOPILOT_RATES_HZ`;
         a ``.tlog`` is usually written at the INS rate).
     signing_key : bytes, optional
         32-byte MAVLink 2 signing secret: sign every packet.
@@ -153,7 +153,7 @@ class MavlinkEmitter(Emitter):
         super().__init__(link, faults, seed, rank)
         self.feed = feed
         self.tlog = isinstance(link, FileLink)
-        self.default_rates_hz = dict(DEFAULT_RATES_HZ if rates_hz is None else rates_hz)
+        self.default_rates_hz = dict(AUTOPILOT_RATES_HZ if rates_hz is None else rates_hz)
         self.rates_hz = dict(self.default_rates_hz)
         self.pos_ned = (
             feed.pos_ned if feed.pos_ned is not None else dead_reckoned(feed.t_ns, feed.vel_ned)

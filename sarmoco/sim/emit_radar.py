@@ -27,8 +27,8 @@ from sarmoco.processing.types import ComplexArray, IntArray, RadarParams
 from sarmoco.sim.echostream import EchoStream
 from sarmoco.sim.emitter import Emitter
 from sarmoco.sim.faults import PacketFaults
-from sarmoco.sim.links import Link, UdpOutLink
 from sarmoco.sim.pacing import Event
+from sarmoco.sim.transports import Link, UdpOutLink
 
 INT16_PEAK = 16384.0
 """Largest |I| or |Q| of the run after scaling to int16 (6 dB below full scale)."""

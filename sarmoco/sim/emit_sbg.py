@@ -31,8 +31,8 @@ from sarmoco.sim.emit_mavlink import dead_reckoned
 from sarmoco.sim.emitter import Emitter
 from sarmoco.sim.faults import PacketFaults
 from sarmoco.sim.insfeed import GEODETIC_ORIGIN, GEOID_UNDULATION_M, InsFeed
-from sarmoco.sim.links import Link
 from sarmoco.sim.pacing import Event, merge
+from sarmoco.sim.transports import Link
 
 SOLUTION_NAV_POSITION = 4
 """sbgECom solution mode "full navigation" (bits 0-3 of the EKF status)."""

@@ -3,7 +3,7 @@
 An emitter turns a :class:`~sarmoco.sim.run.SimRun` into a time-ordered stream
 of :class:`~sarmoco.sim.pacing.Event` (its schedule), sends each packet through
 its :class:`~sarmoco.sim.faults.PacketFaultInjector` onto its
-:class:`~sarmoco.sim.links.Link`, and answers what the daemon sends back
+:class:`~sarmoco.sim.transports.Link`, and answers what the daemon sends back
 (:meth:`Emitter.on_bytes`). Schedules are in scenario GPS time; what goes on
 the wire is shifted by :attr:`WireTime.shift_ns` (zero unless a live run is
 pinned to the host clock, so that TIMESYNC means something to the daemon).
@@ -18,8 +18,8 @@ from typing import Any
 
 from sarmoco.drivers.clock import GPS_LEAP_SECONDS_DEFAULT, gps_ns_to_unix_ns
 from sarmoco.sim.faults import PacketFaultInjector, PacketFaults
-from sarmoco.sim.links import Link
 from sarmoco.sim.pacing import Event
+from sarmoco.sim.transports import Link
 
 
 @dataclass(frozen=True)

@@ -15,11 +15,11 @@ from typing import Any
 
 from sarmoco.errors import ConfigError
 from sarmoco.sim.emit_can import SbgCanEmitter
-from sarmoco.sim.emit_mavlink import DEFAULT_RATES_HZ, MavlinkEmitter
+from sarmoco.sim.emit_mavlink import AUTOPILOT_RATES_HZ, MavlinkEmitter
 from sarmoco.sim.emit_sbg import SbgEmitter
 from sarmoco.sim.emitter import Emitter
 from sarmoco.sim.insfeed import InsFeed
-from sarmoco.sim.links import FileLink, PtyLink, TcpServerLink, UdpOutLink
+from sarmoco.sim.transports import FileLink, PtyLink, TcpServerLink, UdpOutLink
 
 TLOG_SYSTEM_TIME_HZ = 5.0
 """SYSTEM_TIME rate in a written ``.tlog``, Hz."""
@@ -62,7 +62,7 @@ def host_port(text: str, what: str) -> tuple[str, int]:
 
 def _mavlink_file(link: FileLink, feed: InsFeed, options: dict[str, Any]) -> Emitter:
     rates = {
-        **DEFAULT_RATES_HZ,  # the autopilot's default streams, and what the daemon asks for
+        **AUTOPILOT_RATES_HZ,  # the autopilot's default streams, and what the daemon asks for
         "LOCAL_POSITION_NED": feed.rate_hz,
         "ATTITUDE_QUATERNION": feed.rate_hz,
         "SYSTEM_TIME": TLOG_SYSTEM_TIME_HZ,

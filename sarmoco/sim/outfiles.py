@@ -8,7 +8,8 @@ nav.tlog      MAVLink 2 with 8-byte UNIX µs stamps; LOCAL_POSITION_NED and
               ATTITUDE_QUATERNION at the INS rate, SYSTEM_TIME at 5 Hz
 ins.sbg       sbgECom binary as read from the serial port
 ins.log       SBG CAN frames in candump format
-truth.json    the run's truth (:meth:`SimRun.truth_dict`) and a ``wire`` section:
+truth.json    the run's truth (:meth:`SimRun.truth_dict`, each target's latitude and
+              longitude added) and a ``wire`` section:
               what was written, the wire time base, the INS clock, the faults
               asked for and those injected per file
 ============  ==================================================================
@@ -23,16 +24,19 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from sarmoco.drivers.vita49 import PayloadFormat
 from sarmoco.errors import DataFileError
+from sarmoco.geodesy import ned_to_geodetic
 from sarmoco.sim.emit_radar import RadarEmitter
 from sarmoco.sim.emitter import Emitter, WireTime
 from sarmoco.sim.faults import Faults
 from sarmoco.sim.insemitters import INS_EMITTERS
-from sarmoco.sim.insfeed import InsFeed
-from sarmoco.sim.links import FileLink
+from sarmoco.sim.insfeed import GEODETIC_ORIGIN, InsFeed
 from sarmoco.sim.player import Pacing, play_emitters
 from sarmoco.sim.run import SimRun
+from sarmoco.sim.transports import FileLink
 
 NAV_FILES = {name: kind.file for name, kind in INS_EMITTERS.items()}
 """File written for each INS protocol (:data:`~sarmoco.sim.insemitters.INS_EMITTERS`)."""
@@ -50,8 +54,13 @@ def truth_record(
     """The run's truth plus what went on the wire (JSON-able).
 
     ``wire.shift_ns`` is added to every scenario GPS time on the wire (0 for files).
+    Each target also gets ``lla``: its latitude, longitude (deg, WGS-84) and ellipsoid
+    height (m), the scenario NED position placed about
+    :data:`~sarmoco.sim.insfeed.GEODETIC_ORIGIN` (where a GIS should find it).
     """
     truth = run.truth_dict()
+    for target in truth["targets"]:
+        target["lla"] = ned_to_geodetic(np.asarray(target["pos_ned"]), GEODETIC_ORIGIN).tolist()
     truth["wire"] = wire_record(feed, faults, emitters, wire)
     return truth
 

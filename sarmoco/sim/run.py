@@ -11,8 +11,9 @@ import numpy as np
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 from sarmoco.sim.echostream import EchoStream, scene_echo
 from sarmoco.sim.ins import InsMeasurement, measure_ins
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.scenario import Scenario, radar_table
-from sarmoco.sim.trajectory import MotionSpec, Trajectory, apc_trajectory, true_trajectory
+from sarmoco.sim.trajectory import Trajectory, apc_trajectory, true_trajectory
 
 INS_MARGIN_S = 0.5
 """The INS record starts this long before the first pulse and ends this long after the last, s."""

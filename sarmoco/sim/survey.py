@@ -41,8 +41,9 @@ import numpy as np
 
 from sarmoco.errors import ConfigError
 from sarmoco.processing.types import FloatArray
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.scenario import Scenario, Target
-from sarmoco.sim.trajectory import MotionSpec, TurbulenceDeviation
+from sarmoco.sim.turbulence import TurbulenceDeviation
 
 G_MPS2 = 9.80665
 """Standard gravity, m/s²."""

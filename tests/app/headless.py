@@ -19,9 +19,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-import pytest
-
 from sarmoco.closing import Closing
+from tests.conftest import unavailable
 
 CHROMIUM_FLAGS = (
     "--headless",
@@ -45,10 +44,7 @@ def chromium_or_skip() -> str:
     ``CI=true`` (``.ci/run`` installs the distribution's package)."""
     path = shutil.which("chromium") or shutil.which("chromium-browser")
     if path is None:
-        msg = "chromium not found (Debian: apt-get install chromium)"
-        if os.environ.get("CI", "").lower() == "true":
-            pytest.fail(msg)
-        pytest.skip(msg)
+        unavailable("chromium not found (Debian: apt-get install chromium)")
     return path
 
 

@@ -10,8 +10,10 @@ neighbour tiles for tile PGA): without it the tiles lose pulses and differ.
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -28,6 +30,7 @@ from sarmoco.daemon.runner import replay_files, replay_store
 from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.processing.geometry import ReferenceTrack
 from sarmoco.processing.imaging.tiles import TileLayout
+from tests.workloads.dask_cluster import separate_cluster
 
 PULSES = 700
 """Pulses simulated (ku-vehicle at scale 0.05: ten tiles)."""
@@ -69,8 +72,20 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> tuple[Config, Path]:
     return load_config(out / "sim" / "sarmoco.toml"), out
 
 
-def assert_same_store(single: RunStore, batch: RunStore) -> None:
-    """The batch store holds the single-process replay's products."""
+@pytest.fixture(scope="module")
+def replayed(recorded: tuple[Config, Path]) -> tuple[Path, Path]:
+    """The single-process replays: of the files, and of the store that replay wrote."""
+    cfg, out = recorded
+    sim = out / "sim"
+    single_files = out / "single_files.zarr"
+    replay_files(cfg, sim / "radar.vrt", sim / "nav.tlog", single_files, progress=False)
+    single_store = out / "single_store.zarr"
+    replay_store(cfg, single_files, single_store, progress=False)
+    return single_files, single_store
+
+
+def assert_same_store(single: RunStore, batch: RunStore, rtol: float = IMAGE_RTOL) -> None:
+    """The batch store holds the single-process replay's products (tiles to ``rtol``)."""
     assert batch.attrs["complete"] is True
     assert batch.n_images == single.n_images >= 8
     for k in range(single.n_images):
@@ -78,7 +93,7 @@ def assert_same_store(single: RunStore, batch: RunStore) -> None:
         np.testing.assert_array_equal(a.axis0_m, b.axis0_m)
         np.testing.assert_array_equal(a.axis1_m, b.axis1_m)
         err = np.linalg.norm(a.data - b.data) / np.linalg.norm(a.data)
-        assert err <= IMAGE_RTOL, f"tile {k}: relative L2 difference {err:.3g}"
+        assert err <= rtol, f"tile {k}: relative L2 difference {err:.3g}"
         assert attrs_a == attrs_b, k
     assert batch.attrs["metrics"] == single.attrs["metrics"]
     for table in ("pulses", "motion", "autofocus"):
@@ -89,10 +104,13 @@ def assert_same_store(single: RunStore, batch: RunStore) -> None:
 
 
 def test_blocks_on_two_workers_give_the_single_process_replay(
-    client: Any, recorded: tuple[Config, Path], capsys: pytest.CaptureFixture[str]
+    client: Any,
+    recorded: tuple[Config, Path],
+    replayed: tuple[Path, Path],
+    capsys: pytest.CaptureFixture[str],
 ) -> None:
     """``sarmoco batch --scheduler`` on the cluster, a store and a file pair at once."""
-    cfg, out = recorded
+    _, out = recorded
     assert client.scheduler.address.startswith(f"tcp://{LOOPBACK}:")
     workers = client.scheduler_info()["workers"]
     assert len(workers) == 2 and all(a.startswith(f"tcp://{LOOPBACK}:") for a in workers)
@@ -106,11 +124,7 @@ def test_blocks_on_two_workers_give_the_single_process_replay(
     }
     assert listening and {ip for _, ip in listening} == {LOOPBACK}, listening
     sim = out / "sim"
-    single_files = out / "single_files.zarr"
-    replay_files(cfg, sim / "radar.vrt", sim / "nav.tlog", single_files, progress=False)
-    single_store = out / "single_store.zarr"
-    replay_store(cfg, single_files, single_store, progress=False)
-
+    single_files, single_store = replayed
     status = main(
         ["batch", "--config", str(sim / "sarmoco.toml"), str(single_files),
          "--radar", str(sim / "radar.vrt"), "--nav", str(sim / "nav.tlog"),
@@ -126,6 +140,83 @@ def test_blocks_on_two_workers_give_the_single_process_replay(
     assert_same_store(open_store(single_files), open_store(out / "batch" / "radar.zarr"))
     assert_same_store(open_store(single_store), open_store(out / "batch" / "single_files.zarr"))
     assert not list((out / "batch").glob("*scratch*"))
+
+
+def listening_addresses(pids: list[int]) -> set[str]:
+    """The addresses that processes and their children listen on (TCP and UDP)."""
+    tree = [psutil.Process(pid) for pid in pids]
+    tree += [child for proc in list(tree) for child in proc.children(recursive=True)]
+    return {
+        c.laddr.ip
+        for proc in tree
+        for c in proc.net_connections("inet")
+        if c.status in (psutil.CONN_LISTEN, psutil.CONN_NONE)
+    }
+
+
+def test_a_worker_killed_mid_job_costs_only_its_tasks(
+    recorded: tuple[Config, Path], replayed: tuple[Path, Path], tmp_path: Path
+) -> None:
+    """``sarmoco batch --scheduler`` on a cluster of separate processes (``dask scheduler``,
+    two ``dask worker``) on 127.0.0.1: one worker is SIGKILLed while it runs a front end
+    (its output store half written); its nanny starts a new worker, the task runs again,
+    and both recordings' stores equal the single-process replays bit for bit."""
+    from distributed import Client
+
+    _, out = recorded
+    sim = out / "sim"
+    single_files, single_store = replayed
+    batch_out = tmp_path / "batch"
+    with separate_cluster(tmp_path, 2) as (address, pids), Client(address) as watcher:
+        assert address.startswith(f"tcp://{LOOPBACK}:")
+        watcher.wait_for_workers(2, timeout=30)
+        assert listening_addresses(pids) == {LOOPBACK}
+        batch = subprocess.Popen(
+            [sys.executable, "-m", "sarmoco", "batch", "--config", str(sim / "sarmoco.toml"),
+             str(single_files), "--radar", str(sim / "radar.vrt"), "--nav", str(sim / "nav.tlog"),
+             "--out", str(batch_out), "--scheduler", address, "--tiles-per-block", "4"],
+            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        outputs = [batch_out / "single_files.zarr", batch_out / "radar.zarr"]
+        deadline = time.monotonic() + 300  # workers load sarmoco on their first task
+        while True:  # a worker in a front end that has begun writing its store
+            busy = {
+                worker: keys
+                for worker, keys in watcher.processing().items()
+                if any(str(k).startswith("front_end") for k in keys)
+            }
+            if busy and all(p.exists() for p in outputs):
+                break
+            assert batch.poll() is None, batch.communicate()
+            assert time.monotonic() < deadline, (busy, [p.exists() for p in outputs])
+            time.sleep(0.05)
+        victim = next(iter(busy))
+        os.kill(watcher.run(os.getpid, workers=[victim])[victim], signal.SIGKILL)
+        stdout, stderr = batch.communicate(timeout=120)
+        assert batch.returncode == 0, stderr
+        assert victim not in watcher.scheduler_info()["workers"]
+        watcher.wait_for_workers(2, timeout=30)  # the nanny's new worker
+    (dashboard,) = [line for line in stderr.splitlines() if line.startswith("dashboard: ")]
+    assert f"http://{LOOPBACK}:" in dashboard, dashboard  # served (or to be) on loopback only
+    assert "2 recording(s)" in stdout
+    assert_same_store(open_store(single_files), open_store(outputs[1]), rtol=0.0)
+    assert_same_store(open_store(single_store), open_store(outputs[0]), rtol=0.0)
+    assert not list(batch_out.glob("*scratch*"))
+
+
+def test_batch_refuses_outputs_that_exist(
+    recorded: tuple[Config, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A batch never overwrites a store (the one it finds on a retried task is its own)."""
+    _, out = recorded
+    sim = out / "sim"
+    (tmp_path / "o.zarr").mkdir()
+    status = main(
+        ["batch", "--config", str(sim / "sarmoco.toml"), "--radar", str(sim / "radar.vrt"),
+         "--nav", str(sim / "nav.tlog"), "--out", str(tmp_path / "o.zarr"), "--workers", "1"]
+    )  # fmt: skip
+    assert status == 2 and "never overwrites" in capsys.readouterr().err
+    assert (tmp_path / "o.zarr").is_dir()
 
 
 def test_batch_command_refuses_what_it_cannot_run(

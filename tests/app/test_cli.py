@@ -144,3 +144,18 @@ def test_sim_out_writes_a_configuration_the_daemon_accepts(
         (context,) = src.decoder.context.values()
     assert got and not any(p.context_mismatch for p in got)
     assert context.bandwidth_hz == pytest.approx(cfg.radar.sample_rate_hz)
+
+
+def test_the_export_formats_named_in_help_are_the_ones_export_writes(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """Each NGA format ``sarmoco --help`` names beside ``export`` has its option in
+    ``sarmoco export --help`` (the top-level text claims nothing the verb cannot do)."""
+    status, out, _ = run_cli(["--help"], capsys)
+    assert status == 0
+    (line,) = [x for x in out.splitlines() if x.strip().startswith("export ")]
+    named = {f for f in ("SICD", "CPHD", "CRSD", "SIDD") if f in line}
+    assert named, line
+    status, out, _ = run_cli(["export", "--help"], capsys)
+    assert status == 0
+    assert {f for f in named if f"--{f.lower()}" not in out} == set(), (line, out)

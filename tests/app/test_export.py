@@ -155,6 +155,73 @@ def test_the_geotiff_puts_the_brightest_target_where_the_simulator_did(scene: Sc
     assert np.linalg.norm(ned) < 1e-3
 
 
+def _parabola_peak(values: np.ndarray) -> tuple[float, float]:
+    """(row, column) of the largest value of a 2-D array, refined by a parabola through it
+    and its neighbours along each axis (fractional indices)."""
+    k = np.unravel_index(np.argmax(values), values.shape)
+    refined = [float(k[0]), float(k[1])]
+    for axis in (0, 1):
+        step = np.zeros(2, dtype=int)
+        step[axis] = 1
+        a, b, c = values[tuple(np.subtract(k, step))], values[k], values[tuple(np.add(k, step))]
+        if a - 2 * b + c != 0:
+            refined[axis] += 0.5 * (a - c) / (a - 2 * b + c)
+    return refined[0], refined[1]
+
+
+def test_the_geotiff_opens_in_rasterio_with_every_target_at_its_latitude_and_longitude(
+    scene: Scene,
+) -> None:
+    """rasterio (GDAL) reads the GeoTIFF's georeferencing on its own: each simulated
+    target's peak in the raster (refined to a fraction of a pixel), mapped through the
+    file's geotransform and from the file's CRS to WGS-84, lies within half a pixel of the
+    latitude and longitude ``truth.json`` gives it (a geotransform one pixel off misses
+    by a pixel)."""
+    import rasterio
+    import rasterio.warp
+
+    folder = scene.out / "rasterio"
+    folder.mkdir()
+    (tif,) = write_geotiffs(scene.store, folder)
+    with rasterio.open(tif.path) as src:
+        raster = src.read(1).astype(np.float64)
+        transform, crs = src.transform, src.crs
+    assert crs is not None and crs.is_geographic
+    misses = []
+    for target in scene.truth["targets"]:
+        lat, lon, h = target["lla"]
+        (x,), (y,) = rasterio.warp.transform("EPSG:4326", crs, [lon], [lat])
+        col, row = ~transform @ (x, y)  # where the file says the target is (corner coords)
+        r0, c0 = round(row - 0.5) - 10, round(col - 0.5) - 10  # a window of 2 m
+        assert r0 >= 1 and c0 >= 1, (row, col)
+        r, c = _parabola_peak(raster[r0 : r0 + 21, c0 : c0 + 21])
+        x, y = transform @ (c0 + c + 0.5, r0 + r + 0.5)  # the peak pixel's centre
+        (lon_at,), (lat_at,) = rasterio.warp.transform(crs, "EPSG:4326", [x], [y])
+        misses.append(
+            float(np.linalg.norm(geodetic_to_ned(np.array([lat_at, lon_at, h]), (lat, lon, h))[:2]))
+        )
+    print(f"rasterio: targets' peaks {np.round(misses, 4).tolist()} m from their lat/lon")
+    assert len(misses) == 3
+    assert max(misses) < PIXEL_M / 2
+
+
+def test_the_sicd_opens_in_sarpy_with_our_pixels(scene: Scene) -> None:
+    """sarpy (``sarpy.io.complex.open``), the reader many SICD users have, reads the file
+    ``sarmoco export --sicd`` writes: the same complex pixels, the size and side of track."""
+    from sarpy.io.complex import open as open_complex
+
+    out = scene.out / "sarpy.nitf"
+    assert main(["export", str(scene.store.path), "--sicd", str(out)]) == 0
+    reader = open_complex(str(out))
+    (meta,) = reader.get_sicds_as_tuple()
+    pixels = reader[:, :]
+    seg = segment_images(scene.store)[0]
+    assert pixels.dtype == np.complex64
+    assert np.array_equal(pixels, seg.image.data.T)  # rows: ground range, columns: along track
+    assert (meta.ImageData.NumRows, meta.ImageData.NumCols) == seg.image.data.T.shape
+    assert meta.SCPCOA.SideOfTrack == "R"
+
+
 def test_sicd_export_passes_the_consistency_check_and_holds_our_pixels(
     scene: Scene, capsys: pytest.CaptureFixture[str]
 ) -> None:

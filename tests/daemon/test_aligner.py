@@ -239,7 +239,7 @@ def test_pulse_velocity_is_the_ins_velocity_not_its_positions_derivative() -> No
 def test_timeout_flag_velocity_only_source_and_flush() -> None:
     ring = EchoRing(16, 4)
     nav = NavBuffer(history_ns=5_000 * MS)
-    aligner = Aligner(ring, nav, max_gap_ns=20 * MS, latency_budget_ns=100 * MS)
+    aligner = Aligner(ring, nav, max_gap_ns=20 * MS, latency_budget_ns=100 * MS, max_block=256)
     for k, t in enumerate((0, 10, 20)):
         nav.push_velocity(t * MS, (30.0, 1.0 + k, 0.0))  # no position from this source
         nav.push_attitude(t * MS, (1.0, 0.0, 0.0, 0.0))
@@ -270,7 +270,7 @@ def test_short_silence_bridged_long_ones_flagged() -> None:
     pos, vel = _imu(t_ins * 1e-9)
     quat = _euler_quat(t_ins * 1e-9)
     ring = EchoRing(4096, 4)
-    aligner = Aligner(ring, NavBuffer(), 50 * MS, 500 * MS, bridge_gap_ns=400 * MS)
+    aligner = Aligner(ring, NavBuffer(), 50 * MS, 500 * MS, 256, bridge_gap_ns=400 * MS)
     events = sorted([(int(t), 0, k) for k, t in enumerate(t_pulse)]
                     + [(int(t) + 5 * MS, 1, k) for k, t in enumerate(t_ins)])  # fmt: skip
     blocks: list[AlignedBlock] = []

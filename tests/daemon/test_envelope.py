@@ -18,9 +18,9 @@ from pathlib import Path
 import pytest
 
 from sarmoco.app.simconfig import scenario_config
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec
 from tests.daemon.test_pipeline import _target_metrics
 
 GOAL_DB = -13.0

@@ -58,6 +58,7 @@ import pytest
 
 from sarmoco.app.benchcmd import committed_now
 from sarmoco.daemon.store import open_store
+from tests.conftest import unavailable
 from tests.daemon.test_daemon_process import (
     N_PULSES,
     Daemon,
@@ -84,7 +85,7 @@ FREEZE_S = 4.0
 def _mount(args: list[str]) -> None:
     done = subprocess.run(["mount", *args], capture_output=True, text=True)
     if done.returncode != 0:
-        pytest.skip(f"mount {' '.join(args)} failed here (root needed): {done.stderr.strip()}")
+        unavailable(f"mount {' '.join(args)} failed here (root needed): {done.stderr.strip()}")
 
 
 @contextlib.contextmanager
@@ -351,14 +352,14 @@ def memory_cgroup(limit: str) -> Iterator[Path]:
     """A cgroup v1 memory group under this process's own, limited to ``limit`` bytes."""
     mine = [ln for ln in Path("/proc/self/cgroup").read_text().splitlines() if ":memory:" in ln]
     if not mine:
-        pytest.skip("no cgroup v1 memory controller here")
+        unavailable("no cgroup v1 memory controller here")
     group = Path("/sys/fs/cgroup/memory" + mine[0].split(":", 2)[2])
     group = group / f"sarmoco-test-{os.getpid()}-{next(_CGROUPS)}"
     try:
         group.mkdir()
         (group / "memory.limit_in_bytes").write_text(limit)
     except OSError as exc:
-        pytest.skip(f"cannot create a memory cgroup at {group}: {exc.strerror}")
+        unavailable(f"cannot create a memory cgroup at {group}: {exc.strerror}")
     try:
         yield group
     finally:

@@ -37,9 +37,9 @@ from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.focuser import Focuser
 from sarmoco.daemon.pipeline import _strictly_increasing
 from sarmoco.daemon.store import open_store
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec
 from tests.daemon.test_daemon_process import (
     Daemon,
     free_port,

@@ -16,9 +16,9 @@ from sarmoco.daemon.focuser import Focuser
 from sarmoco.processing.imaging.tiles import Tile
 from sarmoco.processing.metrics import point_target_metrics
 from sarmoco.processing.types import Image
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import Target, load_preset
-from sarmoco.sim.trajectory import MotionSpec
 
 
 @pytest.fixture(scope="module")

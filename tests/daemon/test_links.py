@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import typing
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,7 @@ import can
 import numpy as np
 import pytest
 
-from sarmoco.daemon.config import Config, InsConfig, describe_keys, parse_config
+from sarmoco.daemon.config import Config, InsConfig, InsProtocol, describe_keys, parse_config
 from sarmoco.daemon.links import INS_OPENERS, open_ins, open_radar
 from sarmoco.drivers.can_source import CanLogSource, CanSource
 from sarmoco.drivers.samples import Sample, VelocitySample
@@ -67,7 +68,7 @@ def assert_every_sample(vel: list[VelocitySample], truth: dict[str, Any]) -> Non
 
 
 def test_the_registries_and_the_configuration_name_the_same_protocols() -> None:
-    assert list(INS_OPENERS) == list(INS_EMITTERS) == ["mavlink", "sbg", "sbg-can"]
+    assert list(INS_OPENERS) == list(INS_EMITTERS) == list(typing.get_args(InsProtocol))
     row = next(r for r in describe_keys() if r["key"] == "ins.protocol")
     assert row["allowed"] == '"mavlink", "sbg", "sbg-can"' and row["type"] == "string"
     for name in INS_OPENERS:

@@ -31,9 +31,9 @@ from sarmoco.drivers.samples import AttitudeSample, EchoPackets, Validity, Veloc
 from sarmoco.drivers.vita49 import encode_signal_packet
 from sarmoco.processing.metrics import PointTargetMetrics, point_target_metrics
 from sarmoco.processing.types import Image
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec
 
 MOTION = MotionSpec(
     kind="turbulence",

@@ -22,9 +22,9 @@ from sarmoco.daemon.focuser import Focuser
 from sarmoco.processing.imaging.tiles import Tile
 from sarmoco.processing.metrics import point_target_metrics
 from sarmoco.processing.types import Image
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec
 
 WINDOW_M = 1.5
 """Half-size of the image window measured about each target, m."""

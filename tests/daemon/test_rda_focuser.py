@@ -28,9 +28,9 @@ from sarmoco.processing.imaging.rda_tiles import LEVELS, RdaTileImager, degraded
 from sarmoco.processing.imaging.tiles import Tile, TileLayout
 from sarmoco.processing.metrics import point_target_metrics
 from sarmoco.processing.types import C_MPS, Image
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import Target, load_preset
-from sarmoco.sim.trajectory import MotionSpec
 
 SINC_PSLR_DB = -13.26
 """Peak sidelobe of an unweighted sinc, dB."""

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from bench.run_ends import one
+from tests.workloads.run_ends import one
 
 SEEDS = [0, 1, 2]
 Groups = list[list[float]]

@@ -33,9 +33,9 @@ from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.store import open_store
 from sarmoco.processing.geometry import fit_reference_track
 from sarmoco.processing.metrics import PointTargetMetrics
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec
 from tests.daemon.test_pipeline import _target_metrics, feed
 
 MAX_RELATIVE_POSITION_M = 0.1

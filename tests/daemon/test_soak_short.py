@@ -1,4 +1,4 @@
-"""A short soak (:mod:`bench.soak`, its every check): the simulator's real-time ku-vehicle
+"""A short soak (:mod:`tests.workloads.soak`, its every check): the simulator's real-time ku-vehicle
 flight with 1 % radar loss and INS dropouts into ``sarmoco run`` started as systemd would
 (``NOTIFY_SOCKET``, ``WATCHDOG_USEC``), for seconds instead of 30 minutes.
 
@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.soak import soak
+from tests.workloads.soak import soak
 
 FLIGHT_S = 15.0
 WATCHDOG_S = 2.0

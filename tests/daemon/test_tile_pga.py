@@ -24,9 +24,9 @@ from sarmoco.processing.imaging.tile_pga import StripPga, TilePga
 from sarmoco.processing.imaging.tiles import Tile, TileImager, TileLayout
 from sarmoco.processing.metrics import point_target_metrics
 from sarmoco.processing.types import Image
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec
 
 WAVELENGTH_M = 0.02
 HEIGHT_M = 100.0

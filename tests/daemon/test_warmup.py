@@ -30,7 +30,7 @@ from sarmoco.processing.autofocus import splice
 from sarmoco.processing.imaging import backprojection, ffbp, presum
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec
+from sarmoco.sim.motionspec import MotionSpec
 
 KERNELS = {"backprojection": backprojection._bp_kernel, "presum": presum._fir_decimate,
            "splice": splice._rotate, "ffbp polar": ffbp._pulses_to_polar,

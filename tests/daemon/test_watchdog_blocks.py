@@ -18,9 +18,9 @@ from sarmoco.daemon.runner import open_recorder
 from sarmoco.daemon.sdnotify import Notifier
 from sarmoco.daemon.status import Counters
 from sarmoco.drivers.samples import AttitudeSample, Validity, VelocitySample
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec
 
 BLOCK = 32
 PULSES = 3 * BLOCK + 9

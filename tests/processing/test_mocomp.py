@@ -25,7 +25,7 @@ from sarmoco.processing.mocomp import (
     shift_range,
 )
 from sarmoco.processing.types import RadarParams
-from sarmoco.sim.trajectory import MotionSpec
+from sarmoco.sim.motionspec import MotionSpec
 
 RADAR = RadarParams(
     carrier_hz=200e9,

@@ -15,7 +15,8 @@ from sarmoco.processing.navinterp import (
     slerp,
 )
 from sarmoco.processing.types import NavSamples
-from sarmoco.sim.trajectory import MotionSpec, TurbulenceDeviation
+from sarmoco.sim.motionspec import MotionSpec
+from sarmoco.sim.turbulence import TurbulenceDeviation
 
 MS = 1_000_000  # ns
 

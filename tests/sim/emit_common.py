@@ -5,10 +5,10 @@ from __future__ import annotations
 import functools
 
 from sarmoco.sim.emitter import Emitter
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.player import Pacing, PlayResult, play_emitters
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec
 
 
 @functools.cache

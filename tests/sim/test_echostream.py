@@ -16,11 +16,11 @@ from sarmoco.sim.emit_radar import INT16_PEAK, RadarEmitter
 from sarmoco.sim.emitter import WireTime
 from sarmoco.sim.faults import Faults
 from sarmoco.sim.insfeed import InsFeed
-from sarmoco.sim.links import FileLink
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.outfiles import TruthWriter, truth_record, write_truth
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec
+from sarmoco.sim.transports import FileLink
 
 MOTION = MotionSpec("turbulence", seed=1)
 

@@ -14,8 +14,8 @@ from sarmoco.drivers.source import Source
 from sarmoco.sim.emit_can import CHANNEL, Framing, SbgCanEmitter
 from sarmoco.sim.faults import Faults
 from sarmoco.sim.insfeed import InsFeed
-from sarmoco.sim.links import FileLink, Link, PtyLink, TcpServerLink
 from sarmoco.sim.player import Pacing, play_emitters
+from sarmoco.sim.transports import FileLink, Link, PtyLink, TcpServerLink
 from tests.sim.emit_common import play_fast, tiny_run
 
 CLOCK = Faults(clock_offset_s=-0.11, clock_drift_ppm=2.0)

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from sarmoco.app.demo import free_udp_port
-from sarmoco.drivers.mavlink import DEFAULT_RATES_HZ as DAEMON_RATES
+from sarmoco.drivers.mavlink import REQUESTED_RATES_HZ as DAEMON_RATES
 from sarmoco.drivers.mavlink import MavlinkSource
 from sarmoco.drivers.samples import AttitudeSample, Sample, VelocitySample
 from sarmoco.sim.emit_mavlink import MavlinkEmitter
 from sarmoco.sim.faults import Faults, PacketFaults
 from sarmoco.sim.insfeed import InsFeed
-from sarmoco.sim.links import FileLink, Link, PtyLink, TcpServerLink, UdpOutLink
 from sarmoco.sim.player import Pacing, PlayResult, play_emitters
+from sarmoco.sim.transports import FileLink, Link, PtyLink, TcpServerLink, UdpOutLink
 from tests.drivers.mapbounds import observe_map_bounds
 from tests.sim.emit_common import play_fast, tiny_run
 

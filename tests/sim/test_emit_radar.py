@@ -15,7 +15,7 @@ from sarmoco.drivers.vita49 import PayloadFormat, VitaDecoder
 from sarmoco.errors import ConfigError
 from sarmoco.sim.emit_radar import INT16_PEAK, RadarEmitter
 from sarmoco.sim.faults import PacketFaults
-from sarmoco.sim.links import FileLink, Link, TcpServerLink, UdpOutLink
+from sarmoco.sim.transports import FileLink, Link, TcpServerLink, UdpOutLink
 from tests.sim.emit_common import play_fast, tiny_run
 
 

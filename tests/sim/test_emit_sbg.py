@@ -14,7 +14,7 @@ from sarmoco.geodesy import ned_to_geodetic
 from sarmoco.sim.emit_sbg import SbgEmitter
 from sarmoco.sim.faults import Faults, PacketFaults
 from sarmoco.sim.insfeed import GEODETIC_ORIGIN, InsFeed
-from sarmoco.sim.links import FileLink, Link, PtyLink
+from sarmoco.sim.transports import FileLink, Link, PtyLink
 from tests.sim.emit_common import play_fast, tiny_run
 
 DRIFT = Faults(clock_offset_s=0.37, clock_drift_ppm=2.0)

@@ -11,8 +11,9 @@ import pytest
 from sarmoco.errors import ConfigError
 from sarmoco.processing.types import FloatArray
 from sarmoco.sim.ins import GRADES, InsGrade, device_ticks, measure_ins, quat_multiply
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec, Trajectory, true_trajectory
+from sarmoco.sim.trajectory import Trajectory, true_trajectory
 
 SCN = load_preset("ku-vehicle", scale=0.1)
 MOTION = MotionSpec(kind="turbulence", seed=2)

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from sarmoco.processing.rangecomp import compress, range_axis_m
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import MotionSpec
 from tests.conftest import SHARED_DATA
 
 TLOG = SHARED_DATA / "mavlink" / "arduplane_quadplane_sitl.tlog"

@@ -11,16 +11,10 @@ from scipy.signal import welch
 from scipy.spatial.transform import Rotation
 
 from sarmoco.errors import ConfigError, NavigationError
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.scenario import load_preset
-from sarmoco.sim.trajectory import (
-    BAND_RATIO,
-    MotionSpec,
-    Trajectory,
-    apc_trajectory,
-    euler_to_quat,
-    lowpass2_psd,
-    true_trajectory,
-)
+from sarmoco.sim.trajectory import Trajectory, apc_trajectory, euler_to_quat, true_trajectory
+from sarmoco.sim.turbulence import BAND_RATIO, lowpass2_psd
 from tests.conftest import SHARED_DATA
 
 TLOG = SHARED_DATA / "mavlink" / "arduplane_quadplane_sitl.tlog"

@@ -34,10 +34,10 @@ from sarmoco.sim.emitter import Emitter
 from sarmoco.sim.faults import Faults
 from sarmoco.sim.insemitters import INS_EMITTERS
 from sarmoco.sim.insfeed import InsFeed
-from sarmoco.sim.links import FileLink
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import Target, load_preset
-from sarmoco.sim.trajectory import MotionSpec
+from sarmoco.sim.transports import FileLink
 from tests.daemon.test_end_to_end import assert_focused
 from tests.sim.emit_common import play_fast
 

@@ -374,6 +374,44 @@ def _grid_heights(
     return out
 
 
+def _compensate_motion(
+    data: ComplexArray,
+    t: IntArray,
+    pos: FloatArray,
+    quat: FloatArray,
+    system: ArraySystem,
+    track: ReferenceTrack,
+    dx: float,
+    opt: Array3dOptions,
+) -> tuple[ComplexArray, float]:
+    """Range-compressed echoes (P, M N, S) compensated for the virtual elements' deviation
+    from the reference track (wavenumber domain, ``opt.blocks`` sub-blocks), and the sine of
+    the boresight's cross-track angle that the compensation centred the k_y band on.
+
+    ``dx`` is the pulse spacing along track, m; ``quat`` the INS attitude (used only when
+    ``opt.compensate_attitude``).
+    """
+    radar = system.radar
+    n_p, _, n_s = data.shape
+    y_epc, d = system.layout.virtual_array()
+    kr = (
+        4.0
+        * math.pi
+        * (radar.carrier_hz + scipy.fft.fftfreq(n_s, 1.0 / radar.sample_rate_hz))
+        / C_MPS
+    )
+    level = np.tile(np.array([1.0, 0.0, 0.0, 0.0]), (n_p, 1))
+    att = np.asarray(quat, dtype=np.float64) if opt.compensate_attitude else level
+    dev = epc_deviation(t, pos, att, system.layout, track)
+    # a roll α (right wing down) turns the elements' boresight to sin θ = -sin α (left): the
+    # echo's k_y band and the beams are centred there
+    boresight = -mean_roll_sine(dev, y_epc)
+    k_c = 4.0 * math.pi / radar.wavelength_m
+    spec = scipy.fft.fft(data, axis=2, workers=-1)
+    compensate(spec, dev, np.argsort(y_epc), kr, dx, d, opt.blocks, ky_centre=k_c * boresight)
+    return scipy.fft.ifft(spec, axis=2, workers=-1), boresight
+
+
 def form_dem(
     echoes: ComplexArray,
     t_ns: IntArray,
@@ -413,32 +451,13 @@ def form_dem(
     radar = system.radar
     track = fit_reference_track(t, pos)
     dx = track.v0_mps * float(np.median(np.diff(t))) * 1e-9
-    y_epc, d = system.layout.virtual_array()
-    y_order = np.argsort(y_epc)
 
     data = compress(radar, np.asarray(echoes).reshape(n_p * n_c, n_s)).reshape(n_p, n_c, n_s)
     r = range_axis_m(radar)
     depth = -opt.ground_height_m - float(track.origin_ned[2])
     _near_field(data, system, r, depth)
 
-    kr = (
-        4.0
-        * math.pi
-        * (radar.carrier_hz + scipy.fft.fftfreq(n_s, 1.0 / radar.sample_rate_hz))
-        / C_MPS
-    )
-    level = np.tile(np.array([1.0, 0.0, 0.0, 0.0]), (n_p, 1))
-    att = np.asarray(quat, dtype=np.float64) if opt.compensate_attitude else level
-    dev = epc_deviation(t, pos, att, system.layout, track)
-    # a roll α (right wing down) turns the elements' boresight to sin θ = -sin α (left): the
-    # echo's k_y band and the beams are centred there
-    boresight = -mean_roll_sine(dev, y_epc)
-    k_c = 4.0 * math.pi / radar.wavelength_m
-    spec = scipy.fft.fft(data, axis=2, workers=-1)
-    compensate(spec, dev, y_order, kr, dx, d, opt.blocks, ky_centre=k_c * boresight)
-    data = scipy.fft.ifft(spec, axis=2, workers=-1)
-    del spec
-
+    data, boresight = _compensate_motion(data, t, pos, quat, system, track, dx, opt)
     _azimuth_compress(data, system, r, dx)
     sines = _beam_sines(system, boresight, opt.angle_oversample)
     bins, bins_single, power = _surface_ranges(data, system, sines, opt)

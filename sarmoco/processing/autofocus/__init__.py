@@ -20,4 +20,7 @@ __all__ = [
     "SlidingSubapertureAutofocus",
     "SubapertureReport",
     "autofocus_offline",
+    "report",
+    "settings",
+    "splice",
 ]

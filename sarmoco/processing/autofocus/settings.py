@@ -27,7 +27,8 @@ class AutofocusGeometry:
     squint_rad : float
         Squint of the beam centre from the plane normal to the track, rad (positive: ahead;
         an antenna fixed to a crabbed body). A target seen at squint ψ has the Doppler rate
-        ``-2 (v cos ψ)² / (λ R)`` and walks through range at ``-v sin ψ``.
+        ``-2 (v cos ψ)² / (λ R)``, walks through range at ``-v sin ψ`` and has the Doppler
+        frequency ``2 v sin ψ / λ``.
     """
 
     wavelength_m: float
@@ -42,6 +43,13 @@ class AutofocusGeometry:
         return self.speed_mps * math.cos(self.squint_rad)
 
     @property
+    def centroid_hz(self) -> float:
+        """Doppler frequency of a target at the beam centre, ``2 v sin ψ / λ``, Hz (slow time
+        on the reference track's uniform speed: the pulses' time is their along-track
+        position over v)."""
+        return 2.0 * self.speed_mps * math.sin(self.squint_rad) / self.wavelength_m
+
+    @property
     def walk_mps(self) -> float:
         """Range rate of a target at the beam centre, ``-v sin ψ``, m/s."""
         return -self.speed_mps * math.sin(self.squint_rad)
@@ -53,7 +61,7 @@ class AutofocusConfig:
 
     Each field is a configuration key (:func:`sarmoco.keys.key`): its meaning, unit and
     bounds are in its metadata, and the daemon's ``[autofocus]`` section is this class
-    plus the daemon's own switches, so the README's key table documents every field.
+    plus the daemon's own switches, so the key table of docs/configuration.md documents every field.
     Offline (:func:`autofocus_offline`) ``pin_window_s`` runs to the last subaperture centre.
     """
 
@@ -99,8 +107,8 @@ class AutofocusConfig:
     )
     min_lines: int = key(
         2,
-        "A subaperture with fewer usable lines makes no correction (rate error 0) rather "
-        "than a fit through noise",
+        "A subaperture with fewer usable lines, none of them lit throughout it, makes no "
+        "estimate of its own (bridged from its neighbours) rather than a fit through noise",
         ge=1,
     )
     rate_span_hz_per_s: float = key(

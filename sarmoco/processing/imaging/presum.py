@@ -43,6 +43,9 @@ from scipy import signal
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.types import ComplexArray, IntArray
 
+PREFILTER_OVERSAMPLING = 1.25
+"""Default pulse rate after the pre-filter over the two-sided Doppler band it keeps."""
+
 ATTENUATION_DB = 60.0
 """Stopband attenuation of the Kaiser design, dB (passband deviation of the same order, < 0.3 %)."""
 
@@ -119,7 +122,7 @@ class AzimuthPrefilter:
         self,
         prf_hz: float,
         band_hz: float,
-        oversampling: float = 1.25,
+        oversampling: float = PREFILTER_OVERSAMPLING,
         attenuation_db: float = ATTENUATION_DB,
     ) -> None:
         if not (prf_hz > 0 and band_hz > 0 and oversampling > 1 and attenuation_db > 0):

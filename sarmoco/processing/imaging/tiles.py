@@ -12,7 +12,7 @@ at along-track position ``x_p`` reaches the tiles that meet its footprint
 ``x_p + rho tan(psi_lo) <= x <= x_p + rho tan(psi_hi)`` over the swath's ``rho`` (the
 distance from the track); a tile is finished, and handed out, once the latest pulse's
 footprint has passed its end, so memory stays bounded however long the run. Each
-block of pulses is upsampled in range once (in chunks of ``CHUNK_PULSES``) and
+block of pulses is upsampled in range once (in chunks of ``RANGE_CHUNK_PULSES``) and
 accumulated in place into every tile it reaches.
 
 Segments that overlap at a cut (:mod:`sarmoco.processing.segments`) each image only
@@ -34,7 +34,7 @@ from sarmoco.processing.imaging.ffbp import ffbp_into
 from sarmoco.processing.imaging.grid import PlaneGrid
 from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, Image, IntArray
 
-CHUNK_PULSES = 128
+RANGE_CHUNK_PULSES = 128
 """Pulses upsampled in range at a time (bounds the memory of a large block)."""
 
 
@@ -180,7 +180,7 @@ class TileImager:
     ffbp_budget_rad : float, optional
         Form the tiles by fast factorised backprojection
         (:func:`~sarmoco.processing.imaging.ffbp.ffbp_into`) with this phase-error budget,
-        rad; None: direct backprojection. The pulses are then held until ``CHUNK_PULSES``
+        rad; None: direct backprojection. The pulses are then held until ``RANGE_CHUNK_PULSES``
         are there (one factorisation over each chunk), so tiles finish up to that many
         pulses later.
     """
@@ -204,7 +204,7 @@ class TileImager:
         self._held: list[
             tuple[ComplexArray, IntArray, FloatArray, FloatArray | None, FloatArray]
         ] = []
-        """With FFBP: pulses not yet imaged (fewer than ``CHUNK_PULSES``)."""
+        """With FFBP: pulses not yet imaged (fewer than ``RANGE_CHUNK_PULSES``)."""
 
     def add(
         self,
@@ -247,9 +247,9 @@ class TileImager:
         dy = None if compensated_dy_m is None else np.array(compensated_dy_m)
         self._held.append((np.array(rc), np.array(t_ns), np.array(apc_m), dy, beam.copy()))
         n = sum(h[0].shape[0] for h in self._held)
-        if n < CHUNK_PULSES:
+        if n < RANGE_CHUNK_PULSES:
             return []
-        return self._add(*self._release(n - n % CHUNK_PULSES))
+        return self._add(*self._release(n - n % RANGE_CHUNK_PULSES))
 
     def _release(
         self, n: int
@@ -283,8 +283,8 @@ class TileImager:
                 grid = self.layout.grid(k)
                 shape = (grid.axis0_m.size, grid.axis1_m.size)
                 self._open[k] = Tile(k, grid, np.zeros(shape, np.complex64), int(t_ns[0]), 0)
-        for start in range(0, rc.shape[0], CHUNK_PULSES):
-            chunk = slice(start, start + CHUNK_PULSES)
+        for start in range(0, rc.shape[0], RANGE_CHUNK_PULSES):
+            chunk = slice(start, start + RANGE_CHUNK_PULSES)
             dy = None if compensated_dy_m is None else compensated_dy_m[chunk]
             self._backproject(rc[chunk], t_ns[chunk], apc_m[chunk], dy, beam[chunk])
         return self._pop_below(math.floor(float(x[-1] + back[-1]) / length))

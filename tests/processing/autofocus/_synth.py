@@ -60,23 +60,39 @@ def make(
     speed_error_mps: float = 0.0,
     snr_db: float | None = None,
     seed: int = 0,
+    along_m: FloatArray | None = None,
+    beam: tuple[float, float] | None = None,
 ) -> Synthetic:
-    """Form the data; the true track is ``x = (v + dv) t``, ``y, z = d_yz``."""
+    """Form the data; the true track is ``x = (v + dv) t + along``, ``y, z = d_yz``.
+
+    ``along_m`` (P,): along-track deviation of each pulse from ``(v + dv) t``, m; the
+    returned times are then ``t + along / (v + dv)`` (the pulses' along-track position over
+    the speed, as the along-track compensation gives them: uneven in slow time). ``beam``:
+    (squint of the beam centre from the plane normal to the track, positive ahead; two-way
+    half-width), rad: a target contributes only to the pulses that see it within the beam.
+    """
     t = np.arange(round(duration_s * PRF_HZ)) / PRF_HZ - duration_s / 2.0
     rng_axis = np.arange(range_span_m[0], range_span_m[1], BIN_M)
     d = np.zeros((t.size, 2)) if d_yz_m is None else d_yz_m
     a = np.zeros((t.size, 2)) if acc_yz_mps2 is None else acc_yz_mps2
-    apc = np.column_stack([(SPEED_MPS + speed_error_mps) * t, d[:, 0], d[:, 1]])
+    speed = SPEED_MPS + speed_error_mps
+    x = speed * t + (0.0 if along_m is None else along_m)
+    apc = np.column_stack([x, d[:, 0], d[:, 1]])
     tg = np.asarray(targets, dtype=float)
     rc = np.zeros((t.size, rng_axis.size), dtype=np.complex128)
     for p in tg:
         r = np.linalg.norm(apc - p[None, :], axis=1)
+        lit = np.ones(t.size)
+        if beam is not None:
+            squint = np.arcsin((p[0] - apc[:, 0]) / r)
+            lit = (np.abs(squint - beam[0]) <= beam[1]).astype(float)
         rc += (
-            np.sinc((rng_axis[None, :] - r[:, None]) / RES_M)
+            lit[:, None]
+            * np.sinc((rng_axis[None, :] - r[:, None]) / RES_M)
             * np.exp(-4j * np.pi * r / WAVELENGTH_M)[:, None]
         )
     if snr_db is not None:
         rng = np.random.default_rng(seed)
         sigma = 10 ** (-snr_db / 20.0) / np.sqrt(2.0)
         rc += sigma * (rng.standard_normal(rc.shape) + 1j * rng.standard_normal(rc.shape))
-    return Synthetic(t, rng_axis, rc.astype(np.complex64), d, a, tg)
+    return Synthetic(x / speed, rng_axis, rc.astype(np.complex64), d, a, tg)

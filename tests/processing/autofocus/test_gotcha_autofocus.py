@@ -12,7 +12,6 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.gotcha_autofocus import recover
 from sarmoco.drivers.gotcha import read_gotcha
 from sarmoco.processing.autofocus.spotlight import spotlight_autofocus
 from sarmoco.processing.imaging import (
@@ -23,6 +22,7 @@ from sarmoco.processing.imaging import (
 )
 from sarmoco.processing.metrics import image_entropy
 from sarmoco.processing.types import C_MPS, ComplexArray, Image
+from tests.workloads.gotcha_autofocus import recover
 
 
 def test_autofocus_sharpens_provided_data(gotcha_files: list[Path]) -> None:

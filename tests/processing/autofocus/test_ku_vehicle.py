@@ -10,7 +10,12 @@ from typing import Any
 import numpy as np
 import pytest
 
-from bench.ku_vehicle_table import (
+from sarmoco.processing.autofocus import AutofocusConfig, autofocus_offline
+from sarmoco.processing.geometry import look_angle
+from sarmoco.processing.imaging.backprojection import backproject
+from sarmoco.processing.imaging.grid import PlaneGrid
+from sarmoco.processing.metrics import point_target_metrics
+from tests.workloads.ku_vehicle import (
     EVALUATED,
     Case,
     Prepared,
@@ -23,11 +28,6 @@ from bench.ku_vehicle_table import (
     streaming_vs_offline,
     wide_low_case,
 )
-from sarmoco.processing.autofocus import AutofocusConfig, autofocus_offline
-from sarmoco.processing.geometry import look_angle
-from sarmoco.processing.imaging.backprojection import backproject
-from sarmoco.processing.imaging.grid import PlaneGrid
-from sarmoco.processing.metrics import point_target_metrics
 
 
 @pytest.fixture(scope="module")

@@ -29,9 +29,9 @@ from sarmoco.processing.imaging.presum import AzimuthPrefilter
 from sarmoco.processing.imaging.tiles import Tile, TileImager
 from sarmoco.processing.metrics import point_target_metrics
 from sarmoco.processing.types import ComplexArray, FloatArray, Image
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import Target, load_preset
-from sarmoco.sim.trajectory import MotionSpec
 from tests.processing.imaging.test_tiles import (
     HEADING_ERROR_RAD,
     SQUINT_TOLERANCE_RAD,

@@ -35,9 +35,9 @@ from sarmoco.processing.imaging import (
 )
 from sarmoco.processing.metrics import PointTargetMetrics, point_target_metrics
 from sarmoco.processing.types import C_MPS, ComplexArray, FloatArray, Image
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import Scenario, Target, load_preset
-from sarmoco.sim.trajectory import MotionSpec
 
 PSLR_SINC_DB = -13.26
 IRW_SINC = 0.886

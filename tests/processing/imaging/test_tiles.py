@@ -26,9 +26,9 @@ from sarmoco.processing.imaging.presum import AzimuthPrefilter
 from sarmoco.processing.imaging.tiles import Tile, TileImager, TileLayout
 from sarmoco.processing.metrics import CutMetrics, point_target_metrics
 from sarmoco.processing.types import ComplexArray, FloatArray, Image, IntArray
+from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import Scenario, Target, load_preset
-from sarmoco.sim.trajectory import MotionSpec
 
 SQUINT_TOLERANCE_RAD = math.radians(0.3)
 """The daemon's default imaging.squint_tolerance_deg."""

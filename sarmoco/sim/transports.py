@@ -21,14 +21,15 @@ from typing import Any, BinaryIO
 
 from sarmoco.errors import ConfigError, DriverError
 
-LOOPBACK_HOSTS = ("127.0.0.1", "localhost")
+SIM_HOSTS = ("127.0.0.1", "localhost")
+"""Host names a simulated link may use: the IPv4 loopback only."""
 STALL_S = 5.0
 """Longest wait for a peer to take bytes before they are dropped, s."""
 
 
 def loopback(host: str, what: str) -> str:
     """Check that ``host`` is the loopback interface and return its IPv4 address."""
-    if host not in LOOPBACK_HOSTS:
+    if host not in SIM_HOSTS:
         raise ConfigError(
             f"{what}: host {host!r} is not 127.0.0.1 (the simulator only uses loopback)"
         )
