@@ -51,12 +51,6 @@ What is measured (one JSON line with ``--json``):
     The daemon's peak VmHWM, and the slope of a line fitted to its VmRSS (sampled every
     second) after a warm-up of a third of the stream (30 s at most).
 
-The daemon runs the preset's configuration except one key: the first reference track
-follows one processing block of flight (``mocomp.heading_window_s`` set to
-``imaging.block_pulses`` / PRF). The flight default holds the first seconds of pulses
-until their heading is known, which would leave a short bench little or nothing to
-focus while it measures.
-
 The simulator holds every echo of the run in memory before it plays (about 90 kB per
 full-size ``thz-spotlight`` pulse while it synthesises): ``--duration`` is bounded by
 the memory of the machine, not by the daemon.
@@ -85,7 +79,6 @@ import scipy.fft
 
 from sarmoco.app.demo import free_udp_port, read_json_line
 from sarmoco.app.simconfig import config_table, write_config
-from sarmoco.daemon.config import parse_config
 from sarmoco.daemon.status import LIVE_PAGE_POLL_S
 from sarmoco.daemon.store import open_store
 from sarmoco.daemon.threadcpu import STAGES
@@ -335,10 +328,6 @@ def live_run(
         )
         for name, values in sections.items():
             table.setdefault(name, {}).update(values)
-        mocomp = table.setdefault("mocomp", {})
-        if mocomp.get("heading_window_s") is None:
-            block = parse_config(table).imaging.block_pulses
-            mocomp["heading_window_s"] = block / scn.radar.prf_hz
         cfg_path = write_config(out / "sarmoco.toml", table)
         with (out / "daemon.log").open("w") as err:
             daemon = subprocess.Popen(

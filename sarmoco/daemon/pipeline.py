@@ -614,7 +614,7 @@ class Pipeline:
         """Whether the pulses accepted and not focused cover ``mocomp.heading_window_s``
         from the first one with navigation (or none has navigation: nothing to wait for)."""
         first = next((int(p.t_ns[p.usable][0]) for p in self._pending if p.usable.any()), None)
-        if first is None:
+        if first is None or self.cfg.mocomp.heading_window_s == 0.0:
             return True
         window_ns = round(self.cfg.mocomp.heading_window_s * 1e9)
         return int(self._pending[-1].t_ns[-1]) >= first + window_ns
@@ -625,8 +625,9 @@ class Pipeline:
 
         The first reference track follows the mean velocity of the usable pulses ``held``
         (``p`` and the pulses accepted after it) within ``mocomp.heading_window_s`` of that
-        first one, however the blocks were cut (live and replay cut them differently: the
-        reference track must not depend on it). None while no pulse has navigation.
+        first one (0: of the first ``imaging.block_pulses`` usable pulses of ``p``), however
+        the blocks were cut (live and replay cut them differently: the reference track must
+        not depend on it). None while no pulse has navigation.
         """
         if not p.usable.any():
             self._record_unfocused(p)
@@ -635,10 +636,13 @@ class Pipeline:
         self._record_unfocused(p.upto(first_usable))
         p = p.since(first_usable)
         t0 = int(p.t_ns[0])
-        window = held.usable & (held.t_ns >= t0)
-        window &= held.t_ns < t0 + round(self.cfg.mocomp.heading_window_s * 1e9)
-        start_vel = held.vel_ned[window].mean(axis=0)
         first = slice(0, self.cfg.imaging.block_pulses)
+        if self.cfg.mocomp.heading_window_s == 0.0:
+            start_vel = p.vel_ned[p.usable][first].mean(axis=0)
+        else:
+            window = held.usable & (held.t_ns >= t0)
+            window &= held.t_ns < t0 + round(self.cfg.mocomp.heading_window_s * 1e9)
+            start_vel = held.vel_ned[window].mean(axis=0)
         self.focuser = Focuser(self.cfg, t0, start_vel, self.sink, quat=p.quat[p.usable][first])
         self.recorder.set_attribute(
             schema.REFERENCE_TRACK_ATTR, schema.encode_reference_track(self.focuser.track)

@@ -16,8 +16,8 @@ first pulse. Two defects cut those apertures (the second one is open):
 
 The image grid is laid along the first reference track, so the same 11.8 mrad turned it
 against the course: the targets, 12 m apart in ground range, sat 0.13 m apart along track
-from where they are. The track now follows ``mocomp.heading_window_s`` (4 s) of flight,
-here the whole run: 0.017 m.
+from where they are. With ``mocomp.heading_window_s = 4`` the track follows 4 s of flight,
+here the whole run: 0.017 m (the default, 0, keeps one block's heading).
 """
 
 from __future__ import annotations
@@ -41,6 +41,9 @@ from tests.daemon.test_pipeline import _target_metrics, feed
 MAX_RELATIVE_POSITION_M = 0.1
 """Largest error of a target's place in the image relative to the others', m (a third of
 the azimuth resolution)."""
+
+HEADING_WINDOW_S = 4.0
+"""``mocomp.heading_window_s`` of these runs (longer than the run: its whole flight), s."""
 
 Focused = tuple[SimRun, list[PointTargetMetrics]]
 
@@ -67,24 +70,30 @@ def test_no_turn_and_one_segment_at_the_start_of_a_straight_run(tmp_path: Path) 
 
 
 @pytest.fixture(scope="module")
-def focused(tmp_path_factory: pytest.TempPathFactory) -> Callable[[int], Focused]:
-    """The seed's run and its targets' metrics through the pipeline (each seed once)."""
-    done: dict[int, Focused] = {}
+def focused(tmp_path_factory: pytest.TempPathFactory) -> Callable[[int, float], Focused]:
+    """The seed's run and its targets' metrics through the pipeline with that
+    ``mocomp.heading_window_s`` (each pair once)."""
+    done: dict[tuple[int, float], Focused] = {}
 
-    def get(seed: int) -> Focused:
-        if seed not in done:
+    def get(seed: int, heading_window_s: float = 0.0) -> Focused:
+        key = (seed, heading_window_s)
+        if key not in done:
             run = _run(seed)
-            cfg = scenario_config(run.scenario, radar={"sample_format": "float32"})
+            cfg = scenario_config(
+                run.scenario,
+                radar={"sample_format": "float32"},
+                mocomp={"heading_window_s": heading_window_s},
+            )
             store = tmp_path_factory.mktemp(f"seed{seed}") / "run.zarr"
-            done[seed] = (run, [m for m, _ in _target_metrics(run, cfg, store)])
-        return done[seed]
+            done[key] = (run, [m for m, _ in _target_metrics(run, cfg, store)])
+        return done[key]
 
     return get
 
 
 @pytest.mark.parametrize("seed", [4, 10])
 def test_start_targets_keep_their_whole_aperture(
-    seed: int, focused: Callable[[int], Focused]
+    seed: int, focused: Callable[[int, float], Focused]
 ) -> None:
     """Every target's azimuth PSLR is at most -12.5 dB and its IRW at most 1.1 x theory
     (0.886 x the preset's azimuth resolution).
@@ -94,7 +103,7 @@ def test_start_targets_keep_their_whole_aperture(
     echoes' Doppler centroid put it, not of the track's broadside, so the targets keep
     their whole aperture.
     """
-    run, metrics = focused(seed)
+    run, metrics = focused(seed, 0.0)
     theory = 0.886 * run.scenario.azimuth_resolution_m
     az = [(m.axis0.pslr_db, m.axis0.irw_m / theory) for m in metrics]
     print(f"seed {seed}: azimuth PSLR dB / IRW x theory {az}")
@@ -103,13 +112,13 @@ def test_start_targets_keep_their_whole_aperture(
 
 
 def test_the_image_grid_follows_the_course_not_the_first_block(
-    focused: Callable[[int], Focused],
+    focused: Callable[[int, float], Focused],
 ) -> None:
     """Seed 4, whose first processing block heads 11.8 mrad off the run's course: each
     target's place in the image grid (along track, ground range) less the median over the
     targets is within :data:`MAX_RELATIVE_POSITION_M` of its place on the course (the line
     fitted to the true antenna positions), so the grid is not turned against the ground."""
-    run, metrics = focused(4)
+    run, metrics = focused(4, HEADING_WINDOW_S)
     course = fit_reference_track(run.t_ns, run.apc_ned, run.scenario.look_side)
     rel = run.targets_ned - run.apc_ned[0]
     truth = np.stack([rel @ course.x_hat, rel @ course.y_hat], axis=1)
