@@ -256,6 +256,20 @@ class MocompConfig:
         "turn and where the INS track leaves the current one by segment_tolerance_m; "
         "pulses in turns are flagged TURN and not imaged); false: one track for the run",
     )
+    heading_window_s: float = _key(
+        0.0,
+        "The first reference track, and with it the along-track axis of the image grid, "
+        "follows the mean antenna velocity of this much flight from the first pulse with "
+        "navigation (of the whole run when it is shorter); focusing starts once the pulses "
+        "cover it and holds them meanwhile (this times the PRF pulses in memory). 0: the "
+        "first processing block's pulses (imaging.block_pulses), no wait. Over a short span "
+        "turbulence turns the mean velocity off the course (one 1.3 s block of the "
+        "acceptance flight: 0.42 deg), and the image grid with it: targets 130 m apart in "
+        "range then sit 0.3-0.4 m apart along track from where they are (4 s: 0.014 m). "
+        "With a crab, 4 s loses azimuth PSLR on the acceptance crab cases (-13.0 to -9.4 dB)",
+        unit="s",
+        ge=0,
+    )
     segment_tolerance_m: float = _key(
         3.0,
         "Cross-track/vertical deviation from the reference track at which a new segment "

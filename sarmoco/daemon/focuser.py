@@ -8,12 +8,12 @@ processing object with its own carried state, so a live run and a replay of the
 same pulses give the same products.
 
 The strip is cut into segments (:mod:`sarmoco.processing.segments`): the first
-reference track is the straight line at the mean INS velocity of the first block
-(docs/methods.md §1); after each turn, and wherever the INS track leaves the current line by
-``mocomp.segment_tolerance_m``, the segment's autofocus is flushed, its tiles are
-closed, and a new segment starts with a new track, a new D_los (from 0), a new
-autofocus and a new tile imager. Pulses in turns are not imaged (the pipeline flags
-them ``TURN``).
+reference track is the straight line at the velocity it is given (the pipeline's mean
+over ``mocomp.heading_window_s`` of flight, docs/methods.md §1); after each turn, and
+wherever the INS track leaves the current line by ``mocomp.segment_tolerance_m``, the
+segment's autofocus is flushed, its tiles are closed, and a new segment starts with a new
+track, a new D_los (from 0), a new autofocus and a new tile imager. Pulses in turns are
+not imaged (the pipeline flags them ``TURN``).
 
 At a deviation cut (not after a turn or a navigation gap) the two segments overlap, so
 that a target whose aperture straddles the cut is still imaged from one track with its
@@ -672,8 +672,9 @@ def segment_limits(cfg: Config, v0_mps: float) -> SegmentLimits:
     )
 
 
-def _nan_motion(t_ns: IntArray) -> MocompSolution:
-    """Motion rows of pulses that were not compensated (turns): NaN, no shift."""
+def nan_motion(t_ns: IntArray) -> MocompSolution:
+    """Motion rows of pulses that were not compensated (turns, pulses without navigation):
+    NaN, no shift."""
     n = t_ns.shape[0]
     nan = np.full(n, math.nan)
     return MocompSolution(
@@ -702,8 +703,8 @@ class Focuser:
     t0_ns : int
         GPS time of the first pulse: the first reference track starts there, ns.
     velocity_ned : ndarray, shape (3,)
-        Mean INS velocity at the start, NED, m/s: fixes the first track's heading and
-        speed v0.
+        Mean antenna velocity of the flight from the start, NED, m/s: fixes the first
+        track's heading (the image grid's along-track axis) and speed v0.
     sink : SinkFactory, optional
         Hand every segment's pulses ready for backprojection to a sink made by this
         instead of imaging them (no tiles come out; see :class:`TileSink`).
@@ -847,14 +848,14 @@ class Focuser:
                 self.segments += 1
             if plan.turn[a]:
                 self._close(out)
-                motion.append(_nan_motion(t_ns[a:b]))
+                motion.append(nan_motion(t_ns[a:b]))
                 continue
             assert self.segment is not None
             m, tiles = self.segment.push(rc[a:b], t_ns[a:b], vel_ned[a:b], q[a:b])
             motion.append(m)
             self._emit(out, self.segment, tiles)
             self._run_on(out, rc[a:b], t_ns[a:b], vel_ned[a:b], q[a:b])
-        out.motion = _join(motion) if motion else _nan_motion(t_ns)
+        out.motion = _join(motion) if motion else nan_motion(t_ns)
         return out
 
     def _hand_over(

@@ -82,7 +82,7 @@ class Georeference:
         return (
             ("geodetic_origin", f"{lat:.9f} deg, {lon:.9f} deg, {alt:.3f} m"),
             ("geodetic_origin_source", self.origin.source),
-            ("geodetic_origin_height", schema.HEIGHT_NOTE),
+            ("geodetic_origin_height", self.origin.height_note),
             ("run_frame_offset_ned_m", ",".join(f"{v:.4f}" for v in self.offset_ned_m)),
             ("georeference_fit_rms_m", f"{self.fit_rms_m:.4f}"),
             ("georeference_fixes", str(self.n_fixes)),

@@ -49,7 +49,7 @@ from sarmoco.daemon.backlog import FocusBacklog, RecordedBatch
 from sarmoco.daemon.config import Config
 from sarmoco.daemon.echoring import Block, EchoRing, SampleFormat, sample_dtype, sample_shape
 from sarmoco.daemon.flags import NAV_FLAGS, NAV_UNUSABLE, UNFOCUSABLE, PulseFlag
-from sarmoco.daemon.focuser import Focuser, FocusOutput, SinkFactory
+from sarmoco.daemon.focuser import Focuser, FocusOutput, SinkFactory, nan_motion
 from sarmoco.daemon.navbuffer import NavBuffer
 from sarmoco.daemon.navframe import StoreFrame
 from sarmoco.daemon.recorder import Recorder
@@ -58,6 +58,7 @@ from sarmoco.drivers.radar import UDP_BATCH_PACKETS
 from sarmoco.drivers.samples import AttitudeSample, EchoPackets, Sample, VelocitySample
 from sarmoco.processing.imaging.tiles import Tile
 from sarmoco.processing.metrics import image_contrast, image_entropy
+from sarmoco.processing.mocomp import MocompSolution
 from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, IntArray
 
 log = logging.getLogger(__name__)
@@ -135,6 +136,14 @@ class RunSummary:
     pulses_late_dropped: int = 0
     pulses_focus_skipped: int = 0
     """Pulses recorded but skipped by live focusing, fallen behind (a replay focuses them)."""
+    pulses_out_of_order: int = 0
+    """Pulses not newer than one before them, kept from the focuser (the ring sorts pulses
+    out already, so this stays 0 unless something upstream breaks)."""
+    pulses_unfocused: int = 0
+    """Pulses that reached focusing unfit for it (without navigation, or taken under radar
+    parameters other than the configured ones): in the motion table without a solution.
+    Every pulse recorded is processed, unfocused, skipped or out of time order, one of
+    them."""
     doppler_attitude_hz: float = math.nan
     """Doppler centroid of the latest block from the attitude and the antenna mount, Hz."""
     doppler_echo_hz: float = math.nan
@@ -156,6 +165,8 @@ class RunSummary:
             "pulses_reordered": self.pulses_reordered,
             "pulses_late_dropped": self.pulses_late_dropped,
             "pulses_focus_skipped": self.pulses_focus_skipped,
+            "pulses_out_of_order": self.pulses_out_of_order,
+            "pulses_unfocused": self.pulses_unfocused,
             "doppler_attitude_hz": _finite_or_none(self.doppler_attitude_hz),
             "doppler_echo_hz": _finite_or_none(self.doppler_echo_hz),
         }
@@ -303,9 +314,6 @@ class Pipeline:
         """Time of the newest pulse the aligner took from the backlog, GPS ns."""
         self._focused_ns: int | None = None
         """Time of the newest pulse given to the focuser, GPS ns."""
-        self.out_of_order = 0
-        """Pulses not newer than one before them, kept from the focuser (the ring sorts
-        pulses out already, so this stays 0 unless something upstream breaks)."""
         self._refuse_jumps = refuse_jumps
         self.time_jumps = 0
         """Pulses refused as stamped too far ahead (:data:`TIME_JUMP_S`)."""
@@ -526,7 +534,8 @@ class Pipeline:
                 self._accept(block)
             if len(self.ring) == 0:
                 break
-        self._focus_pending()
+        while self._pending_n > 0:  # a block at a time: held for the heading window, or the last
+            self._focus_pending(min(self._pending_n, self.cfg.imaging.block_pulses))
         if self.focuser is not None:
             self._record(self.focuser.finish())
         r, summary = self.ring, self.summary
@@ -553,12 +562,14 @@ class Pipeline:
             self.recorder.flag_pulses(e.row[nav_flags == flag], flag)
         self._pending.append(_Pulses.join([block]))
         self._pending_n += len(block)
+        if self.focuser is None and not self._heading_window_held():
+            return  # the first track waits for its heading window
         while self._pending_n >= self.cfg.imaging.block_pulses:
             self._focus_pending(self.cfg.imaging.block_pulses)
 
-    def _focus_pending(self, n: int | None = None) -> None:
-        """Focus the first ``n`` pulses accepted and not focused yet (None: all of them),
-        and record their motion and products.
+    def _focus_pending(self, n: int) -> None:
+        """Focus the first ``n`` pulses accepted and not focused yet, and record their
+        motion and products.
 
         The focuser takes ``imaging.block_pulses`` at a time however the aligner released
         them, so that a live run and a replay of its store cut the stream alike (the
@@ -567,14 +578,13 @@ class Pipeline:
         if not self._pending:
             return
         pending = _Pulses.cat(self._pending)
-        n = pending.t_ns.size if n is None else n
         self._pending = [pending.since(n)] if n < pending.t_ns.size else []
         self._pending_n = pending.t_ns.size - n
         in_order = self._in_time_order(pending.upto(n))
         if in_order is None:
             return
         self.summary.pulses_nav_flagged += int(np.count_nonzero(in_order.flags & NAV_UNUSABLE))
-        p = in_order if self.focuser is not None else self._start_focusing(in_order)
+        p = in_order if self.focuser is not None else self._start_focusing(in_order, pending)
         if p is None:
             return  # no navigation yet: the aperture has not begun
         assert self.focuser is not None
@@ -585,16 +595,17 @@ class Pipeline:
             self._last_nav = (int(p.t_ns[k]), p.vel_ned[k], p.quat[k])
         out = self.focuser.push(p.raw, p.t_ns, p.vel_ned, p.usable, p.quat)
         self.summary.pulses_processed += int(np.count_nonzero(p.usable))
+        self.summary.pulses_unfocused += int(np.count_nonzero(~p.usable))
         self._record_motion(p, out)
         self._record(out)
 
     def _in_time_order(self, p: _Pulses) -> _Pulses | None:
         """``p`` without the pulses not after every pulse focused before (counted in
-        :attr:`out_of_order`: the focuser needs strictly increasing times); None if none is
-        left."""
+        :attr:`RunSummary.pulses_out_of_order`: the focuser needs strictly increasing
+        times); None if none is left."""
         fresh = _strictly_increasing(p.t_ns, self._focused_ns)
         if not fresh.all():
-            self.out_of_order += int(np.count_nonzero(~fresh))
+            self.summary.pulses_out_of_order += int(np.count_nonzero(~fresh))
             log.warning("pulses out of time order kept from the focuser",
                         extra={"pulses": int(np.count_nonzero(~fresh))})  # fmt: skip
             p = p.rows(fresh)
@@ -606,34 +617,65 @@ class Pipeline:
     def _record_motion(self, p: _Pulses, out: FocusOutput) -> None:
         """Record the motion solution of the pulses pushed, and flag the turn pulses."""
         assert out.motion is not None
-        m = out.motion
-        self.recorder.append_motion(
-            p.pulse_id, p.t_ns, p.pos_ned, p.vel_ned, p.quat, m.d_los_m, m.phase_rad,
-            m.range_shift_m,
-        )  # fmt: skip
+        self._append_motion(p, out.motion)
         if out.turn.any():
             self.recorder.flag_pulses(p.row[out.turn], PulseFlag.TURN)
 
-    def _start_focusing(self, p: _Pulses) -> _Pulses | None:
-        """Start the focuser at the first pulse with navigation; the pulses from there on.
+    def _heading_window_held(self) -> bool:
+        """Whether the pulses accepted and not focused cover ``mocomp.heading_window_s``
+        from the first one with navigation (or none has navigation: nothing to wait for)."""
+        first = next((int(p.t_ns[p.usable][0]) for p in self._pending if p.usable.any()), None)
+        if first is None or self.cfg.mocomp.heading_window_s == 0.0:
+            return True
+        window_ns = round(self.cfg.mocomp.heading_window_s * 1e9)
+        return int(self._pending[-1].t_ns[-1]) >= first + window_ns
 
-        The reference track's velocity is the mean of the first ``imaging.block_pulses``
-        usable pulses, however the blocks were cut (live and replay cut them differently:
-        the reference track must not depend on it). None while no pulse has navigation.
+    def _start_focusing(self, p: _Pulses, held: _Pulses) -> _Pulses | None:
+        """Start the focuser at the first pulse of ``p`` with navigation; the pulses from
+        there on (the pulses before it are recorded unfocused).
+
+        The first reference track follows the mean velocity of the usable pulses ``held``
+        (``p`` and the pulses accepted after it) within ``mocomp.heading_window_s`` of that
+        first one (0: of the first ``imaging.block_pulses`` usable pulses of ``p``), however
+        the blocks were cut (live and replay cut them differently: the reference track must
+        not depend on it). None while no pulse has navigation.
         """
         if not p.usable.any():
+            self._record_unfocused(p)
             return None
-        p = p.since(int(np.argmax(p.usable)))
+        first_usable = int(np.argmax(p.usable))
+        self._record_unfocused(p.upto(first_usable))
+        p = p.since(first_usable)
+        t0 = int(p.t_ns[0])
         first = slice(0, self.cfg.imaging.block_pulses)
-        start_vel = p.vel_ned[p.usable][first].mean(axis=0)
-        self.focuser = Focuser(
-            self.cfg, int(p.t_ns[0]), start_vel, self.sink, quat=p.quat[p.usable][first]
-        )
+        if self.cfg.mocomp.heading_window_s == 0.0:
+            start_vel = p.vel_ned[p.usable][first].mean(axis=0)
+        else:
+            window = held.usable & (held.t_ns >= t0)
+            window &= held.t_ns < t0 + round(self.cfg.mocomp.heading_window_s * 1e9)
+            start_vel = held.vel_ned[window].mean(axis=0)
+        self.focuser = Focuser(self.cfg, t0, start_vel, self.sink, quat=p.quat[p.usable][first])
         self.recorder.set_attribute(
             schema.REFERENCE_TRACK_ATTR, schema.encode_reference_track(self.focuser.track)
         )
         self._last_nav = (int(p.t_ns[0]), p.vel_ned[0], p.quat[0])
         return p
+
+    def _record_unfocused(self, p: _Pulses) -> None:
+        """Record pulses before the aperture begins (none has navigation, or all were taken
+        under other radar parameters) in the motion table without a solution, and count
+        them (:attr:`RunSummary.pulses_unfocused`)."""
+        if p.t_ns.size == 0:
+            return
+        self._append_motion(p, nan_motion(p.t_ns))
+        self.summary.pulses_unfocused += p.t_ns.size
+
+    def _append_motion(self, p: _Pulses, m: MocompSolution) -> None:
+        """Record the navigation and the motion solution ``m`` of pulses ``p``."""
+        self.recorder.append_motion(
+            p.pulse_id, p.t_ns, p.pos_ned, p.vel_ned, p.quat, m.d_los_m, m.phase_rad,
+            m.range_shift_m,
+        )  # fmt: skip
 
     def _blank_unusable(self, p: _Pulses) -> _Pulses:
         """Zero the echoes of pulses without navigation and give them placeholder motion.
@@ -724,9 +766,10 @@ class Pipeline:
             "pulses_duplicate": self.ring.duplicates,
             "pulses_reordered": self.ring.reordered,
             "pulses_late_dropped": self.ring.late_dropped,
-            "pulses_out_of_order": self.out_of_order,
+            "pulses_out_of_order": self.summary.pulses_out_of_order,
             "pulses_time_jump": self.time_jumps,
             "pulses_focus_skipped": self.backlog.skipped,
+            "pulses_unfocused": self.summary.pulses_unfocused,
             "nav_samples": self.summary.nav_samples,
             "tiles": self.summary.tiles,
         }

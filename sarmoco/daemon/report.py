@@ -583,10 +583,12 @@ def write_report(
         plot_series(t, {"d_los (m)": m["d_los_m"], "phase (rad)": m["phase_rad"],
                         "range shift (m)": m["range_shift_m"]},
                     out_dir / "motion.png", "INS motion solution per pulse")  # fmt: skip
-        summary["motion"] = {
-            "d_los_rms_m": float(np.sqrt(np.mean(m["d_los_m"] ** 2))),
-            "d_los_peak_to_peak_m": float(np.ptp(m["d_los_m"])),
-        }
+        d_los = m["d_los_m"][np.isfinite(m["d_los_m"])]  # turns, no navigation: no solution
+        if d_los.size:
+            summary["motion"] = {
+                "d_los_rms_m": float(np.sqrt(np.mean(d_los**2))),
+                "d_los_peak_to_peak_m": float(np.ptp(d_los)),
+            }
     if "autofocus" in store.tables() and store.committed("autofocus"):
         a = store.read("autofocus", ["t_center_s", "a_y_mps2", "a_z_mps2", "kappa"])
         plot_series(a["t_center_s"], {"a_y (m/s²)": a["a_y_mps2"], "a_z (m/s²)": a["a_z_mps2"],

@@ -685,15 +685,32 @@ class GeodeticOrigin:
     source : str
         What set the frame (e.g. ``"mavlink.GPS_GLOBAL_ORIGIN"``, the autopilot's EKF
         origin; ``"sbg.EKF_NAV"``, its first valid position).
+    ellipsoid_height : bool
+        The altitude is the height above the WGS-84 ellipsoid; False: above mean sea level
+        as the INS gave it, used as the ellipsoid height
+        (:attr:`~sarmoco.drivers.samples.TangentFrame.ellipsoid_height`).
     """
 
     t_ns: int
     lla: tuple[float, float, float]
     source: str
+    ellipsoid_height: bool = False
+
+    @property
+    def height_note(self) -> str:
+        """How the altitude is used as a height (:data:`HEIGHT_ELLIPSOID` or :data:`HEIGHT_MSL`)."""
+        return HEIGHT_ELLIPSOID if self.ellipsoid_height else HEIGHT_MSL
+
+    @property
+    def frame(self) -> TangentFrame:
+        """The tangent frame of the store's positions."""
+        return TangentFrame(self.lla, self.source, self.ellipsoid_height)
 
 
-HEIGHT_NOTE = "INS altitude (MSL) used as WGS-84 ellipsoid height: geoid undulation not applied"
-"""How the altitude of :class:`GeodeticOrigin` is used as a height (stored beside it)."""
+HEIGHT_MSL = "INS altitude (MSL) used as WGS-84 ellipsoid height: geoid undulation not applied"
+"""``geodetic_origin.height`` of an INS that gives altitudes above mean sea level only."""
+HEIGHT_ELLIPSOID = "WGS-84 ellipsoid height (the INS's altitude above MSL plus its undulation)"
+"""``geodetic_origin.height`` of an INS that gives the geoid undulation with its altitude."""
 FRAME_STATED = (
     "nav/pos_ned (INS point) and motion/pos_ned (antenna phase centre): NED, m, in the tangent "
     "frame at this point"
@@ -709,8 +726,8 @@ FRAME_UNSTATED = (
 def encode_geodetic_origin(origin: GeodeticOrigin | None) -> dict[str, Any]:
     """The root attribute :data:`GEODETIC_ORIGIN_ATTR`: ``{"absent": why}`` while the INS
     gave no absolute position, else ``t_ns``, ``lat_deg``, ``lon_deg``, ``alt_m``,
-    ``source`` and ``height`` (:data:`HEIGHT_NOTE`); ``frame`` says what the store's
-    positions are in (:data:`FRAME_STATED` or :data:`FRAME_UNSTATED`)."""
+    ``source`` and ``height`` (:data:`HEIGHT_ELLIPSOID` or :data:`HEIGHT_MSL`); ``frame``
+    says what the store's positions are in (:data:`FRAME_STATED` or :data:`FRAME_UNSTATED`)."""
     if origin is None:
         return {"absent": NO_ABSOLUTE_POSITION, "frame": FRAME_UNSTATED}
     lat, lon, alt = origin.lla
@@ -720,7 +737,7 @@ def encode_geodetic_origin(origin: GeodeticOrigin | None) -> dict[str, Any]:
         "lon_deg": lon,
         "alt_m": alt,
         "source": origin.source,
-        "height": HEIGHT_NOTE,
+        "height": origin.height_note,
         "frame": FRAME_STATED,
     }
 
@@ -744,9 +761,12 @@ def decode_geodetic_origin(attrs: Mapping[str, Any], where: str) -> GeodeticOrig
     if not (-90.0 <= lat <= 90.0 and -180.0 <= lon <= 180.0 and math.isfinite(alt)):
         raise RecorderError(f"{key}: lat {lat!r}, lon {lon!r}, alt {alt!r} out of range")
     t_ns = read_attr(value, "t_ns", int, key)
-    return GeodeticOrigin(
-        t_ns, (float(lat), float(lon), float(alt)), read_attr(value, "source", str, key)
-    )
+    height = read_attr(value, "height", str, key)
+    if height not in (HEIGHT_ELLIPSOID, HEIGHT_MSL):
+        raise RecorderError(f"{key}.height: {height!r} is neither {HEIGHT_ELLIPSOID!r} nor MSL")
+    source = read_attr(value, "source", str, key)
+    lla = (float(lat), float(lon), float(alt))
+    return GeodeticOrigin(t_ns, lla, source, height == HEIGHT_ELLIPSOID)
 
 
 def first_geodetic_origin(rows: Sequence[NavRow]) -> GeodeticOrigin | None:
@@ -754,5 +774,6 @@ def first_geodetic_origin(rows: Sequence[NavRow]) -> GeodeticOrigin | None:
     sample whose position names one (None when there is none)."""
     for s, _, result in rows:
         if result == PushResult.ACCEPTED and isinstance(s, VelocitySample) and s.pos_frame:
-            return GeodeticOrigin(s.t_gps_ns, s.pos_frame.lat_lon_alt, s.pos_frame.source)
+            f = s.pos_frame
+            return GeodeticOrigin(s.t_gps_ns, f.lat_lon_alt, f.source, f.ellipsoid_height)
     return None

@@ -31,7 +31,7 @@ from sarmoco.daemon import schema
 from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.daemon.schema import COMMITTED_ATTR
 from sarmoco.daemon.verify import DAMAGE, chunk_present, chunk_rows, describe
-from sarmoco.drivers.samples import EchoPackets, Sample, TangentFrame
+from sarmoco.drivers.samples import EchoPackets, Sample
 from sarmoco.drivers.source import Source
 from sarmoco.errors import RecorderError
 from sarmoco.processing.array.imaging3d import DemProduct
@@ -418,7 +418,7 @@ class StoreNav(Source):
         keep = keep[np.argsort(cols["t_ns"][keep], kind="stable")]
         try:
             origin = schema.decode_geodetic_origin(store.attrs, str(store.path))
-            frame = TangentFrame(origin.lla, origin.source)
+            frame = origin.frame
         except RecorderError:  # no absolute position: the positions are in the INS's frame
             frame = None
         self._samples = schema.decode_nav({k: v[keep] for k, v in cols.items()}, frame=frame)

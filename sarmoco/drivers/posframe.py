@@ -25,10 +25,14 @@ class LocalPositions:
     first_fix_source : str
         ``source`` of the frame taken from the first geodetic position when the INS
         states none (e.g. ``"sbg.EKF_NAV"``).
+    ellipsoid_height : bool
+        The source's altitudes are heights above the WGS-84 ellipsoid
+        (:attr:`TangentFrame.ellipsoid_height`).
     """
 
-    def __init__(self, first_fix_source: str) -> None:
+    def __init__(self, first_fix_source: str, ellipsoid_height: bool = False) -> None:
         self._first_fix_source = first_fix_source
+        self._ellipsoid_height = ellipsoid_height
         self.stated: TangentFrame | None = None
         """The frame the INS states for its local positions (None until it does)."""
         self.first_fix: TangentFrame | None = None
@@ -42,12 +46,14 @@ class LocalPositions:
     def state(self, lat_lon_alt: Vec3, source: str) -> None:
         """The INS states the origin of its local frame (deg, deg, m)."""
         if self.stated is None or self.stated.lat_lon_alt != lat_lon_alt:
-            self.stated = TangentFrame(lat_lon_alt, source)
+            self.stated = TangentFrame(lat_lon_alt, source, self._ellipsoid_height)
 
     def local(self, lat_lon_alt: Vec3) -> tuple[Vec3, TangentFrame]:
         """A geodetic position (deg, deg, m) as NED (m) in :attr:`frame`, and that frame."""
         if self.frame is None:
-            self.first_fix = TangentFrame(lat_lon_alt, self._first_fix_source)
+            self.first_fix = TangentFrame(
+                lat_lon_alt, self._first_fix_source, self._ellipsoid_height
+            )
         frame = self.frame
         assert frame is not None
         n, e, d = geodetic_to_ned(np.asarray(lat_lon_alt), frame.lat_lon_alt).tolist()

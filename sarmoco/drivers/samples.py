@@ -40,16 +40,22 @@ class TangentFrame:
     Attributes
     ----------
     lat_lon_alt : tuple of 3 float
-        The point: latitude, longitude (deg, WGS 84) and altitude (m, as the INS gives it;
-        used as the ellipsoid height).
+        The point: latitude, longitude (deg, WGS 84) and altitude (m; see
+        ``ellipsoid_height``).
     source : str
         What set it: the INS's own statement of its frame (``"mavlink.GPS_GLOBAL_ORIGIN"``,
         the autopilot's EKF origin) or the first valid position a driver received
         (``"sbg.EKF_NAV"``, ``"mavlink.GLOBAL_POSITION_INT"``).
+    ellipsoid_height : bool
+        The altitude is the height above the WGS-84 ellipsoid (an SBG INS: its altitude
+        above mean sea level plus the geoid undulation it sends). False: the altitude above
+        mean sea level as the INS gives it (MAVLink), used as the ellipsoid height (the
+        geoid undulation, tens of metres, unknown).
     """
 
     lat_lon_alt: tuple[float, float, float]
     source: str
+    ellipsoid_height: bool = False
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,9 +80,10 @@ class VelocitySample:
     vel_std_mps : tuple of 3 float or None
         1-sigma velocity accuracy, m/s, when the message carries one.
     lat_lon_alt : tuple of 3 float or None
-        Latitude, longitude (deg, WGS 84) and altitude above mean sea level (m),
-        when the message carries a global position (or its driver derives it from a
-        local one in a stated frame).
+        Latitude, longitude (deg, WGS 84) and altitude (m: above the ellipsoid when
+        ``pos_frame.ellipsoid_height``, else above mean sea level), when the message
+        carries a global position (or its driver derives it from a local one in a stated
+        frame).
     pos_frame : TangentFrame or None
         The frame of ``pos_ned``; None when the INS does not state where its local frame is.
     """

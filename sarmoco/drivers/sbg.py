@@ -77,12 +77,14 @@ class SbgDecoder:
     ----------
     positions : LocalPositions
         The frame of the samples' local NED positions (``pos_ned``): the tangent plane
-        at the first EKF_NAV with a valid position (``positions.frame``).
+        at the first EKF_NAV with a valid position (``positions.frame``). Heights are
+        above the WGS-84 ellipsoid: EKF_NAV's altitude above mean sea level plus its
+        undulation.
     """
 
     def __init__(self, leap_s: int = GPS_LEAP_SECONDS_DEFAULT, link: str = "sbg") -> None:
         self.leap_s = leap_s
-        self.positions = LocalPositions("sbg.EKF_NAV")
+        self.positions = LocalPositions("sbg.EKF_NAV", ellipsoid_height=True)
         self.sniffer, self.counters = codec.new_sniffer(link)
         fit = LinearClockFit(window=16, outlier_ns=1_000_000, min_pairs=2, ready_pairs=2)
         self.clock = DeviceClock(link, self.counters, model=fit)
@@ -108,9 +110,10 @@ class SbgDecoder:
                 self.counters.parse_errors += 1
                 return
             valid = _flags(msg.status)
-            lla = (
-                msg.lat_lon_alt if valid & Validity.POSITION and _finite(msg.lat_lon_alt) else None
-            )
+            lla = None
+            if valid & Validity.POSITION and _finite((*msg.lat_lon_alt, msg.undulation_m)):
+                lat, lon, alt_msl = msg.lat_lon_alt
+                lla = (lat, lon, alt_msl + msg.undulation_m)  # height above the ellipsoid
             pos, frame = self.positions.local(lla) if lla is not None else (None, None)
             sample = VelocitySample(
                 0, msg.vel_ned, valid, "sbg.EKF_NAV", dev_ns, pos_ned=pos,

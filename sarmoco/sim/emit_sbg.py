@@ -2,7 +2,9 @@
 
 Per INS sample: EKF_NAV (velocity NED, geodetic position: the INS position, or the
 velocity integrated from the true position at the first sample for grades without
-one; NED about :data:`~sarmoco.sim.insfeed.GEODETIC_ORIGIN`, position valid) and EKF_QUAT (or
+one; NED about :data:`~sarmoco.sim.insfeed.GEODETIC_ORIGIN`, position valid; the altitude
+above mean sea level with the geoid undulation :data:`~sarmoco.sim.insfeed.GEOID_UNDULATION_M`)
+and EKF_QUAT (or
 EKF_EULER); every ``utc_period_s`` a UTC_TIME pairing the device clock with UTC
 and the GPS time of week; one EVENT_A per radar pulse (sync-in: the pulse
 transmit time on the device clock). Times are the device clock in µs since
@@ -28,7 +30,7 @@ from sarmoco.processing.types import FloatArray
 from sarmoco.sim.emit_mavlink import dead_reckoned
 from sarmoco.sim.emitter import Emitter
 from sarmoco.sim.faults import PacketFaults
-from sarmoco.sim.insfeed import GEODETIC_ORIGIN, InsFeed
+from sarmoco.sim.insfeed import GEODETIC_ORIGIN, GEOID_UNDULATION_M, InsFeed
 from sarmoco.sim.pacing import Event, merge
 from sarmoco.sim.transports import Link
 
@@ -145,6 +147,7 @@ class SbgEmitter(SbgDevice):
             else feed.start_pos_ned + dead_reckoned(feed.t_ns, feed.vel_ned)
         )
         self.geodetic = ned_to_geodetic(pos_ned, GEODETIC_ORIGIN)
+        self.geodetic[:, 2] -= GEOID_UNDULATION_M  # EKF_NAV's altitude is above mean sea level
         g = feed.grade
         self.vel_std = vec3(np.full(3, max(g.vel_std_mps, MIN_STD)))
         self.att_std = vec3(np.full(3, max(g.att_std_rad, MIN_STD)))
@@ -178,8 +181,9 @@ class SbgEmitter(SbgDevice):
         lla = vec3(self.geodetic[i])
         status = self.status
         nav = codec.EkfNav(
-            time_us, vec3(f.vel_ned[i]), self.vel_std, lla, 0.0, self.pos_std, status
-        )
+            time_us, vec3(f.vel_ned[i]), self.vel_std, lla, GEOID_UNDULATION_M, self.pos_std,
+            status,
+        )  # fmt: skip
         self._send_msg(nav, "EKF_NAV", t_emit)
         att: codec.Message
         if self.attitude == "quat":

@@ -21,8 +21,14 @@ from sarmoco.sim.trajectory import true_trajectory
 OUTPUT_LATENCY_S = 0.001
 """Time from an INS sample's epoch to its message leaving the device, s."""
 GEODETIC_ORIGIN = (47.3769, 8.5417, 408.0)
-"""Latitude (deg), longitude (deg) and altitude above MSL (m) of the local NED origin
-(the scenario frame's tangent point; the altitude is used as the ellipsoid height)."""
+"""Latitude (deg), longitude (deg) and height above the WGS-84 ellipsoid (m) of the local
+NED origin (the scenario frame's tangent point). The simulated autopilot sends that height
+where MAVLink has the altitude above mean sea level (it has no geoid model); the simulated
+SBG INS sends the altitude above mean sea level and :data:`GEOID_UNDULATION_M`, as an SBG
+does."""
+GEOID_UNDULATION_M = 47.4
+"""Height of the geoid above the WGS-84 ellipsoid at :data:`GEODETIC_ORIGIN`, m (about its
+value at Zurich)."""
 
 
 @dataclass(frozen=True)

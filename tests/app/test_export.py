@@ -107,6 +107,9 @@ def test_the_store_keeps_the_sbg_position_and_the_geodetic_origin(scene: Scene) 
     origin = schema.decode_geodetic_origin(scene.store.attrs, "run")
     first = int(np.argmax(vel & (nav["result"] == 0)))
     assert origin.t_ns == nav["t_ns"][first] and origin.source == "sbg.EKF_NAV"
+    # EKF_NAV's altitude above mean sea level plus its undulation: the ellipsoid height
+    assert origin.ellipsoid_height
+    assert scene.store.attrs["geodetic_origin"]["height"] == schema.HEIGHT_ELLIPSOID
     assert origin.lla == tuple(nav["lla"][first])
     assert np.allclose(nav["pos_ned"][first], 0.0)  # NED about the first fix
     # the origin is where the simulator's INS was at its first sample (scenario NED)
@@ -243,6 +246,7 @@ def test_sicd_export_passes_the_consistency_check_and_holds_our_pixels(
     }
     origin = schema.decode_geodetic_origin(scene.store.attrs, "run")
     assert stated["geodetic_origin_source"] == origin.source == "sbg.EKF_NAV"
+    assert stated["geodetic_origin_height"] == schema.HEIGHT_ELLIPSOID
     lat, lon, _ = (float(v.split()[0]) for v in stated["geodetic_origin"].split(","))
     assert (lat, lon) == pytest.approx(origin.lla[:2], abs=1e-9)
     # the scene centre point is the pixel at SCPPixel, on the ground below the track
@@ -317,6 +321,7 @@ def test_a_mavlink_run_states_the_ekf_origin_and_exports_to_sicd(
     store = open_store(path)
     origin = schema.decode_geodetic_origin(store.attrs, "run")
     assert origin.source == "mavlink.GPS_GLOBAL_ORIGIN"
+    assert store.attrs["geodetic_origin"]["height"] == schema.HEIGHT_MSL  # no undulation
     assert geodetic_to_ned(np.asarray(origin.lla), GEODETIC_ORIGIN) == pytest.approx(
         np.zeros(3), abs=0.01
     )
@@ -340,24 +345,33 @@ def test_a_mavlink_run_states_the_ekf_origin_and_exports_to_sicd(
     assert failures(skver.SicdConsistency.from_file, out, warnings=True) == []
 
 
+def _cut_tlog(scene: Scene, keep: set[str], name: str) -> Path:
+    """The simulated autopilot's log with only the messages ``keep``, replayed into a store
+    named ``name``; the store's path."""
+    src = mavutil.mavlink_connection(str(scene.out / "sim" / "nav.tlog"))
+    records = []
+    while (m := src.recv_match(type=list(keep))) is not None:
+        records.append(tlog_record(m))
+    (scene.out / f"{name}.tlog").write_bytes(b"".join(records))
+    cfg = load_config(scene.out / "sim" / "sarmoco.toml")
+    path = scene.out / f"{name}.zarr"
+    replay_files(cfg, scene.out / "sim" / "radar.vrt", scene.out / f"{name}.tlog", path, False)
+    return path
+
+
 def test_ardupilot_default_streams_alone_give_positions_about_the_ekf_origin(
     scene: Scene,
 ) -> None:
     """The simulated autopilot's log cut to what ArduPilot streams unasked
     (GLOBAL_POSITION_INT, ATTITUDE, GPS_GLOBAL_ORIGIN, SYSTEM_TIME; 4 Hz): every focused
     pulse's ``motion/pos_ned`` is the true antenna position in the EKF origin's frame, to
-    the 1 cm of the wire's degE7, and the SICD export takes it."""
-    src = mavutil.mavlink_connection(str(scene.out / "sim" / "nav.tlog"))
+    the 1 cm of the wire's degE7, the targets are georeferenced within half a pixel, and
+    the SICD export takes it."""
     keep = {"HEARTBEAT", "GLOBAL_POSITION_INT", "ATTITUDE", "GPS_GLOBAL_ORIGIN", "SYSTEM_TIME"}
-    records = []
-    while (m := src.recv_match(type=list(keep))) is not None:
-        records.append(tlog_record(m))
-    (scene.out / "global.tlog").write_bytes(b"".join(records))
-    cfg = load_config(scene.out / "sim" / "sarmoco.toml")
-    path = scene.out / "global.zarr"
-    replay_files(cfg, scene.out / "sim" / "radar.vrt", scene.out / "global.tlog", path, False)
+    path = _cut_tlog(scene, keep, "global")
     store = open_store(path)
     assert schema.decode_geodetic_origin(store.attrs, "run").source == "mavlink.GPS_GLOBAL_ORIGIN"
+    assert max(_target_errors_m(Scene(store, scene.truth, scene.out))) < PIXEL_M / 2
     motion = store.read("motion", ["t_ns", "pos_ned"])
     ok = np.isfinite(motion["pos_ned"]).all(axis=1)
     apc = np.asarray(scene.truth["pulses"]["apc_ned"])
@@ -367,6 +381,18 @@ def test_ardupilot_default_streams_alone_give_positions_about_the_ekf_origin(
           f"max {err.max():.4f} m from the true APC")  # fmt: skip
     assert ok.mean() > 0.9 and err.max() < 0.02
     assert main(["export", str(path), "--sicd", str(scene.out / "global.nitf")]) == 0
+
+
+def test_global_position_alone_georeferences_the_targets(scene: Scene) -> None:
+    """GLOBAL_POSITION_INT without GPS_GLOBAL_ORIGIN: the store's frame is the tangent plane
+    at the first position (its altitude above MSL stated as used for the ellipsoid height),
+    and every target is georeferenced within half a pixel of the simulator's place."""
+    keep = {"HEARTBEAT", "GLOBAL_POSITION_INT", "ATTITUDE", "SYSTEM_TIME"}
+    store = open_store(_cut_tlog(scene, keep, "global_only"))
+    origin = schema.decode_geodetic_origin(store.attrs, "run")
+    assert origin.source == "mavlink.GLOBAL_POSITION_INT" and not origin.ellipsoid_height
+    assert store.attrs["geodetic_origin"]["height"] == schema.HEIGHT_MSL
+    assert max(_target_errors_m(Scene(store, scene.truth, scene.out))) < PIXEL_M / 2
 
 
 def test_the_checker_fails_a_sicd_whose_geometry_is_wrong(scene: Scene) -> None:

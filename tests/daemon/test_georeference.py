@@ -140,22 +140,29 @@ def test_a_damaged_origin_is_refused_naming_the_field(value: dict, message: str)
 
 
 def test_sbg_positions_are_ned_about_the_first_valid_fix() -> None:
+    """EKF_NAV gives the altitude above mean sea level and the geoid undulation: the
+    positions are heights above the ellipsoid (their sum), NED about the first valid fix."""
     dec = SbgDecoder(LEAP)
     d1 = 100_000_000
-    origin = (47.3769, 8.5417, 408.0)
-    moved = tuple(ecef_to_geodetic(ned_to_ecef(np.array([12.0, -3.0, -5.0]), origin)).tolist())
+    undulation = 47.4
+    origin = (47.3769, 8.5417, 408.0)  # height above the ellipsoid
+    moved = ecef_to_geodetic(ned_to_ecef(np.array([12.0, -3.0, -5.0]), origin))
+    msl = [(lat, lon, h - undulation) for lat, lon, h in (origin, moved.tolist())]
     no_fix = codec.EkfNav(d1, (1.0, 0, 0), (0,) * 3, (10.0, 20.0, 30.0), 0.0, (0,) * 3, OK_STATUS)
     valid = OK_STATUS | codec.SOL_POSITION_VALID
-    first = codec.EkfNav(d1 + 10_000, (1.0, 0, 0), (0,) * 3, origin, 0.0, (0,) * 3, valid)
-    second = codec.EkfNav(d1 + 20_000, (1.0, 0, 0), (0,) * 3, moved, 0.0, (0,) * 3, valid)
-    frames = [utc_msg(d1 - 300_000), utc_msg(d1 - 100_000), no_fix, first, second]
+    first = codec.EkfNav(d1 + 10_000, (1.0, 0, 0), (0,) * 3, msl[0], undulation, (0,) * 3, valid)
+    second = codec.EkfNav(d1 + 20_000, (1.0, 0, 0), (0,) * 3, msl[1], undulation, (0,) * 3, valid)
+    frames: list[codec.Message] = [utc_msg(d1 - 300_000), utc_msg(d1 - 100_000)]
+    frames += [no_fix, first, second]
     out = dec.feed(b"".join(codec.encode_message(m) for m in frames))
     vel = [s for s in out if isinstance(s, VelocitySample)]
     assert len(vel) == 3
     assert vel[0].pos_ned is None and vel[0].lat_lon_alt is None  # position not valid
     assert vel[1].pos_ned == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
-    assert vel[2].pos_ned == pytest.approx((12.0, -3.0, -5.0), abs=1e-6)
-    assert dec.positions.frame == TangentFrame(origin, "sbg.EKF_NAV")
+    assert vel[2].pos_ned == pytest.approx((12.0, -3.0, -5.0), abs=1e-4)  # float32 undulation
+    fix = vel[1].lat_lon_alt
+    assert fix is not None and fix == pytest.approx(origin, abs=1e-4)
+    assert dec.positions.frame == TangentFrame(fix, "sbg.EKF_NAV", ellipsoid_height=True)
     assert vel[1].pos_frame == vel[2].pos_frame == dec.positions.frame
 
 

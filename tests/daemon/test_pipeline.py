@@ -55,12 +55,13 @@ def run() -> SimRun:
     return simulate(load_preset("ku-vehicle", 0.1), MOTION, "tactical", seed=0)
 
 
-def feed(run: SimRun, cfg: Config, store: Path) -> Pipeline:
-    """Play a simulated run into a pipeline on the radar's virtual clock."""
+def feed(run: SimRun, cfg: Config, store: Path, nav_from_ns: int | None = None) -> Pipeline:
+    """Play a simulated run into a pipeline on the radar's virtual clock (the INS from
+    ``nav_from_ns`` on, GPS ns; from its start when None)."""
     nav = run.ins.nav
     with open_recorder(cfg, store) as rec:
         pipe = Pipeline(cfg, rec, Counters())
-        k = 0
+        k = 0 if nav_from_ns is None else int(np.searchsorted(nav.t_ns, nav_from_ns))
         for i, t in enumerate(run.t_ns.tolist()):
             slot = pipe.ring.reserve()
             assert slot is not None
@@ -111,6 +112,27 @@ def test_pipeline_focuses_and_records(run: SimRun, tmp_path: Path, autofocus: bo
         irw_rg = 0.886 * scn.radar.range_resolution_m * np.hypot(tgt[1], tgt[2]) / tgt[1]
         assert p["pslr_az_db"] <= -12.5 and p["pslr_rg_db"] <= -12.5, p
         assert p["irw_az_m"] <= 1.1 * irw_az and p["irw_rg_m"] <= 1.1 * irw_rg, p
+
+
+def test_pulses_before_the_ins_starts_are_counted_once(run: SimRun, tmp_path: Path) -> None:
+    """The INS starts 1.5 processing blocks after the first pulse: the pulses before it
+    reach the motion table without a solution and are counted unfocused, so every pulse
+    recorded is in the motion table once and counted in exactly one of processed,
+    unfocused, skipped and out of order (the first block without navigation was left out
+    of both)."""
+    cfg = scenario_config(
+        run.scenario, radar={"sample_format": "float32"}, autofocus={"enabled": False}
+    )
+    late = round(1.5 * cfg.imaging.block_pulses)
+    pipe = feed(run, cfg, tmp_path / "run.zarr", nav_from_ns=int(run.t_ns[late]))
+    store = open_store(tmp_path / "run.zarr")
+    motion = store.read("motion", ["pulse_id", "d_los_m"])
+    np.testing.assert_array_equal(motion["pulse_id"], np.arange(run.t_ns.size))
+    metrics, totals = store.attrs["metrics"], pipe.totals()
+    unfocused = int(np.count_nonzero(~np.isfinite(motion["d_los_m"])))
+    assert metrics["pulses_unfocused"] == totals["pulses_unfocused"] == unfocused >= late
+    fates = ("processed", "unfocused", "focus_skipped", "out_of_order")
+    assert sum(metrics[f"pulses_{k}"] for k in fates) == run.t_ns.size
 
 
 def test_an_empty_tile_is_a_product_not_an_error() -> None:

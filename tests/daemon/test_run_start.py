@@ -10,13 +10,19 @@ first pulse. Two defects cut those apertures (the second one is open):
   pulses after it went to a second track, the targets were imaged in both (2.66 x the
   azimuth IRW in the first);
 - the first reference track followed the mean INS velocity of one processing block
-  (256 pulses, 1.46 s), e.g. 11.8 mrad off the run's course at seed 4; the pixels take
+  (256 pulses, 1.46 s), e.g. 11.8 mrad off the run's course at seed 4; the pixels took
   the pulses within half the beam plus the 5.2 mrad squint tolerance of the track's
   broadside, so 6.6 of the 50 mrad the beam illuminates were cut (1.18 x IRW).
+
+The image grid is laid along the first reference track, so the same 11.8 mrad turned it
+against the course: the targets, 12 m apart in ground range, sat 0.13 m apart along track
+from where they are. With ``mocomp.heading_window_s = 4`` the track follows 4 s of flight,
+here the whole run: 0.017 m (the default, 0, keeps one block's heading).
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -25,10 +31,21 @@ import pytest
 from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.store import open_store
+from sarmoco.processing.geometry import fit_reference_track
+from sarmoco.processing.metrics import PointTargetMetrics
 from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
 from tests.daemon.test_pipeline import _target_metrics, feed
+
+MAX_RELATIVE_POSITION_M = 0.1
+"""Largest error of a target's place in the image relative to the others', m (a third of
+the azimuth resolution)."""
+
+HEADING_WINDOW_S = 4.0
+"""``mocomp.heading_window_s`` of these runs (longer than the run: its whole flight), s."""
+
+Focused = tuple[SimRun, list[PointTargetMetrics]]
 
 
 def _run(seed: int) -> SimRun:
@@ -52,22 +69,61 @@ def test_no_turn_and_one_segment_at_the_start_of_a_straight_run(tmp_path: Path) 
     assert tracks == {int(run.t_ns[0])}, tracks
 
 
+@pytest.fixture(scope="module")
+def focused(tmp_path_factory: pytest.TempPathFactory) -> Callable[[int, float], Focused]:
+    """The seed's run and its targets' metrics through the pipeline with that
+    ``mocomp.heading_window_s`` (each pair once)."""
+    done: dict[tuple[int, float], Focused] = {}
+
+    def get(seed: int, heading_window_s: float = 0.0) -> Focused:
+        key = (seed, heading_window_s)
+        if key not in done:
+            run = _run(seed)
+            cfg = scenario_config(
+                run.scenario,
+                radar={"sample_format": "float32"},
+                mocomp={"heading_window_s": heading_window_s},
+            )
+            store = tmp_path_factory.mktemp(f"seed{seed}") / "run.zarr"
+            done[key] = (run, [m for m, _ in _target_metrics(run, cfg, store)])
+        return done[key]
+
+    return get
+
+
 @pytest.mark.parametrize("seed", [4, 10])
-def test_start_targets_keep_their_whole_aperture(seed: int, tmp_path: Path) -> None:
+def test_start_targets_keep_their_whole_aperture(
+    seed: int, focused: Callable[[int, float], Focused]
+) -> None:
     """Every target's azimuth PSLR is at most -12.5 dB and its IRW at most 1.1 x theory
     (0.886 x the preset's azimuth resolution).
 
-    The first reference track follows one processing block of flight, so its heading
-    can be off the flight's course by more than the squint tolerance; the pixels take the
-    pulses of the beam where the attitude and the echoes' Doppler centroid put it, not of
-    the track's broadside, so the targets keep their whole aperture.
+    One processing block of flight can head off the flight's course by more than the
+    squint tolerance; the pixels take the pulses of the beam where the attitude and the
+    echoes' Doppler centroid put it, not of the track's broadside, so the targets keep
+    their whole aperture.
     """
-    run = _run(seed)
-    scn = run.scenario
-    cfg = scenario_config(scn, radar={"sample_format": "float32"})
-    theory = 0.886 * scn.azimuth_resolution_m
-    metrics = _target_metrics(run, cfg, tmp_path / "run.zarr")
-    az = [(m.axis0.pslr_db, m.axis0.irw_m / theory) for m, _ in metrics]
+    run, metrics = focused(seed, 0.0)
+    theory = 0.886 * run.scenario.azimuth_resolution_m
+    az = [(m.axis0.pslr_db, m.axis0.irw_m / theory) for m in metrics]
     print(f"seed {seed}: azimuth PSLR dB / IRW x theory {az}")
     for pslr, irw in az:
         assert pslr <= -12.5 and irw <= 1.1, az
+
+
+def test_the_image_grid_follows_the_course_not_the_first_block(
+    focused: Callable[[int, float], Focused],
+) -> None:
+    """Seed 4, whose first processing block heads 11.8 mrad off the run's course: each
+    target's place in the image grid (along track, ground range) less the median over the
+    targets is within :data:`MAX_RELATIVE_POSITION_M` of its place on the course (the line
+    fitted to the true antenna positions), so the grid is not turned against the ground."""
+    run, metrics = focused(4, HEADING_WINDOW_S)
+    course = fit_reference_track(run.t_ns, run.apc_ned, run.scenario.look_side)
+    rel = run.targets_ned - run.apc_ned[0]
+    truth = np.stack([rel @ course.x_hat, rel @ course.y_hat], axis=1)
+    peaks = np.array([(m.axis0.peak_m, m.axis1.peak_m) for m in metrics])
+    error = peaks - truth
+    error -= np.median(error, axis=0)
+    print(f"relative position errors (along, range), m: {error.round(3).tolist()}")
+    assert np.hypot(*error.T).max() <= MAX_RELATIVE_POSITION_M, error
