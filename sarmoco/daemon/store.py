@@ -159,15 +159,16 @@ class RunStore:
         stop = n if stop is None else min(stop, n)
         group = self._group(table)
         names = columns if columns is not None else sorted(k for k, _ in group.arrays())
-        out: dict[str, npt.NDArray[Any]] = {}
-        bad = np.zeros(max(stop - start, 0), dtype=bool)
-        for name in names:
-            arr = _array(group, name)
+        arrays = {name: _array(group, name) for name in names}
+        for name, arr in arrays.items():
             if arr.ndim == 0 or arr.shape[0] < stop:
                 raise RecorderError(
                     f"{self.path}/{table}/{name}: shape {arr.shape} holds fewer rows than "
                     f"{table}.{COMMITTED_ATTR} = {n}"
                 )
+        out: dict[str, npt.NDArray[Any]] = {}
+        bad = np.zeros(max(stop - start, 0), dtype=bool)
+        for name, arr in arrays.items():
             if self.skip_damaged:
                 out[name] = self._read_intact(arr, f"{table}/{name}", start, stop, n, bad)
             else:

@@ -54,14 +54,20 @@ def truth_record(
     """The run's truth plus what went on the wire (JSON-able).
 
     ``wire.shift_ns`` is added to every scenario GPS time on the wire (0 for files).
-    Each target also gets ``lla``: its latitude, longitude (deg, WGS-84) and ellipsoid
-    height (m), the scenario NED position placed about
-    :data:`~sarmoco.sim.insfeed.GEODETIC_ORIGIN` (where a GIS should find it).
+    Each target also gets ``lla`` (:func:`run_truth`): where a GIS should find it.
     """
+    truth = run_truth(run)
+    truth["wire"] = wire_record(feed, faults, emitters, wire)
+    return truth
+
+
+def run_truth(run: SimRun) -> dict[str, Any]:
+    """The run's part of the truth record: :meth:`SimRun.truth_dict`, each target with its
+    ``lla`` (latitude, longitude in deg, WGS-84 ellipsoid height in m) about
+    :data:`~sarmoco.sim.insfeed.GEODETIC_ORIGIN`."""
     truth = run.truth_dict()
     for target in truth["targets"]:
         target["lla"] = ned_to_geodetic(np.asarray(target["pos_ned"]), GEODETIC_ORIGIN).tolist()
-    truth["wire"] = wire_record(feed, faults, emitters, wire)
     return truth
 
 
@@ -97,7 +103,7 @@ class TruthWriter:
 
     def __init__(self, path: Path, run: SimRun) -> None:
         self.path = path
-        self._run_json = json.dumps(run.truth_dict())
+        self._run_json = json.dumps(run_truth(run))
 
     def write(
         self, feed: InsFeed, faults: Faults, emitters: dict[str, Emitter], wire: WireTime

@@ -164,7 +164,10 @@ def test_non_finite_and_out_of_range_fields_are_parse_errors() -> None:
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     tx.connect(src._conn.port.getsockname())
     inf, nan = float("inf"), float("nan")
-    bad = [
+    bad = [  # after the autopilot's HEARTBEAT: the link listens to the autopilot only
+        mavlink2.MAVLink_heartbeat_message(
+            mavlink2.MAV_TYPE_FIXED_WING, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA, 0, 0, 0, 3
+        ),
         mavlink2.MAVLink_attitude_message(10, 0.0, inf, 0.0, 0, 0, 0),
         mavlink2.MAVLink_local_position_ned_message(10, 0, 0, 0, nan, 0, 0),
         mavlink2.MAVLink_system_time_message(2**64 - 1, 10),
@@ -174,7 +177,7 @@ def test_non_finite_and_out_of_range_fields_are_parse_errors() -> None:
         tx.send(m.pack(_MAV))
     tx.close()
     deadline = time.monotonic() + 2.0
-    while src.counters.frames < frames0 + 3 and time.monotonic() < deadline:
+    while src.counters.frames < frames0 + 4 and time.monotonic() < deadline:
         assert src.poll(0.01) == []
     src.close()
     assert src.counters.parse_errors - errors0 == 3
