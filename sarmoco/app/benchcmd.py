@@ -482,8 +482,9 @@ def figures(run: BenchRun, fft_s_per_pulse: float) -> dict[str, float]:
 
 
 def pulse_figures(run: BenchRun) -> dict[str, Any]:
-    """The daemon's pulse and tile counters at the end of ``run``, its CPU and the live
-    page's rendering cost."""
+    """The daemon's pulse counters at the end of the stream, its CPU and the live page's
+    rendering cost; the tiles formed while the stream played (``tiles_live``) and in all,
+    once the daemon stopped (``tiles``: a spotlight's strip closes its tiles at the end)."""
     c = run.counters
     return {
         "pulses_taken": int(c.get("pipeline_pulses_received", 0)),
@@ -492,7 +493,8 @@ def pulse_figures(run: BenchRun) -> dict[str, Any]:
         "pulses_nav_flagged": int(c.get("pipeline_pulses_nav_flagged", 0)),
         "pulses_dropped_ring": int(c.get("pipeline_pulses_dropped_ring", 0)),
         "radar_link_drops": int(c.get("radar_drops", 0)),
-        "tiles": int(c.get("pipeline_tiles", 0)),
+        "tiles_live": int(c.get("pipeline_tiles", 0)),
+        "tiles": open_store(run.store).n_images,
         "processing_busy_s": c.get("processing_busy_seconds", 0.0),
         "daemon_cpu_s": run.cpu_s,
         "live_page_renders": int(run.live.get("png_renders", 0)),
@@ -571,13 +573,14 @@ def bench(
         fft_s = fft_cpu_s_per_pulse(load_preset(preset, scale).radar.n_samples)
         run = live_run(out, preset, scale, duration_s, **sections)
         written = dir_bytes(run.store)
+        counted = pulse_figures(run)
     finally:
         if not keep:
             shutil.rmtree(out, ignore_errors=True)
     return (
         figures(run, fft_s)
         | stage_figures(run)
-        | pulse_figures(run)
+        | counted
         | {
             "preset": preset,
             "scale": scale,

@@ -38,7 +38,7 @@ def test_bench_prints_sane_figures_and_removes_its_folder(tmp_path: Path) -> Non
     assert r["lost_pulses"] == r["pulses_sent"] - r["pulses_recorded"] >= 0
     assert r["pulses_taken"] == r["pulses_recorded"] > 0.9 * r["pulses_sent"]
     assert 0 < r["pulses_focused"] <= r["pulses_taken"]
-    assert r["tiles"] > 0
+    assert r["tiles"] > 0 and 0 <= r["tiles_live"] <= r["tiles"]
     assert r["realtime_ratio"] > 0 and r["cpu_realtime_ratio"] > 0
     # the whole chain costs more CPU per pulse than one FFT of the pulse, but not absurdly
     assert 1.0 < r["fft_floor_ratio"] < 1e5
