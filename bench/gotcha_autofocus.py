@@ -1,15 +1,8 @@
-"""Issue 4 acceptance 4b: recovery of a known motion error injected into the GOTCHA data.
+"""Recovery of a known motion error injected into the GOTCHA data.
 
-The real 2-deg phase history (234 pulses, X band, 640 MHz) is corrupted by a LOS displacement
-d_p applied over the whole band (``exp(-j 4π f d_p / c)``: carrier phase and envelope): a smooth
-part spanning 2-3 range cells (tens of wavelengths) plus a random walk of 3 rad rms at the
-carrier. :func:`~sarmoco.processing.autofocus.spotlight.spotlight_two_step` (range alignment,
-then the per-pulse ML phase estimator on fresh images) recovers it; the entropy of the 60 m
-image is compared with the data as provided. The recovered displacement is compared with the
-injected one modulo the unobservable mean and trend: envelope error in m, carrier phase error
-in rad (wrapped; it also holds the data's own small phase error, 0.19 rad rms by acceptance 4a).
+The command line of :mod:`tests.workloads.gotcha_autofocus` (the workload, shared with the tests)::
 
-Run: ``.venv/bin/python -m bench.gotcha_autofocus`` (about 20 s) -> docs/img/gotcha_autofocus.png.
+    .venv/bin/python -m bench.gotcha_autofocus
 """
 
 from __future__ import annotations

@@ -1,26 +1,8 @@
-"""Issue 4 acceptance 1-3: the ku-vehicle table (navigation only, COA baseline, two-step, PGA).
+"""The ku-vehicle autofocus table: navigation only, COA baseline, two-step, PGA.
 
-Scenario: ``ku-vehicle`` (scaled) with turbulence large enough that uncorrected targets spread
-over several range cells, navigated by GPS only (≈2 m absolute, 0.3 m noise, 10 Hz). GPS
-positions are far too noisy to compensate cross-track motion at a fraction of a 0.2 m cell, so
-"navigation only" is the straight reference track fitted to the GPS positions (speed, heading,
-origin) and nothing else. The rows:
+The command line of :mod:`tests.workloads.ku_vehicle` (the workload, shared with the tests)::
 
-- ``nav only``: backprojection on that track;
-- ``baseline``: the paper's comparison, contrast optimisation, phase step only (no envelope);
-- ``two-step``: map drift, envelope step then second-order phase step (docs/methods.md §3);
-- ``two-step+PGA``: followed by PGA on the corrected pulses.
-
-Every image is a backprojection on a small ground grid around each target (IMAGING's
-``backproject``), axis 0 north (azimuth), axis 1 east (ground range); PSLR and IRW come from
-``processing.metrics``. IRW theory: range ``0.886 c/2B / sin β`` on the ground, azimuth
-``0.886 λ / (4 sin(θ/2))`` of the stripmap beam θ.
-
-Acceptance 3 (``--range-orders``): the two-step method with a first- and a second-order κ range
-model on a wide-swath, low-altitude variant (:func:`wide_low_case`).
-
-Run: ``.venv/bin/python -m bench.ku_vehicle_table [--scale 0.3] [--seed 2] [--range-orders]``;
-the test ``tests/processing/autofocus/test_ku_vehicle.py`` runs a smaller case.
+    .venv/bin/python -m bench.ku_vehicle_table [--scale 0.3] [--range-orders] [--streaming]
 """
 
 from __future__ import annotations

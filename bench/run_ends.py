@@ -1,14 +1,8 @@
 """Ends of runs with the autofocus on (docs/measurements/flights.md).
 
-Run as ``.venv/bin/python -m bench.run_ends [--seeds 0 1 2] [--uniform] [--no-autofocus]``.
+The command line of :mod:`tests.workloads.run_ends` (the workload, shared with the tests)::
 
-ku-vehicle ×0.1 flown with the motion of a real ArduPilot flight log (18.5 → 19.5 m/s),
-tactical INS, 9 targets (3 along track 15 m apart × 3 ranges; the start group is lit from
-the run's first pulses, the end group leaves the beam 0.4 s, one subaperture, before the
-last: the log flies faster than the preset's 17.5 m/s), simulated, written as ``.vrt`` and
-``.tlog`` and replayed (``mocomp.along_track`` on unless ``--uniform``). Prints the azimuth
-PSLR of the start, middle and end targets (each three ranges): the strip's nine brightest
-points, as the report measures them.
+    .venv/bin/python -m bench.run_ends [--seeds 0 1 2] [--uniform] [--no-autofocus]
 """
 
 from __future__ import annotations

@@ -1,34 +1,8 @@
 """The soak: a long live run with 1 % radar loss and a short INS dropout every minute.
 
-Run as a module (not part of the test suite; it takes the flight's length in wall time)::
+The command line of :mod:`tests.workloads.soak` (the workload, shared with the tests)::
 
     .venv/bin/python -m bench.soak [--minutes 30] [--scale 0.1] [--nice N] [--work DIR]
-
-``sarmoco sim --serve`` flies the ku-vehicle preset (straight track, turbulence, tactical
-INS) in real time at the scaled preset's own PRF (every pulse it defines, none thinned)
-into ``sarmoco run`` over VITA 49/UDP and MAVLink/UDP on 127.0.0.1, with
-``--fault loss=0.01@radar`` and ``--fault ins-dropout=60k:0.2`` for every minute k.
-The daemon runs as systemd would start it: ``NOTIFY_SOCKET`` is a real AF_UNIX datagram
-socket kept by this script and ``WATCHDOG_USEC`` is the unit's ``WatchdogSec``
-(``systemd/sarmoco.service``). ``--nice N`` runs this script (the watchdog listener), the
-simulator and the daemon at niceness N (negative: priority over the machine's other work,
-as an onboard computer gives its acquisition; needs CAP_SYS_NICE): on a shared machine
-whose other load leaves the daemon less CPU than a second of data costs, the soak
-otherwise measures the other load.
-Measured:
-
-- VmRSS of the daemon every second (``/proc``): medians of the first and last minute
-  after a 60 s warm-up, the trend (least squares), the maximum;
-- every WATCHDOG=1 arrival: the longest gap against ``WatchdogSec``;
-- tiles: every tile index the flown track covers, from the first pulse's footprint to
-  the last one's, must be in the store (none missing, none twice);
-- pulses: every datagram the simulator did not drop is a committed pulse (the store is
-  read back after SIGTERM; late or duplicate arrivals counted by the daemon are
-  accounted for), times strictly increasing;
-- the load average every minute (the machine is shared).
-
-The result is printed and written to ``DIR/soak.json``; the exit status is 0 only when
-every check passed.
 """
 
 from __future__ import annotations

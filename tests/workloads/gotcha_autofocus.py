@@ -1,4 +1,4 @@
-"""Issue 4 acceptance 4b: recovery of a known motion error injected into the GOTCHA data.
+"""Recovery of a known motion error injected into the GOTCHA data.
 
 The real 2-deg phase history (234 pulses, X band, 640 MHz) is corrupted by a LOS displacement
 d_p applied over the whole band (``exp(-j 4π f d_p / c)``: carrier phase and envelope): a smooth
