@@ -26,24 +26,15 @@ from sarmoco.processing.autofocus import (
 )
 from sarmoco.processing.autofocus.pga import pga_stripmap
 from sarmoco.processing.geometry import fit_reference_track
-from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
-from tests.workloads.ku_vehicle import Case, scenario
+from tests.workloads.ku_vehicle import Case, motion_spec, scenario
 
 
 def measure(seconds: float) -> dict[str, float]:
     """CPU seconds of the two-step autofocus and of PGA per second of data."""
     case = Case(scale=1.0)
     scn = scenario(case)
-    motion = MotionSpec(
-        kind="turbulence",
-        cross_track_rms_m=case.cross_track_rms_m,
-        vertical_rms_m=case.vertical_rms_m,
-        along_speed_rms_mps=case.along_speed_rms_mps,
-        attitude_rms_rad=0.0,
-        corner_hz=case.corner_hz,
-        seed=case.motion_seed,
-    )
+    motion = motion_spec(case)
     n = min(scn.n_pulses, round(seconds * scn.radar.prf_hz))
     run = simulate(scn, motion, "gps", n_pulses=n)
     rc = rangecomp.compress(scn.radar, run.echo)

@@ -212,10 +212,9 @@ class Prepared:
     theory: list[tuple[float, float]]
 
 
-def prepare(case: Case) -> Prepared:
-    """Simulate ``case``, range-compress, and fit the reference track to the navigation."""
-    scn = scenario(case)
-    motion = MotionSpec(
+def motion_spec(case: Case) -> MotionSpec:
+    """The turbulence of ``case`` (level attitude: the table's errors are translational)."""
+    return MotionSpec(
         kind="turbulence",
         cross_track_rms_m=case.cross_track_rms_m,
         vertical_rms_m=case.vertical_rms_m,
@@ -224,6 +223,12 @@ def prepare(case: Case) -> Prepared:
         corner_hz=case.corner_hz,
         seed=case.motion_seed,
     )
+
+
+def prepare(case: Case) -> Prepared:
+    """Simulate ``case``, range-compress, and fit the reference track to the navigation."""
+    scn = scenario(case)
+    motion = motion_spec(case)
     run = simulate(scn, motion, case.ins_grade, seed=case.seed)
     radar = scn.radar
     nav = run.ins.nav
