@@ -8,8 +8,9 @@
 - A radar gap longer than an autofocus subaperture (an outage, an overload) is focused
   around (the autofocus run ends there), not a processing error.
 - Overload: 1500 pulses thrown at the daemon's UDP port as fast as a socket sends them
-  (a hundred times the PRF), 200 of them missing in the middle, some sent twice: pulses
-  are lost (flagged on the pulse after them, counted by the radar link), duplicates are
+  (a hundred times the PRF), 200 packets missing in the middle, some sent twice: each
+  echo is stored once at most, every loss (the outage, and whatever the kernel or a full
+  ring dropped on this machine) is flagged on the pulse after it, duplicates are
   counted in /status and /metrics, the process stays up, and SIGTERM exits 0 with a
   complete store.
 - ``sarmoco replay`` of an INS log that ends before the radar starts, and of a radar file
@@ -123,7 +124,7 @@ def wait_idle(port: int, timeout_s: float = 60.0) -> dict[str, Any]:
 
 
 def test_overload_costs_pulses_not_the_process(tmp_path: Path) -> None:
-    n_pulses, outage = 1500, range(600, 800)  # 200 slots: over a subaperture (70)
+    n_pulses, outage = 1500, range(600, 800)  # 200 packets: over a subaperture (70)
     twice = range(0, n_pulses, 100)  # sent twice: duplicates, unless the kernel drops one
     simulate_files(tmp_path, n_pulses)
     table = tomllib.loads((tmp_path / "sarmoco.toml").read_text())
@@ -132,16 +133,18 @@ def test_overload_costs_pulses_not_the_process(tmp_path: Path) -> None:
     table["status"] = {"http_port": status_port}
     config = write_config(tmp_path / "overload.toml", table)
     packets = vita_packets(config, tmp_path / "radar.vrt")
+    sent = [k for k in range(len(packets)) if k not in outage]
+    echo_bytes = max(len(p) for p in packets)  # context packets are the short ones
+    unique_echoes = sum(len(packets[k]) == echo_bytes for k in sent)
     daemon = Daemon(config, tmp_path / "overload.zarr")
     try:
         daemon.started()
         with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
             t0 = time.monotonic()
-            for k, packet in enumerate(packets):
-                if k not in outage:
-                    for _ in range(2 if k in twice else 1):
-                        tx.sendto(packet, ("127.0.0.1", radar_port))
-            rate = (n_pulses - len(outage)) / (time.monotonic() - t0)
+            for k in sent:
+                for _ in range(2 if k in twice else 1):
+                    tx.sendto(packets[k], ("127.0.0.1", radar_port))
+            rate = unique_echoes / (time.monotonic() - t0)
         status = wait_idle(status_port)
         metrics = http_get(status_port, "/metrics")[1]
         assert daemon.proc.poll() is None
@@ -152,12 +155,17 @@ def test_overload_costs_pulses_not_the_process(tmp_path: Path) -> None:
     store = open_store(tmp_path / "overload.zarr")
     assert store.attrs["complete"]
     got = store.read("pulses", ["t_ns", "flags"])
-    assert got["t_ns"].size < n_pulses - len(outage)  # more than the outage was lost
+    # each echo stored once at most; how many the kernel or the ring dropped on top of
+    # the outage depends on the machine, and each such loss is counted
+    assert got["t_ns"].size <= unique_echoes < n_pulses
     assert (np.diff(got["t_ns"]) > 0).all()
-    lost = np.uint32(PulseFlag.LOST_BEFORE | PulseFlag.DROPPED_BEFORE)
-    assert np.count_nonzero(got["flags"] & lost) > 0  # a pulse after lost ones is flagged
     counters = status["counters"]
-    assert counters["radar_gaps"] > 0 and counters["radar_drops"] > 0  # and counted
+    assert counters["radar_gaps"] >= 1  # the outage, at least
+    slots = np.rint((got["t_ns"] - got["t_ns"][0]) * 1e-9 * table["radar"]["prf_hz"])
+    after_loss = np.flatnonzero(np.diff(slots) > 1) + 1
+    assert after_loss.size >= 1  # the outage, at least
+    lost = np.uint32(PulseFlag.LOST_BEFORE | PulseFlag.DROPPED_BEFORE)
+    assert (got["flags"][after_loss] & lost).all()  # every loss flagged on the next pulse
     assert 0 < counters["pipeline_pulses_duplicate"] <= len(twice) - 2  # 2 in the outage
     assert (
         f"sarmoco_pipeline_pulses_duplicate_total {counters['pipeline_pulses_duplicate']:.0f}\n"
