@@ -305,6 +305,8 @@ class Pipeline:
         self._next_pulse_id = 0
         self._latest_pulse_ns: int | None = None
         self._latest_pulse_mono_ns = 0
+        self._first_pulse_ns: int | None = None
+        """Time of the first pulse read, GPS ns."""
         self._pending: list[_Pulses] = []
         """Aligned pulses not focused yet, oldest first."""
         self._pending_n = 0
@@ -390,6 +392,8 @@ class Pipeline:
             if k:
                 self._latest_pulse_ns = int(t_ns[-1])
                 self._latest_pulse_mono_ns = time.monotonic_ns()
+                if self._first_pulse_ns is None:
+                    self._first_pulse_ns = int(t_ns[0])
         self.ring.commit_block(block, t_ns, np.arange(first, first + k), channel, flags)
 
     def _not_jumped(self, t_ns: IntArray) -> BoolArray:
@@ -458,6 +462,28 @@ class Pipeline:
                 return None
             elapsed = time.monotonic_ns() - self._latest_pulse_mono_ns if live else 0
             return self._latest_pulse_ns + elapsed
+
+    def oldest_unaligned_ns(self) -> tuple[int | None, bool]:
+        """Where the pulses still waiting for their navigation begin; any thread.
+
+        Returns
+        -------
+        oldest_ns : int or None
+            GPS ns, a bound from below: the oldest pulse in the focus backlog, else the
+            newest recorded (the echo ring's pulses come after it), else the first pulse
+            read; None before the first pulse.
+        all_aligned : bool
+            Every pulse read has been recorded and taken by the aligner.
+        """
+        waiting = self.backlog.oldest_ns()
+        if waiting is not None:
+            return waiting, False
+        with self._id_lock:
+            latest, first = self._latest_pulse_ns, self._first_pulse_ns
+        recorded = self._recorded_ns
+        if recorded is not None:
+            return recorded, recorded == latest
+        return first, False
 
     def process(self, now_ns: int | None, on_block: Callable[[], None] | None = None) -> int:
         """:meth:`record` then :meth:`focus` (one thread does both: a replay, tests);
