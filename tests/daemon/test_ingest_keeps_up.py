@@ -28,8 +28,8 @@ import pytest
 
 from sarmoco.app.demo import free_udp_port, read_json_line
 from sarmoco.app.simconfig import scenario_config
-from sarmoco.daemon.flags import NAV_UNUSABLE
 from sarmoco.daemon.config import load_config
+from sarmoco.daemon.flags import NAV_UNUSABLE
 from sarmoco.daemon.focuser import Focuser, FocusOutput
 from sarmoco.daemon.pipeline import Pipeline
 from sarmoco.daemon.runner import _LiveRun, replay_store
