@@ -53,10 +53,26 @@ def _imports(path: Path, package: Path = PACKAGE) -> set[str]:
 
 
 LAYERS = {
-    "processing": ("sarmoco.daemon", "sarmoco.drivers", "sarmoco.sim", "sarmoco.app"),
-    "drivers": ("sarmoco.processing", "sarmoco.daemon", "sarmoco.sim", "sarmoco.app"),
+    "processing": (
+        "sarmoco.store",
+        "sarmoco.daemon",
+        "sarmoco.products",
+        "sarmoco.drivers",
+        "sarmoco.sim",
+        "sarmoco.app",
+    ),
+    "drivers": (
+        "sarmoco.processing",
+        "sarmoco.store",
+        "sarmoco.daemon",
+        "sarmoco.products",
+        "sarmoco.sim",
+        "sarmoco.app",
+    ),
+    "store": ("sarmoco.products", "sarmoco.sim", "sarmoco.app"),
     "daemon": ("sarmoco.sim", "sarmoco.app"),
-    "sim": ("sarmoco.daemon", "sarmoco.app"),
+    "products": ("sarmoco.sim", "sarmoco.app"),
+    "sim": ("sarmoco.store", "sarmoco.daemon", "sarmoco.products", "sarmoco.app"),
 }
 """Each layer and the packages it must not import (docs/design.md)."""
 

@@ -1,25 +1,20 @@
-"""The process: command line, configuration, pipeline wiring, buffers, recorder, status.
+"""The process that flies: configuration, links, buffers, alignment, pipeline, status.
 
 ``__all__`` lists the modules other packages use; the rest are internal to this one.
 """
 
 __all__ = [
     "array_pipeline",
-    "array_report",
     "camera",
     "config",
     "echoring",
     "focuser",
-    "georeference",
+    "livefeed",
     "logging_setup",
+    "navbuffer",
     "pipeline",
-    "recorder",
-    "report",
     "resources",
     "runner",
-    "schema",
     "status",
-    "store",
     "threadcpu",
-    "verify",
 ]

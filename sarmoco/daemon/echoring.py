@@ -10,7 +10,7 @@ committed pulses with :meth:`EchoRing.peek_times` and takes them out with
 it is full, a reservation returns ``None``; the producer then reads the waiting
 packets into scratch space and reports them with :meth:`EchoRing.note_dropped`,
 which counts them and flags the next committed pulse
-:attr:`~sarmoco.daemon.flags.PulseFlag.DROPPED_BEFORE`. A full ring polled
+:attr:`~sarmoco.store.flags.PulseFlag.DROPPED_BEFORE`. A full ring polled
 while nothing arrives counts nothing.
 
 Pulses leave the ring in time order, each time once. Any number of producers
@@ -41,9 +41,9 @@ from typing import Literal
 import numpy as np
 import numpy.typing as npt
 
-from sarmoco.daemon.flags import FLAG_DTYPE, PulseFlag
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.types import IntArray
+from sarmoco.store.flags import FLAG_DTYPE, PulseFlag
 
 SampleFormat = Literal["complex64", "int16"]
 """How samples are held: ``complex64`` (float32 I/Q) or ``int16`` I/Q pairs (last axis I, Q)."""
@@ -134,7 +134,7 @@ class EchoBatch:
     channel : ndarray of int32, shape (P,)
         Receive channel (VITA 49 stream ID).
     flags : ndarray of uint32, shape (P,)
-        :class:`~sarmoco.daemon.flags.PulseFlag` bits.
+        :class:`~sarmoco.store.flags.PulseFlag` bits.
     """
 
     samples: npt.NDArray[np.generic]
@@ -241,7 +241,7 @@ class EchoRing:
         """Count ``n`` pulses read while the ring was full and discarded.
 
         The next committed pulse carries
-        :attr:`~sarmoco.daemon.flags.PulseFlag.DROPPED_BEFORE`.
+        :attr:`~sarmoco.store.flags.PulseFlag.DROPPED_BEFORE`.
         """
         if n <= 0:
             return
@@ -265,7 +265,7 @@ class EchoRing:
         channel : int
             Receive channel.
         flags : int
-            :class:`~sarmoco.daemon.flags.PulseFlag` bits known at decode time.
+            :class:`~sarmoco.store.flags.PulseFlag` bits known at decode time.
         """
         i = self._check(slot.seq, 1)
         self._t_ns[i] = t_ns
@@ -292,7 +292,7 @@ class EchoRing:
         t_ns, pulse_id : array_like of int, shape (n,)
             Transmit times (GPS ns) and running pulse numbers.
         channel, flags : array_like of int, shape (n,)
-            Receive channels and :class:`~sarmoco.daemon.flags.PulseFlag` bits.
+            Receive channels and :class:`~sarmoco.store.flags.PulseFlag` bits.
 
         Raises
         ------
