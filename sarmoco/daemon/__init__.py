@@ -1,4 +1,5 @@
-"""The process that flies: configuration, links, buffers, alignment, pipeline, status.
+"""The process: configuration, links, buffers, alignment, focusing, status and live page,
+the live runner and the replay; it records through :mod:`sarmoco.store`.
 
 ``__all__`` lists the modules other packages use; the rest are internal to this one.
 """
@@ -9,9 +10,7 @@ __all__ = [
     "config",
     "echoring",
     "focuser",
-    "livefeed",
     "logging_setup",
-    "navbuffer",
     "pipeline",
     "resources",
     "runner",

@@ -46,13 +46,21 @@ import numpy.typing as npt
 from sarmoco.daemon.aligner import AlignedBlock, Aligner, PulseQueue
 from sarmoco.daemon.backlog import FocusBacklog, RecordedBatch
 from sarmoco.daemon.config import Config
-from sarmoco.daemon.echoring import Block, EchoRing, SampleFormat, sample_dtype, sample_shape
+from sarmoco.daemon.echoring import Block, EchoRing
 from sarmoco.daemon.focuser import Focuser, FocusOutput, SinkFactory, nan_motion
 from sarmoco.daemon.navbuffer import NavBuffer
 from sarmoco.daemon.navframe import StoreFrame
 from sarmoco.daemon.status import Counters
 from sarmoco.drivers.radar import UDP_BATCH_PACKETS
-from sarmoco.drivers.samples import AttitudeSample, EchoPackets, Sample, VelocitySample
+from sarmoco.drivers.samples import (
+    AttitudeSample,
+    EchoPackets,
+    Sample,
+    SampleFormat,
+    VelocitySample,
+    sample_dtype,
+    sample_shape,
+)
 from sarmoco.processing.imaging.tiles import Tile
 from sarmoco.processing.metrics import image_contrast, image_entropy
 from sarmoco.processing.mocomp import MocompSolution

@@ -40,7 +40,7 @@ import numpy.typing as npt
 from sarmoco.daemon.livefeed import LIVE_TILES, LiveFeed
 from sarmoco.daemon.livelevel import level_names
 from sarmoco.errors import ConfigError
-from sarmoco.products.quicklook import gray_of, peak_blocks, png_gray
+from sarmoco.grayscale import gray_of, peak_blocks, png_gray
 
 STATUS_HOSTS = ("127.0.0.1", "::1", "localhost")
 """The only addresses the status server binds to."""

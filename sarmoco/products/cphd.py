@@ -185,8 +185,8 @@ def from_store(store: RunStore, segment: int = 0) -> FxPhaseHistory:
         No absolute position, no raw echoes, or no such segment.
     """
     from sarmoco.daemon.config import parse_config
-    from sarmoco.daemon.echoring import to_complex64
     from sarmoco.daemon.focuser import radar_params
+    from sarmoco.drivers.samples import to_complex64
     from sarmoco.processing import rangecomp
     from sarmoco.processing.imaging.phase_history import phase_history_from_compressed
     from sarmoco.products.georeference import georeference, grid_points, run_track, segment_images

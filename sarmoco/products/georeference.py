@@ -22,7 +22,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from sarmoco.daemon.config import parse_config
-from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.errors import RecorderError
 from sarmoco.geodesy import (
     ecef_to_geodetic,
@@ -34,6 +33,7 @@ from sarmoco.processing.geometry import ReferenceTrack, lever_arm_ned
 from sarmoco.processing.mocomp import LosState, integrate_los
 from sarmoco.processing.types import FloatArray, Image, IntArray
 from sarmoco.store import schema
+from sarmoco.store.flags import PushResult
 from sarmoco.store.reader import RunStore
 
 

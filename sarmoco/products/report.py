@@ -30,8 +30,8 @@ import numpy as np
 import numpy.typing as npt
 
 from sarmoco.daemon.config import Config, parse_config
-from sarmoco.daemon.echoring import to_complex64
 from sarmoco.daemon.focuser import imaged_beam_rad, radar_params, reference_look_rad
+from sarmoco.drivers.samples import to_complex64
 from sarmoco.errors import ProcessingError, RecorderError
 from sarmoco.processing import rangecomp
 from sarmoco.processing.geometry import ReferenceTrack, look_angle, vector_to_imaging

@@ -27,13 +27,13 @@ import zarr
 from zarr.core.metadata import ArrayV3Metadata
 
 from sarmoco.closing import Closing
-from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.drivers.samples import EchoPackets, Sample
 from sarmoco.drivers.source import Source
 from sarmoco.errors import RecorderError
 from sarmoco.processing.array.imaging3d import DemProduct
 from sarmoco.processing.types import Image
 from sarmoco.store import schema
+from sarmoco.store.flags import PushResult
 from sarmoco.store.schema import COMMITTED_ATTR
 from sarmoco.store.verify import DAMAGE, chunk_present, chunk_rows, describe
 

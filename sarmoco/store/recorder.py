@@ -35,7 +35,7 @@ import time
 import uuid
 from collections.abc import Awaitable, Callable, Coroutine, Iterator, Mapping
 from pathlib import Path
-from typing import Any, Concatenate, ParamSpec, TypeVar
+from typing import Any, Concatenate, ParamSpec, Protocol, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -45,8 +45,7 @@ from zarr.core.sync import sync as zarr_sync
 from zarr.storage import LocalStore
 
 from sarmoco.closing import Closing
-from sarmoco.daemon.echoring import SampleFormat
-from sarmoco.daemon.livefeed import LiveFeed
+from sarmoco.drivers.samples import SampleFormat
 from sarmoco.errors import RecorderError
 from sarmoco.processing.types import Image
 from sarmoco.store import schema
@@ -497,6 +496,17 @@ class Table:
                 arr.resize((self.committed, *arr.shape[1:]))
 
 
+class RecordingListener(Protocol):
+    """What a :class:`Recorder` tells, in memory, of what it records (the daemon's live
+    page feed is one); called on the thread that records."""
+
+    def add_tile(self, index: int, image: Image) -> None:
+        """A tile was recorded at store index ``index``."""
+
+    def add_autofocus(self, columns: Mapping[str, npt.ArrayLike]) -> None:
+        """Rows of the ``autofocus`` table were recorded, by column."""
+
+
 class Recorder(Closing):
     """Writes one run into a new zarr v3 store (layout: :mod:`sarmoco.store.schema`).
 
@@ -521,9 +531,9 @@ class Recorder(Closing):
     echo_compression : str
         Lossless compressor of the raw echoes, a key of
         :data:`~sarmoco.store.schema.ECHO_COMPRESSION` (``"none"``: stored as they are).
-    live : LiveFeed, optional
-        The live page's feed: each tile and autofocus row recorded is handed to it in
-        memory, so that the page never opens the store.
+    live : RecordingListener, optional
+        Told in memory of each tile and autofocus row recorded (the daemon's live page
+        feed), so that the live page never opens the store.
     writer_queue : int
         Writes that may wait for the recorder's writer thread
         (:class:`~sarmoco.store.writer.OrderedWriter`): every method then checks its
@@ -544,7 +554,7 @@ class Recorder(Closing):
         fsync_interval_s: float = 1.0,
         chunk_rows: int = 1024,
         echo_compression: str = "none",
-        live: LiveFeed | None = None,
+        live: RecordingListener | None = None,
         writer_queue: int = 0,
     ) -> None:
         self.path = Path(path)
@@ -622,8 +632,14 @@ class Recorder(Closing):
 
         Parameters
         ----------
-        t_ns, pulse_id, channel, flags : array_like, shape (P,)
-            As in :class:`~sarmoco.daemon.echoring.EchoBatch`.
+        t_ns : array_like of int64, shape (P,)
+            Transmit times, GPS ns.
+        pulse_id : array_like of int64, shape (P,)
+            Running pulse numbers given by the producer.
+        channel : array_like of int32, shape (P,)
+            Receive channels (VITA 49 stream IDs).
+        flags : array_like of uint32, shape (P,)
+            :class:`~sarmoco.store.flags.PulseFlag` bits.
         samples : array_like, optional
             Raw samples ``(P, S)`` complex64 or ``(P, S, 2)`` int16, in the
             recorder's ``sample_format``; required when raw echoes are recorded.

@@ -51,14 +51,13 @@ from pymavlink import mavutil
 from sarmoco.app.simconfig import write_config
 from sarmoco.daemon.config import Config, load_config
 from sarmoco.daemon.links import open_ins, vita_decoder
-from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.daemon.runner import replay_store
 from sarmoco.drivers.radar import RadarFileSource
 from sarmoco.drivers.samples import AttitudeSample, Sample, VelocitySample
 from sarmoco.drivers.vita49 import VitaStreamFramer
 from sarmoco.errors import DataFileError
 from sarmoco.sim.outfiles import NAV_FILES
-from sarmoco.store.flags import NAV_UNUSABLE, PulseFlag
+from sarmoco.store.flags import NAV_UNUSABLE, PulseFlag, PushResult
 from sarmoco.store.reader import RunStore, open_store
 
 SCALE = 0.05

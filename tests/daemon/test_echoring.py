@@ -8,7 +8,8 @@ import time
 import numpy as np
 import pytest
 
-from sarmoco.daemon.echoring import REORDER_WINDOW, EchoRing, to_complex64
+from sarmoco.daemon.echoring import REORDER_WINDOW, EchoRing
+from sarmoco.drivers.samples import to_complex64
 from sarmoco.errors import ProcessingError
 from sarmoco.store.flags import PulseFlag
 

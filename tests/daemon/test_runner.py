@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 
 from sarmoco.daemon.config import Config, load_config
-from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.daemon.runner import replay_files, replay_store
 from sarmoco.store import schema
+from sarmoco.store.flags import PushResult
 from sarmoco.store.reader import RunStore, open_store
 from tests.daemon.same_images import assert_same_images
 

@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.drivers.samples import (
     AttitudeSample,
     EchoPacket,
@@ -25,7 +24,7 @@ from sarmoco.errors import RecorderError
 from sarmoco.processing.autofocus.report import SubapertureReport
 from sarmoco.processing.geometry import ReferenceTrack
 from sarmoco.store import schema
-from sarmoco.store.flags import PulseFlag
+from sarmoco.store.flags import PulseFlag, PushResult
 from sarmoco.store.reader import StoreNav, StorePulses, open_store
 from sarmoco.store.recorder import Recorder
 
