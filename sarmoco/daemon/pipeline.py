@@ -43,23 +43,31 @@ from typing import Any, Protocol, TypeVar
 import numpy as np
 import numpy.typing as npt
 
-from sarmoco.daemon import schema
 from sarmoco.daemon.aligner import AlignedBlock, Aligner, PulseQueue
 from sarmoco.daemon.backlog import FocusBacklog, RecordedBatch
 from sarmoco.daemon.config import Config
-from sarmoco.daemon.echoring import Block, EchoRing, SampleFormat, sample_dtype, sample_shape
-from sarmoco.daemon.flags import NAV_FLAGS, NAV_UNUSABLE, UNFOCUSABLE, PulseFlag
+from sarmoco.daemon.echoring import Block, EchoRing
 from sarmoco.daemon.focuser import Focuser, FocusOutput, SinkFactory, nan_motion
 from sarmoco.daemon.navbuffer import NavBuffer
 from sarmoco.daemon.navframe import StoreFrame
-from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.status import Counters
 from sarmoco.drivers.radar import UDP_BATCH_PACKETS
-from sarmoco.drivers.samples import AttitudeSample, EchoPackets, Sample, VelocitySample
+from sarmoco.drivers.samples import (
+    AttitudeSample,
+    EchoPackets,
+    Sample,
+    SampleFormat,
+    VelocitySample,
+    sample_dtype,
+    sample_shape,
+)
 from sarmoco.processing.imaging.tiles import Tile
 from sarmoco.processing.metrics import image_contrast, image_entropy
 from sarmoco.processing.mocomp import MocompSolution
 from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, IntArray
+from sarmoco.store import schema
+from sarmoco.store.flags import NAV_FLAGS, NAV_UNUSABLE, UNFOCUSABLE, PulseFlag
+from sarmoco.store.recorder import Recorder
 
 log = logging.getLogger(__name__)
 
@@ -89,7 +97,7 @@ a time jump, when :class:`Pipeline` refuses jumps (a live run's network radar li
 class PulseSource(Protocol):
     """What :meth:`Pipeline.read_radar` reads from: a radar link or file
     (:class:`~sarmoco.drivers.radar.RadarSource`), or a recording's pulses (a replay,
-    :class:`~sarmoco.daemon.store.StorePulses`)."""
+    :class:`~sarmoco.store.reader.StorePulses`)."""
 
     def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = ...) -> EchoPackets:
         """Write the pulses available within ``timeout_s`` into ``out[0], out[1], ...``."""
@@ -186,10 +194,10 @@ class _Pulses:
     t_ns, pulse_id : ndarray of int64, shape (P,)
         Transmit time (GPS ns) and running number.
     usable : ndarray of bool, shape (P,)
-        The pulse is focused (no :data:`~sarmoco.daemon.flags.UNFOCUSABLE` flag: it has
+        The pulse is focused (no :data:`~sarmoco.store.flags.UNFOCUSABLE` flag: it has
         navigation and was taken under the configured radar parameters).
     flags : ndarray of uint32, shape (P,)
-        :class:`~sarmoco.daemon.flags.PulseFlag` bits.
+        :class:`~sarmoco.store.flags.PulseFlag` bits.
     raw : ndarray of complex64, shape (P, S)
         Raw echoes.
     pos_ned, vel_ned : ndarray, shape (P, 3)

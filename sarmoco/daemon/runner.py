@@ -22,16 +22,16 @@ from sarmoco.daemon.focuser import SinkFactory
 from sarmoco.daemon.links import open_ins, open_radar
 from sarmoco.daemon.livefeed import LiveFeed
 from sarmoco.daemon.pipeline import Pipeline, RunSummary, ring_format
-from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.sdnotify import Notifier
 from sarmoco.daemon.status import Counters, Health, LiveView, StatusServer
-from sarmoco.daemon.store import StoreNav, StorePulses, open_store
 from sarmoco.daemon.threadcpu import stage_cpu_seconds
 from sarmoco.daemon.warmup import warm_up_kernels
 from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource
 from sarmoco.drivers.samples import Sample
 from sarmoco.drivers.source import Source
 from sarmoco.errors import ConfigError, DataFileError, SarmocoError
+from sarmoco.store.reader import StoreNav, StorePulses, open_store
+from sarmoco.store.recorder import Recorder
 
 log = logging.getLogger(__name__)
 

@@ -29,12 +29,12 @@ import pytest
 from sarmoco.app.demo import free_udp_port, read_json_line
 from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.config import load_config
-from sarmoco.daemon.flags import NAV_UNUSABLE
 from sarmoco.daemon.focuser import Focuser, FocusOutput
 from sarmoco.daemon.pipeline import Pipeline
 from sarmoco.daemon.runner import _LiveRun, replay_store
-from sarmoco.daemon.store import open_store
 from sarmoco.sim.scenario import load_preset
+from sarmoco.store.flags import NAV_UNUSABLE
+from sarmoco.store.reader import open_store
 from tests.daemon.test_daemon_process import simulate_files
 
 PRESET, SCALE, SECONDS = "ku-vehicle", 0.05, 10.0
