@@ -33,7 +33,7 @@ from typing import Any
 import numcodecs
 import numpy as np
 
-from sarmoco.daemon.pipeline import RING_SECONDS
+from sarmoco.daemon.ingest import RING_SECONDS
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.schema import ECHO_COMPRESSION
 from sarmoco.sim.echostream import EchoStream

@@ -54,9 +54,9 @@ from sarmoco.app.imaging_stream import SegmentStream, StreamRecorder
 from sarmoco.daemon import schema
 from sarmoco.daemon.config import Config, load_config
 from sarmoco.daemon.focuser import radar_params, tile_imaging
-from sarmoco.daemon.pipeline import RunSummary, recorded_tile_metrics
 from sarmoco.daemon.recorder import create_tile, write_tile
 from sarmoco.daemon.runner import replay_files, replay_store
+from sarmoco.daemon.tables import RunSummary, recorded_tile_metrics
 from sarmoco.errors import ConfigError, ProcessingError
 
 LOOPBACK = "127.0.0.1"

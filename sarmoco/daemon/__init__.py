@@ -20,6 +20,7 @@ __all__ = [
     "schema",
     "status",
     "store",
+    "tables",
     "threadcpu",
     "verify",
 ]

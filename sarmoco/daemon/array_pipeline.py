@@ -38,9 +38,10 @@ from sarmoco.daemon.config import Config, array_stream_ids
 from sarmoco.daemon.echoring import EchoRing, sample_dtype, sample_shape, to_complex64
 from sarmoco.daemon.flags import FLAG_DTYPE
 from sarmoco.daemon.focuser import radar_params
+from sarmoco.daemon.ingest import ring_format
 from sarmoco.daemon.links import open_ins, open_radar
 from sarmoco.daemon.navframe import StoreFrame
-from sarmoco.daemon.pipeline import nav_alignment, ring_format
+from sarmoco.daemon.navigation import nav_alignment
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.runner import open_recorder, record_ins_format
 from sarmoco.drivers.samples import AttitudeSample, VelocitySample

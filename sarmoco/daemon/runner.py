@@ -19,13 +19,15 @@ from types import FrameType
 from sarmoco.daemon.camera import CameraComponent, Fault, operator_faults
 from sarmoco.daemon.config import Config, StatusConfig, config_to_dict, live_imaging
 from sarmoco.daemon.focuser import SinkFactory
+from sarmoco.daemon.ingest import ring_format
 from sarmoco.daemon.links import open_ins, open_radar
 from sarmoco.daemon.livefeed import LiveFeed
-from sarmoco.daemon.pipeline import Pipeline, RunSummary, ring_format
+from sarmoco.daemon.pipeline import Pipeline
 from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.sdnotify import Notifier
 from sarmoco.daemon.status import Counters, Health, LiveView, StatusServer
 from sarmoco.daemon.store import StoreNav, StorePulses, open_store
+from sarmoco.daemon.tables import RunSummary
 from sarmoco.daemon.threadcpu import stage_cpu_seconds
 from sarmoco.daemon.warmup import warm_up_kernels
 from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource
