@@ -186,14 +186,13 @@ def from_store(store: RunStore, segment: int = 0) -> FxPhaseHistory:
     """
     from sarmoco.daemon.config import parse_config
     from sarmoco.daemon.echoring import to_complex64
-    from sarmoco.daemon.focuser import radar_params
     from sarmoco.daemon.georeference import georeference, grid_points, run_track, segment_images
     from sarmoco.processing import rangecomp
     from sarmoco.processing.imaging.phase_history import phase_history_from_compressed
 
     geo = georeference(store)
     cfg = parse_config(store.attrs["config"])
-    radar = radar_params(cfg)
+    radar = cfg.radar.params()
     segments = segment_images(store)
     if not 0 <= segment < len(segments):
         raise RecorderError(f"{store.path}: segment {segment} (the store has {len(segments)})")

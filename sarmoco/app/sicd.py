@@ -43,7 +43,6 @@ from scipy.signal import get_window
 from sarmoco import __version__
 from sarmoco.app.cphd import FxPhaseHistory, gps_utc
 from sarmoco.daemon.config import Config, parse_config
-from sarmoco.daemon.focuser import radar_params
 from sarmoco.daemon.georeference import (
     Georeference,
     SegmentImage,
@@ -206,7 +205,7 @@ def sicd_product(store: RunStore, segment: int = 0) -> SicdProduct:
 
 
 def _strip(store: RunStore, cfg: Config, geo: Georeference, seg: SegmentImage) -> _Description:
-    radar = radar_params(cfg)
+    radar = cfg.radar.params()
     image, track = seg.image, seg.track
     left = cfg.geometry.look_side == "left"
     sign = -1.0 if left else 1.0

@@ -37,7 +37,6 @@ from sarmoco.daemon.channelgroup import ChannelGrouper
 from sarmoco.daemon.config import Config, array_stream_ids
 from sarmoco.daemon.echoring import EchoRing, sample_dtype, sample_shape, to_complex64
 from sarmoco.daemon.flags import FLAG_DTYPE
-from sarmoco.daemon.focuser import radar_params
 from sarmoco.daemon.ingest import ring_format
 from sarmoco.daemon.links import open_ins, open_radar
 from sarmoco.daemon.navframe import StoreFrame
@@ -64,7 +63,7 @@ def array_system(cfg: Config) -> ArraySystem:
     """The radar, array layout and beams of an ``array``-mode configuration."""
     a = cfg.array
     return ArraySystem(
-        radar=radar_params(cfg),
+        radar=cfg.radar.params(),
         layout=mimo_layout(a.n_tx, a.n_rx, a.epc_spacing_m),
         antenna_length_m=a.antenna_length_m,
         max_look_rad=math.radians(a.max_look_deg),
