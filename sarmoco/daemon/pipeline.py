@@ -22,6 +22,13 @@ A live run calls the two from threads of their own (and the readers from theirs)
 nav buffer and the backlog are the thread-safe hand-over points, and none of them
 blocks a reader; the recorder takes calls from both parts.
 
+Each part is a module of its own, readable alone: :mod:`~sarmoco.daemon.ingest` (radar
+reads into the ring, the time-jump filter, INS samples into the nav buffer),
+:mod:`~sarmoco.daemon.navigation` (the nav buffer and aligner, pulses with their
+navigation, placeholder navigation across gaps), :mod:`~sarmoco.daemon.blocks` (block
+assembly and focusing) and :mod:`~sarmoco.daemon.tables` (the recording of the tables and
+the run's totals). :class:`Pipeline` wires them.
+
 The "current time" of the aligner is the radar's own clock: the newest pulse
 time stamp plus the host's monotonic time elapsed since it arrived (live), or
 the newest pulse time alone (replay, a virtual clock). Pulses therefore wait
