@@ -15,5 +15,6 @@ __all__ = [
     "resources",
     "runner",
     "status",
+    "tables",
     "threadcpu",
 ]
