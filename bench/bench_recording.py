@@ -33,7 +33,7 @@ from typing import Any
 import numcodecs
 import numpy as np
 
-from sarmoco.daemon.pipeline import RING_SECONDS
+from sarmoco.daemon.ingest import RING_SECONDS
 from sarmoco.sim.echostream import EchoStream
 from sarmoco.sim.emit_radar import int16_scale
 from sarmoco.sim.motionspec import MotionSpec

@@ -14,5 +14,6 @@ __all__ = [
     "resources",
     "runner",
     "status",
+    "tables",
     "threadcpu",
 ]

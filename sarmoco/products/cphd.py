@@ -185,7 +185,6 @@ def from_store(store: RunStore, segment: int = 0) -> FxPhaseHistory:
         No absolute position, no raw echoes, or no such segment.
     """
     from sarmoco.daemon.config import parse_config
-    from sarmoco.daemon.focuser import radar_params
     from sarmoco.drivers.samples import to_complex64
     from sarmoco.processing import rangecomp
     from sarmoco.processing.imaging.phase_history import phase_history_from_compressed
@@ -193,7 +192,7 @@ def from_store(store: RunStore, segment: int = 0) -> FxPhaseHistory:
 
     geo = georeference(store)
     cfg = parse_config(store.attrs["config"])
-    radar = radar_params(cfg)
+    radar = cfg.radar.params()
     segments = segment_images(store)
     if not 0 <= segment < len(segments):
         raise RecorderError(f"{store.path}: segment {segment} (the store has {len(segments)})")

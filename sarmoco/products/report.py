@@ -31,7 +31,7 @@ import numpy as np
 import numpy.typing as npt
 
 from sarmoco.daemon.config import Config, parse_config
-from sarmoco.daemon.focuser import imaged_beam_rad, radar_params, reference_look_rad
+from sarmoco.daemon.focuser import imaged_beam_rad, reference_look_rad
 from sarmoco.drivers.samples import to_complex64
 from sarmoco.errors import ProcessingError, RecorderError
 from sarmoco.processing import rangecomp
@@ -288,7 +288,7 @@ def focus_comparison(
     except RecorderError as exc:
         raise RecorderError(f"{store.path}: no raw echoes recorded (recorder.raw_echoes)") from exc
     cfg: Config = parse_config(store.attrs["config"])
-    radar = radar_params(cfg)
+    radar = cfg.radar.params()
     motion = store.read("motion", ["pulse_id", "t_ns", "vel_ned", "d_los_m"])
     pulses = store.read("pulses", ["pulse_id"])
     # the segment: pulses from the track's start on, up to the first not compensated (turn)
@@ -350,7 +350,7 @@ def _ideal_resolution_m(cfg: Config, slant_m: float, ground_m: float) -> tuple[f
 
     ``slant_m``, ``ground_m``: the target's slant and ground range, m.
     """
-    radar = radar_params(cfg)
+    radar = cfg.radar.params()
     beam = math.radians(cfg.imaging.azimuth_beamwidth_deg)
     azimuth = radar.wavelength_m / (4.0 * math.sin(beam / 2.0))
     return azimuth, radar.range_resolution_m * slant_m / ground_m

@@ -42,7 +42,6 @@ from scipy.signal import get_window
 
 from sarmoco import __version__
 from sarmoco.daemon.config import Config, parse_config
-from sarmoco.daemon.focuser import radar_params
 from sarmoco.errors import RecorderError
 from sarmoco.geodesy import ecef_to_geodetic
 from sarmoco.processing.types import FloatArray, Image
@@ -206,7 +205,7 @@ def sicd_product(store: RunStore, segment: int = 0) -> SicdProduct:
 
 
 def _strip(store: RunStore, cfg: Config, geo: Georeference, seg: SegmentImage) -> _Description:
-    radar = radar_params(cfg)
+    radar = cfg.radar.params()
     image, track = seg.image, seg.track
     left = cfg.geometry.look_side == "left"
     sign = -1.0 if left else 1.0

@@ -20,9 +20,10 @@ import pytest
 from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.config import Config, parse_config
 from sarmoco.daemon.links import open_radar
-from sarmoco.daemon.pipeline import Pipeline, tile_metrics
+from sarmoco.daemon.pipeline import Pipeline
 from sarmoco.daemon.runner import open_recorder
 from sarmoco.daemon.status import Counters
+from sarmoco.daemon.tables import tile_metrics
 from sarmoco.drivers.radar import RadarUdpSource
 from sarmoco.drivers.samples import AttitudeSample, EchoPackets, Validity, VelocitySample
 from sarmoco.drivers.vita49 import encode_signal_packet
