@@ -51,13 +51,13 @@ from typing import Any
 import zarr
 
 from sarmoco.app.imaging_stream import SegmentStream, StreamRecorder
-from sarmoco.daemon import schema
 from sarmoco.daemon.config import Config, load_config
 from sarmoco.daemon.focuser import tile_imaging
-from sarmoco.daemon.recorder import create_tile, write_tile
 from sarmoco.daemon.runner import replay_files, replay_store
 from sarmoco.daemon.tables import RunSummary, recorded_tile_metrics
 from sarmoco.errors import ConfigError, ProcessingError
+from sarmoco.store import schema
+from sarmoco.store.recorder import create_tile, write_tile
 
 LOOPBACK = "127.0.0.1"
 """The only address a local cluster binds."""

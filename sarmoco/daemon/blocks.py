@@ -26,11 +26,11 @@ import numpy as np
 
 from sarmoco.daemon.aligner import AlignedBlock
 from sarmoco.daemon.config import Config
-from sarmoco.daemon.flags import NAV_UNUSABLE
 from sarmoco.daemon.focuser import Focuser, SinkFactory
 from sarmoco.daemon.navigation import GapFill, NavPulses
 from sarmoco.daemon.tables import RunTables
 from sarmoco.processing.types import BoolArray, IntArray
+from sarmoco.store.flags import NAV_UNUSABLE
 
 log = logging.getLogger(__name__)
 

@@ -21,7 +21,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from sarmoco.daemon.schema import ECHO_COMPRESSION
 from sarmoco.errors import ConfigError, ProcessingError
 from sarmoco.keys import key as _key
 from sarmoco.processing.autofocus.settings import AutofocusConfig
@@ -29,6 +28,7 @@ from sarmoco.processing.imaging.presum import PREFILTER_OVERSAMPLING
 from sarmoco.processing.imaging.tile_pga import TilePgaConfig
 from sarmoco.processing.mocomp import DEFAULT_ENVELOPE_FRACTION
 from sarmoco.processing.types import C_MPS, RadarParams
+from sarmoco.store.schema import ECHO_COMPRESSION
 
 
 @dataclass(frozen=True)

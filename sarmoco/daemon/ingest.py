@@ -24,16 +24,24 @@ from typing import Protocol, TypeVar
 import numpy as np
 import numpy.typing as npt
 
-from sarmoco.daemon import schema
 from sarmoco.daemon.config import Config
-from sarmoco.daemon.echoring import Block, EchoRing, SampleFormat, sample_dtype, sample_shape
-from sarmoco.daemon.flags import PulseFlag
+from sarmoco.daemon.echoring import Block, EchoRing
 from sarmoco.daemon.navbuffer import NavBuffer
 from sarmoco.daemon.navframe import StoreFrame
 from sarmoco.daemon.status import Counters
 from sarmoco.drivers.radar import UDP_BATCH_PACKETS
-from sarmoco.drivers.samples import AttitudeSample, EchoPackets, Sample, VelocitySample
+from sarmoco.drivers.samples import (
+    AttitudeSample,
+    EchoPackets,
+    Sample,
+    SampleFormat,
+    VelocitySample,
+    sample_dtype,
+    sample_shape,
+)
 from sarmoco.processing.types import BoolArray, IntArray
+from sarmoco.store import schema
+from sarmoco.store.flags import PulseFlag
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +60,7 @@ a time jump, when :class:`RadarIngest` refuses jumps (a live run's network radar
 class PulseSource(Protocol):
     """What :meth:`RadarIngest.read` reads from: a radar link or file
     (:class:`~sarmoco.drivers.radar.RadarSource`), or a recording's pulses (a replay,
-    :class:`~sarmoco.daemon.store.StorePulses`)."""
+    :class:`~sarmoco.store.reader.StorePulses`)."""
 
     def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = ...) -> EchoPackets:
         """Write the pulses available within ``timeout_s`` into ``out[0], out[1], ...``."""
@@ -99,6 +107,8 @@ class RadarIngest:
         self._next_pulse_id = 0
         self._latest_pulse_ns: int | None = None
         self._latest_pulse_mono_ns = 0
+        self._first_pulse_ns: int | None = None
+        """Time of the first pulse read, GPS ns."""
         self.time_jumps = 0
         """Pulses refused as stamped too far ahead (:data:`TIME_JUMP_S`)."""
         self._jump_logged_mono = -math.inf
@@ -156,6 +166,11 @@ class RadarIngest:
             elapsed = time.monotonic_ns() - self._latest_pulse_mono_ns if live else 0
             return self._latest_pulse_ns + elapsed
 
+    def first_and_latest_ns(self) -> tuple[int | None, int | None]:
+        """Times of the first and of the newest pulse read, GPS ns (None before the first)."""
+        with self._id_lock:
+            return self._first_pulse_ns, self._latest_pulse_ns
+
     def _commit(self, block: Block, packets: EchoPackets) -> None:
         """Publish the pulses decoded into ``block`` with running ids (gives back the rest)."""
         k = len(packets)
@@ -174,6 +189,8 @@ class RadarIngest:
             if k:
                 self._latest_pulse_ns = int(t_ns[-1])
                 self._latest_pulse_mono_ns = time.monotonic_ns()
+                if self._first_pulse_ns is None:
+                    self._first_pulse_ns = int(t_ns[0])
         self.ring.commit_block(block, t_ns, np.arange(first, first + k), channel, flags)
 
     def _not_jumped(self, t_ns: IntArray) -> BoolArray:

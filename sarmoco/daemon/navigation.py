@@ -18,9 +18,9 @@ import numpy.typing as npt
 from sarmoco.daemon.aligner import AlignedBlock, Aligner, PulseQueue
 from sarmoco.daemon.backlog import RecordedBatch
 from sarmoco.daemon.config import Config
-from sarmoco.daemon.flags import UNFOCUSABLE
 from sarmoco.daemon.navbuffer import NavBuffer
 from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, IntArray
+from sarmoco.store.flags import UNFOCUSABLE
 
 
 def nav_alignment(cfg: Config, ring: PulseQueue, max_block: int) -> tuple[NavBuffer, Aligner]:
@@ -56,10 +56,10 @@ class NavPulses:
     t_ns, pulse_id : ndarray of int64, shape (P,)
         Transmit time (GPS ns) and running number.
     usable : ndarray of bool, shape (P,)
-        The pulse is focused (no :data:`~sarmoco.daemon.flags.UNFOCUSABLE` flag: it has
+        The pulse is focused (no :data:`~sarmoco.store.flags.UNFOCUSABLE` flag: it has
         navigation and was taken under the configured radar parameters).
     flags : ndarray of uint32, shape (P,)
-        :class:`~sarmoco.daemon.flags.PulseFlag` bits.
+        :class:`~sarmoco.store.flags.PulseFlag` bits.
     raw : ndarray of complex64, shape (P, S)
         Raw echoes.
     pos_ned, vel_ned : ndarray, shape (P, 3)

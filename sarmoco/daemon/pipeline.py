@@ -51,10 +51,10 @@ from sarmoco.daemon.focuser import Focuser, SinkFactory
 from sarmoco.daemon.ingest import InsIngest, PulseSource, RadarIngest
 from sarmoco.daemon.navframe import StoreFrame
 from sarmoco.daemon.navigation import nav_alignment, recorded
-from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.status import Counters
 from sarmoco.daemon.tables import RunSummary, RunTables
 from sarmoco.drivers.samples import Sample
+from sarmoco.store.recorder import Recorder
 
 FOCUS_BACKLOG_S = 2.0
 """Most the focusing path lags behind the recording, in seconds of pulses at the nominal
@@ -169,6 +169,27 @@ class Pipeline:
     def now_ns(self, live: bool) -> int | None:
         """Radar-clock "now" (see the module doc); None before the first pulse."""
         return self.radar.now_ns(live)
+
+    def oldest_unaligned_ns(self) -> tuple[int | None, bool]:
+        """Where the pulses still waiting for their navigation begin; any thread.
+
+        Returns
+        -------
+        oldest_ns : int or None
+            GPS ns, a bound from below: the oldest pulse in the focus backlog, else the
+            newest recorded (the echo ring's pulses come after it), else the first pulse
+            read; None before the first pulse.
+        all_aligned : bool
+            Every pulse read has been recorded and taken by the aligner.
+        """
+        waiting = self.backlog.oldest_ns()
+        if waiting is not None:
+            return waiting, False
+        first, latest = self.radar.first_and_latest_ns()
+        recorded_ns = self.tables.recorded_ns
+        if recorded_ns is not None:
+            return recorded_ns, recorded_ns == latest
+        return first, False
 
     def process(self, now_ns: int | None, on_block: Callable[[], None] | None = None) -> int:
         """:meth:`record` then :meth:`focus` (one thread does both: a replay, tests);

@@ -23,10 +23,8 @@ from sarmoco.daemon.ingest import ring_format
 from sarmoco.daemon.links import open_ins, open_radar
 from sarmoco.daemon.livefeed import LiveFeed
 from sarmoco.daemon.pipeline import Pipeline
-from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.sdnotify import Notifier
 from sarmoco.daemon.status import Counters, Health, LiveView, StatusServer
-from sarmoco.daemon.store import StoreNav, StorePulses, open_store
 from sarmoco.daemon.tables import RunSummary
 from sarmoco.daemon.threadcpu import stage_cpu_seconds
 from sarmoco.daemon.warmup import warm_up_kernels
@@ -34,6 +32,8 @@ from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource
 from sarmoco.drivers.samples import Sample
 from sarmoco.drivers.source import Source
 from sarmoco.errors import ConfigError, DataFileError, SarmocoError
+from sarmoco.store.reader import StoreNav, StorePulses, open_store
+from sarmoco.store.recorder import Recorder
 
 log = logging.getLogger(__name__)
 
@@ -443,26 +443,23 @@ class _LiveRun:
     def _ins_horizon_ns(self) -> int | None:
         """Newest INS time an INS log may be offered up to, GPS ns (None: no limit).
 
-        Half the nav buffer's history past the oldest pulse waiting to be focused (where
-        the aligner stands), else past the newest pulse read, else (before the first
-        pulse) past the oldest sample held or waiting. A finished radar link sets no limit.
+        Half the nav buffer's history past the oldest pulse still waiting for its
+        navigation, wherever it waits (echo ring or focus backlog: the samples it needs
+        then stay within the history however far the file is read ahead), else (before
+        the first pulse) past the oldest sample held or waiting. No limit once the radar
+        link has finished and every pulse has been taken by the aligner.
         """
-        if "radar" in self.st.finished:
+        oldest, all_aligned = self.pipe.oldest_unaligned_ns()
+        if all_aligned and "radar" in self.st.finished:
             return None
-        waiting = self.pipe.backlog.oldest_ns()
-        if waiting is not None:
-            reference = waiting
+        if oldest is not None:
+            reference = oldest
+        elif (span := self.pipe.nav.span_ns()) is not None:
+            reference = span[0]
+        elif self._ins_backlog:
+            reference = self._ins_backlog[0].t_gps_ns
         else:
-            newest_pulse = self.pipe.now_ns(live=False)
-            span = self.pipe.nav.span_ns()
-            if newest_pulse is not None:
-                reference = newest_pulse
-            elif span is not None:
-                reference = span[0]
-            elif self._ins_backlog:
-                reference = self._ins_backlog[0].t_gps_ns
-            else:
-                return None
+            return None
         return reference + self.pipe.nav.kinematics.history_ns // 2
 
     # -- recording thread ---------------------------------------------------------------------
@@ -649,12 +646,15 @@ class _LiveRun:
         )
 
     def _idle(self, now: float, idle_exit_s: float | None) -> bool:
-        """Whether no pulse came for ``idle_exit_s`` since pulses began (None: never)."""
+        """Whether no pulse came for ``idle_exit_s`` since pulses began (None: never) and,
+        with an INS log, every pulse has been aligned (its samples are offered only as
+        the pulses need them)."""
         st = self.st
         return (
             idle_exit_s is not None
             and bool(st.first_pulse_mono)
             and (now - st.last_pulse_mono > idle_exit_s)
+            and (not self._ins_file or self.pipe.oldest_unaligned_ns()[1])
         )
 
     def shut_down(self) -> None:

@@ -6,7 +6,7 @@ flags of the aligned pulses, the motion solution of each pulse, the autofocus es
 the Doppler centroids and the focused tiles, with the store attributes that go with them
 (reference track, geodetic origin, run metrics). Each write counts what it wrote in the
 run's :class:`RunSummary`. The recording path and the focusing path both write here; the
-recorder (:class:`~sarmoco.daemon.recorder.Recorder`) takes calls from both threads.
+recorder (:class:`~sarmoco.store.recorder.Recorder`) takes calls from both threads.
 """
 
 from __future__ import annotations
@@ -19,21 +19,21 @@ from typing import Any
 
 import numpy as np
 
-from sarmoco.daemon import schema
 from sarmoco.daemon.aligner import AlignedBlock
 from sarmoco.daemon.backlog import FocusBacklog, RecordedBatch
 from sarmoco.daemon.echoring import EchoRing
-from sarmoco.daemon.flags import NAV_FLAGS, PulseFlag
 from sarmoco.daemon.focuser import FocusOutput, nan_motion
 from sarmoco.daemon.ingest import InsIngest
 from sarmoco.daemon.navigation import NavPulses, recorded
-from sarmoco.daemon.recorder import Recorder
 from sarmoco.processing.autofocus import SlidingSubapertureAutofocus
 from sarmoco.processing.geometry import ReferenceTrack
 from sarmoco.processing.imaging.tiles import Tile
 from sarmoco.processing.metrics import image_contrast, image_entropy
 from sarmoco.processing.mocomp import MocompSolution
 from sarmoco.processing.types import ComplexArray
+from sarmoco.store import schema
+from sarmoco.store.flags import NAV_FLAGS, PulseFlag
+from sarmoco.store.recorder import Recorder
 
 RECORD_BLOCK_PULSES = 1024
 """Most pulses stored by one write of :meth:`RunTables.store_pulses`."""

@@ -35,12 +35,12 @@ import pytest
 from sarmoco.app.demo import run_loopback
 from sarmoco.app.simconfig import scenario_config, write_config
 from sarmoco.daemon.blocks import strictly_increasing
-from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.focuser import Focuser
-from sarmoco.daemon.store import open_store
 from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
+from sarmoco.store.flags import PulseFlag
+from sarmoco.store.reader import open_store
 from tests.daemon.test_daemon_process import (
     Daemon,
     free_port,

@@ -30,17 +30,8 @@ import numpy as np
 import numpy.typing as npt
 
 from sarmoco.daemon.config import Config, parse_config
-from sarmoco.daemon.echoring import to_complex64
 from sarmoco.daemon.focuser import imaged_beam_rad, reference_look_rad
-from sarmoco.daemon.geotiff import write_geotiffs
-from sarmoco.daemon.quicklook import (
-    plot_cuts,
-    plot_image,
-    plot_overlays,
-    plot_panels,
-    plot_series,
-)
-from sarmoco.daemon.store import RunStore, open_store
+from sarmoco.drivers.samples import to_complex64
 from sarmoco.errors import ProcessingError, RecorderError
 from sarmoco.processing import rangecomp
 from sarmoco.processing.geometry import ReferenceTrack, look_angle, vector_to_imaging
@@ -58,6 +49,15 @@ from sarmoco.processing.metrics import (
 )
 from sarmoco.processing.mocomp import LosState, integrate_los
 from sarmoco.processing.types import Image
+from sarmoco.products.geotiff import write_geotiffs
+from sarmoco.products.quicklook import (
+    plot_cuts,
+    plot_image,
+    plot_overlays,
+    plot_panels,
+    plot_series,
+)
+from sarmoco.store.reader import RunStore, open_store
 
 BRIGHT_POINTS = 5
 """How many of the brightest scatterers are measured."""
