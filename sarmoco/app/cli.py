@@ -126,7 +126,7 @@ def _replay_array(args: argparse.Namespace, cfg: Config, out: Path) -> int:
     if args.recording or not (args.radar and args.nav):
         raise ConfigError("replay: array mode replays files: give --radar FILE.vrt and --nav FILE")
     s = replay_array_files(cfg, Path(args.radar), Path(args.nav), out)
-    dems = ", ".join(f"{k} {int(v['valid_cells'])} cells" for k, v in s.dems.items())
+    dems = ", ".join(f"{k} {int(v['valid_cells'])} cells" for k, v in s.dem.items())
     print(f"{out}: {s.pulses_imaged} of {s.pulses} array pulses imaged; DEM {dems}")
     return 0
 

@@ -22,6 +22,7 @@ truth by the first pulse, as the tiles of a single-channel run).
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -78,7 +79,7 @@ def array_system(cfg: Config) -> ArraySystem:
 
 @dataclass
 class ArraySummary:
-    """What an array run did.
+    """What an array run did; its fields are the names of the store's ``metrics``.
 
     Attributes
     ----------
@@ -86,34 +87,28 @@ class ArraySummary:
         Whole pulses (every channel) released by the aligner.
     pulses_imaged : int
         Of them, those with navigation, imaged.
-    incomplete, foreign, duplicates : int
-        Pulses dropped for missing channels; packets of other stream IDs; repeated packets.
-    nav_flagged : int
+    pulses_incomplete : int
+        Pulses dropped for missing channels.
+    packets_foreign, packets_duplicate : int
+        Packets of other stream IDs; repeated packets.
+    pulses_nav_flagged : int
         Pulses without navigation (INS gap or timeout).
-    dems : dict
+    dem : dict
         Per DEM product name: its cells, valid cells and imaging time (s).
     """
 
     pulses: int = 0
     pulses_imaged: int = 0
-    incomplete: int = 0
-    foreign: int = 0
-    duplicates: int = 0
-    nav_flagged: int = 0
-    dems: dict[str, dict[str, float]] = field(default_factory=dict)
+    pulses_incomplete: int = 0
+    packets_foreign: int = 0
+    packets_duplicate: int = 0
+    pulses_nav_flagged: int = 0
+    dem: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-able form (the store's ``metrics`` attribute)."""
-        return {
-            "mode": "array",
-            "pulses": self.pulses,
-            "pulses_imaged": self.pulses_imaged,
-            "pulses_incomplete": self.incomplete,
-            "packets_foreign": self.foreign,
-            "packets_duplicate": self.duplicates,
-            "pulses_nav_flagged": self.nav_flagged,
-            "dem": self.dems,
-        }
+        """JSON-able form (the store's ``metrics`` attribute): ``mode`` ``"array"`` and
+        the fields by name."""
+        return {"mode": "array", **dataclasses.asdict(self)}
 
 
 class ArrayPipeline:
@@ -188,15 +183,15 @@ class ArrayPipeline:
             e.samples.reshape(n_p * n_c, *self._row),
         )
         self.summary.pulses += n_p
-        self.summary.nav_flagged += int(np.count_nonzero(~block.nav.valid))
+        self.summary.pulses_nav_flagged += int(np.count_nonzero(~block.nav.valid))
         self._blocks.append(block)
 
     def finish(self) -> ArraySummary:
         """Release the rest, record the INS samples, image and record the DEMs."""
         g = self.grouper
         g.flush()
-        self.summary.incomplete, self.summary.foreign = g.incomplete, g.foreign
-        self.summary.duplicates = g.duplicates
+        self.summary.pulses_incomplete, self.summary.packets_foreign = g.incomplete, g.foreign
+        self.summary.packets_duplicate = g.duplicates
         block = self.aligner.flush()
         if block is not None:
             self._accept(block)
@@ -249,7 +244,7 @@ class ArrayPipeline:
 
     def _record_dem(self, name: str, dem: DemProduct, seconds: float) -> None:
         ok = np.isfinite(dem.height_m)
-        self.summary.dems[name] = {
+        self.summary.dem[name] = {
             "cells": float(dem.height_m.size),
             "valid_cells": float(np.count_nonzero(ok)),
             "imaging_s": seconds,
@@ -297,9 +292,10 @@ def replay_array_files(
         foreign = sorted(pipe.grouper.foreign_ids)
         raise DataFileError(
             f"array replay imaged no pulse: {summary.pulses} whole pulses "
-            f"({summary.incomplete} dropped for missing channels, {summary.foreign} packets of "
-            f"VITA streams {_id_list(foreign)} that are no Tx/Rx pair of array.stream_ids "
-            f"{_id_list(list(pipe.grouper.channel_of))}), {summary.nav_flagged} without "
+            f"({summary.pulses_incomplete} dropped for missing channels, "
+            f"{summary.packets_foreign} packets of VITA streams {_id_list(foreign)} that are no "
+            f"Tx/Rx pair of array.stream_ids "
+            f"{_id_list(list(pipe.grouper.channel_of))}), {summary.pulses_nav_flagged} without "
             f"navigation; radar {radar_file}, INS {nav_file}; store {out}"
         )
     return summary

@@ -107,7 +107,14 @@ def test_store_holds_every_channel_and_both_dems(
     level, _ = store.dem("uncompensated")
     assert compensated.compensated and not level.compensated
     assert cell == pytest.approx(299_792_458.0 / (2 * 150e6))
-    assert report["run"]["pulses_imaged"] == n_pulses
+    run = report["run"]  # the store's metrics, by the names the report and users read
+    assert set(run) == {
+        "mode", "pulses", "pulses_imaged", "pulses_incomplete", "packets_foreign",
+        "packets_duplicate", "pulses_nav_flagged", "dem",
+    }, run  # fmt: skip
+    assert run["mode"] == "array" and run["pulses"] == run["pulses_imaged"] == n_pulses, run
+    assert run["pulses_incomplete"] == run["packets_foreign"] == run["pulses_nav_flagged"] == 0
+    assert set(run["dem"]) == {"compensated", "uncompensated"}, run
 
 
 def test_roll_series_from_the_ins_stream(tmp_path: Path) -> None:
