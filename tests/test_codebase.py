@@ -76,9 +76,9 @@ LAYERS = {
 }
 """Each layer and the packages it must not import (docs/design.md)."""
 
-PRODUCTS_FROM_DAEMON = ("sarmoco.daemon.config", "sarmoco.daemon.focuser")
+PRODUCTS_FROM_DAEMON = ("sarmoco.daemon.config",)
 """What the products may use of the daemon: the run's configuration as it flew (read back
-from the store's attributes) and the focuser's beam and look angles."""
+from the store's attributes)."""
 
 
 def _layering_violations(package: Path) -> list[str]:

@@ -24,6 +24,7 @@ from typing import Any, Literal
 from sarmoco.errors import ConfigError, ProcessingError
 from sarmoco.keys import key as _key
 from sarmoco.processing.autofocus.settings import AutofocusConfig
+from sarmoco.processing.geometry import look_angle
 from sarmoco.processing.imaging.presum import PREFILTER_OVERSAMPLING
 from sarmoco.processing.imaging.tile_pga import TilePgaConfig
 from sarmoco.processing.mocomp import DEFAULT_ENVELOPE_FRACTION
@@ -203,6 +204,15 @@ class GeometryConfig:
         lt=90,
     )
 
+    def reference_look_rad(self) -> float:
+        """Look angle from the vertical at which the beam-centre squint and the attitude
+        Doppler centroid are given (the store's ``doppler`` table), rad: ``90° -
+        antenna_depression_deg``, else the scene centre's (``center_slant_range_m`` at
+        ``height_m``)."""
+        if self.antenna_depression_deg is None:
+            return float(look_angle(self.center_slant_range_m, self.height_m))
+        return math.radians(90.0 - self.antenna_depression_deg)
+
 
 @dataclass(frozen=True)
 class MocompConfig:
@@ -377,6 +387,11 @@ class ImagingConfig:
         gt=0,
         lt=math.pi,
     )
+
+    def imaged_beam_rad(self) -> float:
+        """Azimuth beam the pixels take: ``azimuth_beamwidth_deg`` plus
+        ``squint_tolerance_deg`` on each side, rad."""
+        return math.radians(self.azimuth_beamwidth_deg + 2.0 * self.squint_tolerance_deg)
 
 
 @dataclass(frozen=True)

@@ -148,7 +148,7 @@ def tile_layout(cfg: Config) -> TileLayout:
         swath_m=im.swath_m,
         tile_length_m=im.tile_length_m,
         pixel_m=im.pixel_m,
-        beamwidth_rad=imaged_beam_rad(cfg),
+        beamwidth_rad=cfg.imaging.imaged_beam_rad(),
     )
 
 
@@ -156,7 +156,7 @@ def tile_imaging(cfg: Config, radar: RadarParams) -> tuple[TileFormer, TilePga |
     """A segment's tile imager (``imaging.method``) and tile PGA (None when
     ``autofocus.pga`` is off)."""
     geo, im, af = cfg.geometry, cfg.imaging, cfg.autofocus
-    beam_rad = imaged_beam_rad(cfg)
+    beam_rad = cfg.imaging.imaged_beam_rad()
     imager: TileFormer
     if im.method == "rda":
         imager = RdaTileImager(tile_layout(cfg), rangecomp.range_axis_m(radar), radar.wavelength_m)
@@ -504,11 +504,11 @@ class _Beam:
         geo = cfg.geometry
         self._axis_body = array_axis_body(math.radians(geo.antenna_squint_deg), geo.look_side)
         self._track = track
-        self._half_rad = imaged_beam_rad(cfg) / 2.0
+        self._half_rad = cfg.imaging.imaged_beam_rad() / 2.0
         edges = layout.ground_range_m + np.array([-0.5, 0.5]) * layout.swath_m
         self._swath_look_rad = np.arctan2(edges, layout.height_m)
         self._scene_look_rad = float(look_angle(geo.center_slant_range_m, geo.height_m))
-        self._ref_look_rad = reference_look_rad(cfg)
+        self._ref_look_rad = cfg.geometry.reference_look_rad()
         self._speed_mps, self._wavelength_m = track.v0_mps, radar.wavelength_m
         self.axis = np.array([1.0, 0.0, 0.0])
         """Array axis of the latest block in the imaging frame (broadside: along track)."""
@@ -621,22 +621,6 @@ class _Beam:
         """The centroids recorded since the last call."""
         out, self.centroids = self.centroids, []
         return out
-
-
-def reference_look_rad(cfg: Config) -> float:
-    """Look angle from the vertical at which the store's beam-centre squint and attitude
-    Doppler centroid are given, rad: ``90° - geometry.antenna_depression_deg``, else the
-    scene centre's."""
-    geo = cfg.geometry
-    if geo.antenna_depression_deg is None:
-        return float(look_angle(geo.center_slant_range_m, geo.height_m))
-    return math.radians(90.0 - geo.antenna_depression_deg)
-
-
-def imaged_beam_rad(cfg: Config) -> float:
-    """Beam the pixels take: the azimuth beamwidth plus the squint tolerance each side, rad."""
-    im = cfg.imaging
-    return math.radians(im.azimuth_beamwidth_deg + 2.0 * im.squint_tolerance_deg)
 
 
 def segment_limits(cfg: Config, v0_mps: float) -> SegmentLimits:

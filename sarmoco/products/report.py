@@ -31,7 +31,6 @@ import numpy as np
 import numpy.typing as npt
 
 from sarmoco.daemon.config import Config, parse_config
-from sarmoco.daemon.focuser import imaged_beam_rad, reference_look_rad
 from sarmoco.drivers.samples import to_complex64
 from sarmoco.errors import ProcessingError, RecorderError
 from sarmoco.processing import rangecomp
@@ -232,7 +231,7 @@ def beam_squint_rad(store: RunStore, track: ReferenceTrack, cfg: Config, look_ra
 
     The median over the segment's processing blocks (from ``track.t0_ns`` on) of the
     attitude's beam-centre squint (``doppler/squint_rad``, at the antenna's reference look
-    angle, :func:`~sarmoco.daemon.focuser.reference_look_rad`), carried to
+    angle, :meth:`~sarmoco.daemon.config.GeometryConfig.reference_look_rad`), carried to
     ``look_rad``: the ground squint of a cone about a level array axis turned by a crab
     ``c`` is ``asin(sin β tan c)`` (:mod:`sarmoco.processing.beam`), so its sine scales with
     ``sin β``.
@@ -248,7 +247,7 @@ def beam_squint_rad(store: RunStore, track: ReferenceTrack, cfg: Config, look_ra
     squint = squint[np.isfinite(squint)]
     if squint.size == 0:
         return 0.0
-    ref = reference_look_rad(cfg)
+    ref = cfg.geometry.reference_look_rad()
     sine = math.sin(float(np.median(squint))) * math.sin(look_rad) / math.sin(ref)
     return math.asin(max(-1.0, min(1.0, sine)))
 
@@ -303,7 +302,7 @@ def focus_comparison(
     nominal = track.position_imaging(t_ns)
     ins = nominal[0] + disp
     # pulses whose beam sees the window, every k-th
-    beam = imaged_beam_rad(cfg)
+    beam = cfg.imaging.imaged_beam_rad()
     y_c = float(np.mean(window.axis1_m))
     rho = math.hypot(y_c, cfg.geometry.height_m)
     centre = beam_squint_rad(store, track, cfg, math.atan2(y_c, cfg.geometry.height_m))
