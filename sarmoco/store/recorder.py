@@ -766,7 +766,7 @@ class Recorder(Closing):
         self._writer.submit(self._write_image, index, image, t0_ns, t1_ns, metrics, reference_track)
         self.n_images = index + 1
         if self.live is not None:
-            self.live.add_tile(index, image)
+            self.live.add_tile(index, image, t0_ns, t1_ns)
         return index
 
     def _write_image(
