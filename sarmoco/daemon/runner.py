@@ -22,7 +22,7 @@ from sarmoco.daemon.focuser import SinkFactory
 from sarmoco.daemon.links import open_ins, open_radar
 from sarmoco.daemon.livefeed import LiveFeed
 from sarmoco.daemon.pipeline import Pipeline, RunSummary, ring_format
-from sarmoco.daemon.recorder import Recorder
+from sarmoco.daemon.recorder import Recorder, meta_chunk_pulses
 from sarmoco.daemon.sdnotify import Notifier
 from sarmoco.daemon.status import Counters, Health, LiveView, StatusServer
 from sarmoco.daemon.store import StoreNav, StorePulses, open_store
@@ -75,6 +75,8 @@ def open_recorder(cfg: Config, path: Path, live: LiveFeed | None = None) -> Reco
         chunk_pulses=cfg.recorder.chunk_pulses,
         echo_compression=cfg.recorder.echo_compression,
         fsync_interval_s=cfg.recorder.fsync_interval_s,
+        flush_interval_s=cfg.recorder.flush_interval_s,
+        meta_chunk_pulses=meta_chunk_pulses(cfg.recorder.chunk_pulses, cfg.radar.prf_hz),
         live=live,
         writer_queue=cfg.recorder.writer_queue,
     )
@@ -460,6 +462,7 @@ class _LiveRun:
         while not self.st.stop.is_set():
             try:
                 stored = self.pipe.record(self.pipe.now_ns(live=True))
+                self.pipe.recorder.flush_due()
             except SarmocoError as exc:
                 self._recording_failure = exc
                 self._processing_failed(exc)
