@@ -431,7 +431,10 @@ class Table:
         """Rows of each column in the store."""
         self._flushed_mono = time.monotonic()
         self._dirty = False
-        """Rows held and written were changed since (:meth:`or_flags`)."""
+        """Flags were set since the last write that was due (:meth:`or_flags`)."""
+        self._late_flags: list[tuple[str, npt.NDArray[np.int64], npt.NDArray[Any]]] = []
+        """Flags to OR into rows of the store at the next write that is due: (column, rows,
+        value)."""
 
     def append(self, **columns: npt.ArrayLike) -> int:
         """Write rows to every column, then advance ``committed``; returns the new count.
@@ -489,6 +492,8 @@ class Table:
         now = time.monotonic()
         due = force or self._dirty or now - self._flushed_mono >= self.flush_interval_s
         try:
+            if due:
+                self._apply_late_flags()
             for arr in self.arrays.values():
                 if arr.shape[0] < stop:
                     grow = -(-(stop - arr.shape[0]) // self.grow_rows) * self.grow_rows
@@ -541,21 +546,28 @@ class Table:
 
     def or_flags(self, column: str, rows: npt.NDArray[np.int64], flags: int) -> None:
         """OR ``flags`` into ``column`` at ``rows`` (handed rows): in memory for the rows
-        held, read and written again in the store for the others."""
+        held; for the rows in the store at the next write that is due (:meth:`write`: each
+        chunk touched read and written once)."""
         value = np.asarray(flags, dtype=self._held[column].dtype)
         first = self._held_from[column]
         held = rows[rows >= first]
-        if held.size:
-            self._held[column][held - first] |= value
-            self._dirty = True
-        stored = rows[rows < first]
-        if stored.size:
-            lo, hi = int(stored.min()), int(stored.max()) + 1
-            span = np.asarray(self.arrays[column][lo:hi])
-            span[stored - lo] |= value
-            self.arrays[column][lo:hi] = span
-        if self._dirty and self.flush_interval_s == 0:
+        self._held[column][held - first] |= value
+        self._late_flags.append((column, rows[rows < first], value))
+        self._dirty = True
+        if self.flush_interval_s == 0:
             self.flush_due()
+
+    def _apply_late_flags(self) -> None:
+        """OR the flags :meth:`or_flags` left for rows in the store into their chunks."""
+        for column, rows, value in self._late_flags:
+            arr = self.arrays[column]
+            chunk = arr.chunks[0]
+            for c in np.unique(rows // chunk).tolist():
+                lo = c * chunk
+                span = np.asarray(arr[lo : lo + chunk])  # a whole chunk: held rows are after
+                span[rows[rows // chunk == c] - lo] |= value
+                arr[lo : lo + chunk] = span
+        self._late_flags = []
 
     def _write_regions(
         self, regions: Mapping[str, tuple[slice, npt.NDArray[Any]]], committed: int
