@@ -430,6 +430,8 @@ class Table:
         self._stored = dict.fromkeys(spec.columns, 0)
         """Rows of each column in the store."""
         self._flushed_mono = time.monotonic()
+        self._flushed_rows = 0
+        """Rows handed by the last write that was due (all written then)."""
         self._dirty = False
         """Flags were set since the last write that was due (:meth:`or_flags`)."""
         self._late_flags: list[tuple[str, npt.NDArray[np.int64], npt.NDArray[Any]]] = []
@@ -529,7 +531,7 @@ class Table:
         self._handed = stop
         self.committed = committed
         if due:
-            self._flushed_mono, self._dirty = now, False
+            self._flushed_mono, self._flushed_rows, self._dirty = now, stop, False
         return committed
 
     def flush(self) -> int:
@@ -540,7 +542,8 @@ class Table:
     def flush_due(self) -> None:
         """Write the rows held when ``flush_interval_s`` has passed since the last write
         (rows of whole-chunk columns wait for their chunk to fill)."""
-        if time.monotonic() - self._flushed_mono >= self.flush_interval_s or self._dirty:
+        waiting = self._handed > self._flushed_rows or self._dirty
+        if waiting and time.monotonic() - self._flushed_mono >= self.flush_interval_s:
             empty = {k: v[:0] for k, v in self._held.items()}
             self.write(empty, self._handed)
 
