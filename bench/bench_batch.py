@@ -34,7 +34,7 @@ from distributed import get_task_stream
 from sarmoco.app.batch import Recording, cluster_client, run_batch
 from sarmoco.daemon.config import load_config
 from sarmoco.daemon.runner import replay_files
-from sarmoco.daemon.store import open_store
+from sarmoco.store.reader import open_store
 from tests.workloads.dask_cluster import separate_cluster
 
 PREFIXES = ("front_end", "image_block")

@@ -4,7 +4,7 @@ Run as a script (``python -m bench.bench_checksum``). The recorder appends 8192 
 4096 int16 I/Q samples (128 MiB of echoes, chunks of 256 pulses, no compression, fsync off)
 into a store in /tmp, three times each way; the best wall time and the process CPU time of
 that run are printed as MB/s and CPU seconds per GB. "without" replaces
-:func:`sarmoco.daemon.schema.chunk_codecs` by the same codecs less the checksum.
+:func:`sarmoco.store.schema.chunk_codecs` by the same codecs less the checksum.
 """
 
 from __future__ import annotations
@@ -18,8 +18,8 @@ from unittest import mock
 
 import numpy as np
 
-from sarmoco.daemon import schema
-from sarmoco.daemon.recorder import Recorder
+from sarmoco.store import schema
+from sarmoco.store.recorder import Recorder
 
 BLOCK = 256
 BLOCKS = 32

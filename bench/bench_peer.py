@@ -10,7 +10,7 @@ track, axis 1 along the mean look direction, centred on the scene reference poin
   reads the CPHD with its own reader (``fastsar.io.read_cphd``) and forms the image by
   exact backprojection (``algorithm="bp"``) and by factorised backprojection
   (``algorithm="ffbp"``), its C++/OpenMP ``cpu`` backend, ``OMP_NUM_THREADS=1``;
-* sarmoco reads it with :func:`sarmoco.app.cphd.read_cphd` and forms it by direct
+* sarmoco reads it with :func:`sarmoco.products.cphd.read_cphd` and forms it by direct
   backprojection (:func:`~sarmoco.processing.imaging.backprojection.backproject_into`) and
   by FFBP (:func:`~sarmoco.processing.imaging.ffbp.ffbp_into`, phase budget ``--budget``),
   numba on one thread.
@@ -45,13 +45,13 @@ from typing import Any
 import numba
 import numpy as np
 
-from sarmoco.app.cphd import FxPhaseHistory, grid_heading, read_cphd
 from sarmoco.geodesy import geodetic_to_ecef
 from sarmoco.processing.imaging import PlaneGrid, compressed_from_phase_history
 from sarmoco.processing.imaging.backprojection import RangeLines, backproject_into
 from sarmoco.processing.imaging.ffbp import ffbp_into
 from sarmoco.processing.metrics import point_target_metrics
 from sarmoco.processing.types import C_MPS, ComplexArray, Image
+from sarmoco.products.cphd import FxPhaseHistory, grid_heading, read_cphd
 
 MARGIN_M = 3.0
 """Least distance from a target to the grid's edge, m."""

@@ -3,11 +3,11 @@
 Run as ``python -m bench.bench_pulse_table [--seconds 3] [--prf 20000] [--block 200]
 [--flush-interval S] [--meta-chunk N] [--motion] [--work DIR]``.
 
-What the daemon's recording thread hands the :class:`~sarmoco.daemon.recorder.Recorder`
+What the daemon's recording thread hands the :class:`~sarmoco.store.recorder.Recorder`
 when the raw echoes are not recorded (``thz-spotlight`` at 20 kHz: a recording pass every
 10 ms takes about 200 pulses): blocks of ``--block`` pulses of the ``pulses`` table, paced
 at ``--prf``, and with ``--motion`` the same rows of the ``motion`` table (what focusing
-records for each pulse), then :meth:`~sarmoco.daemon.recorder.Recorder.flush_due` as the
+records for each pulse), then :meth:`~sarmoco.store.recorder.Recorder.flush_due` as the
 recording thread calls it after each pass. Prints the process's user and system CPU per
 pulse (every thread: zarr's included) and the wall time against the data's. Without
 ``--flush-interval`` / ``--meta-chunk`` the recorder's own defaults apply.
@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from sarmoco.daemon.recorder import Recorder
+from sarmoco.store.recorder import Recorder
 
 
 def run(

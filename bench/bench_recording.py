@@ -11,7 +11,7 @@ in one run, on the disk that holds ``--work``:
    candidate on blocks of the simulated ``thz-spotlight`` run at mid-aperture, scaled to
    int16 as the simulator's radar sends them;
 3. **the recorder at the radar's rate**: those echoes offered in blocks of 256 pulses at
-   20 kHz (paced) to the daemon's :class:`~sarmoco.daemon.recorder.Recorder` (fsync every
+   20 kHz (paced) to the daemon's :class:`~sarmoco.store.recorder.Recorder` (fsync every
    second) on a writer thread, through a queue that holds the echo ring's seconds of
    pulses; a block that finds the queue full is not stored and is counted (as the daemon's
    ring counts the pulses it drops). For each echo compression: MB/s of echoes stored per
@@ -33,14 +33,14 @@ from typing import Any
 import numcodecs
 import numpy as np
 
-from sarmoco.daemon.pipeline import RING_SECONDS
-from sarmoco.daemon.recorder import Recorder
-from sarmoco.daemon.schema import ECHO_COMPRESSION
+from sarmoco.daemon.ingest import RING_SECONDS
 from sarmoco.sim.echostream import EchoStream
 from sarmoco.sim.emit_radar import int16_scale
 from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
+from sarmoco.store.recorder import Recorder
+from sarmoco.store.schema import ECHO_COMPRESSION
 
 N_SAMPLES = 4096
 PRF_HZ = 20_000.0

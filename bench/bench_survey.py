@@ -37,11 +37,9 @@ from typing import Any
 import numpy as np
 
 from sarmoco.app.simconfig import scenario_config
-from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.pipeline import Pipeline
 from sarmoco.daemon.runner import open_recorder
 from sarmoco.daemon.status import Counters
-from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.drivers.samples import AttitudeSample, Validity, VelocitySample
 from sarmoco.processing.imaging.backprojection import backproject
 from sarmoco.processing.imaging.grid import PlaneGrid
@@ -54,6 +52,8 @@ from sarmoco.sim.run import pulse_times_ns
 from sarmoco.sim.scenario import Scenario, load_preset
 from sarmoco.sim.survey import SurveyPattern, survey_scenario, survey_spec
 from sarmoco.sim.trajectory import apc_trajectory, true_trajectory
+from sarmoco.store.flags import PulseFlag
+from sarmoco.store.reader import RunStore, open_store
 
 RANGE_CHUNK_PULSES = 2048
 """Pulses generated and played per chunk."""

@@ -23,7 +23,7 @@ from typing import Any
 
 from sarmoco.app.demo import run_loopback
 from sarmoco.app.simconfig import scenario_config
-from sarmoco.daemon.report import write_report
+from sarmoco.products.report import write_report
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
 from tests.daemon.test_end_to_end import targets_in_image

@@ -100,11 +100,11 @@ REALTIME: dict[str, tuple[str, ...]] = {
     # the live page during a `sarmoco run`: renders at most once a second, CPU share
     "tests/daemon/test_live_page.py": ("test_live_page_during_a_run",),
     # 12 writer processes SIGKILLed at random moments within 2 s
-    "tests/daemon/test_recorder.py": (
+    "tests/store/test_recorder.py": (
         "test_sigkill_at_random_moments_leaves_committed_rows_intact",
     ),
     # a `sarmoco run` SIGKILLed mid-run: what the store holds after the kill
-    "tests/daemon/test_recorder_crash_bound.py": (),
+    "tests/store/test_recorder_crash_bound.py": (),
     # a short soak (also a bench)
     "tests/daemon/test_soak_short.py": (),
     # 40 stalled clients: a GET answered within 0.5 s, each stall closed within 1.5 s

@@ -53,10 +53,26 @@ def _imports(path: Path, package: Path = PACKAGE) -> set[str]:
 
 
 LAYERS = {
-    "processing": ("sarmoco.daemon", "sarmoco.drivers", "sarmoco.sim", "sarmoco.app"),
-    "drivers": ("sarmoco.processing", "sarmoco.daemon", "sarmoco.sim", "sarmoco.app"),
-    "daemon": ("sarmoco.sim", "sarmoco.app"),
-    "sim": ("sarmoco.daemon", "sarmoco.app"),
+    "processing": (
+        "sarmoco.store",
+        "sarmoco.daemon",
+        "sarmoco.products",
+        "sarmoco.drivers",
+        "sarmoco.sim",
+        "sarmoco.app",
+    ),
+    "drivers": (
+        "sarmoco.processing",
+        "sarmoco.store",
+        "sarmoco.daemon",
+        "sarmoco.products",
+        "sarmoco.sim",
+        "sarmoco.app",
+    ),
+    "store": ("sarmoco.daemon", "sarmoco.products", "sarmoco.sim", "sarmoco.app"),
+    "daemon": ("sarmoco.products", "sarmoco.sim", "sarmoco.app"),
+    "products": ("sarmoco.sim", "sarmoco.app"),
+    "sim": ("sarmoco.store", "sarmoco.daemon", "sarmoco.products", "sarmoco.app"),
 }
 """Each layer and the packages it must not import (docs/design.md)."""
 
@@ -270,7 +286,8 @@ def test_planted_cycle_long_function_and_missing_all_are_found(tmp_path: Path) -
 
 
 def test_daemon_process_never_loads_the_simulator() -> None:
-    """Every daemon module and the command line for ``sarmoco run`` leave ``sarmoco.sim`` out."""
+    """Every daemon module and the command line for ``sarmoco run`` leave ``sarmoco.sim`` out,
+    and the ground products with their plotting library."""
     code = (
         "import pkgutil, sys, importlib\n"
         "import sarmoco.daemon\n"
@@ -278,7 +295,8 @@ def test_daemon_process_never_loads_the_simulator() -> None:
         "    importlib.import_module(m.name)\n"
         "from sarmoco.app.cli import build_parser\n"
         "build_parser().parse_args(['run', '--config', 'sarmoco.toml'])\n"
-        "sim = ('sarmoco.sim', 'sarmoco.app.sim', 'sarmoco.app.demo')\n"
+        "sim = ('sarmoco.sim', 'sarmoco.app.sim', 'sarmoco.app.demo', 'sarmoco.products',"
+        " 'matplotlib')\n"
         "print(sorted(m for m in sys.modules if m.startswith(sim)))\n"
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)

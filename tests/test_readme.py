@@ -30,7 +30,7 @@ import pytest
 from sarmoco.app.cli import build_parser
 from sarmoco.daemon.config import describe_keys
 
-PACKAGE_DIRS = ("app/", "daemon/", "drivers/", "processing/", "sim/")
+PACKAGE_DIRS = ("app/", "daemon/", "drivers/", "processing/", "products/", "sim/", "store/")
 """Paths the pages write relative to ``sarmoco/`` (``daemon/array_pipeline.py``)."""
 
 README_MAX_LINES = 200

@@ -51,13 +51,13 @@ from typing import Any
 import zarr
 
 from sarmoco.app.imaging_stream import SegmentStream, StreamRecorder
-from sarmoco.daemon import schema
 from sarmoco.daemon.config import Config, load_config
-from sarmoco.daemon.focuser import radar_params, tile_imaging
-from sarmoco.daemon.pipeline import RunSummary, recorded_tile_metrics
-from sarmoco.daemon.recorder import create_tile, write_tile
+from sarmoco.daemon.focuser import tile_imaging
 from sarmoco.daemon.runner import replay_files, replay_store
+from sarmoco.daemon.tables import RunSummary, recorded_tile_metrics
 from sarmoco.errors import ConfigError, ProcessingError
+from sarmoco.store import schema
+from sarmoco.store.recorder import create_tile, write_tile
 
 LOOPBACK = "127.0.0.1"
 """The only address a local cluster binds."""
@@ -157,7 +157,7 @@ def image_block(cfg: Config, block: ImageBlock) -> list[tuple[int, dict[str, flo
     The imager replays the segment's calls that reach the block and forms only the
     block's tiles and, with tile PGA, their neighbours (context only, not written).
     """
-    imager, tile_pga = tile_imaging(cfg, radar_params(cfg))
+    imager, tile_pga = tile_imaging(cfg, cfg.radar.params())
     stream = block.stream
     imager.layout = stream.layout  # with the segment's share of the ground (keep)
     extra = 1 if tile_pga is not None else 0

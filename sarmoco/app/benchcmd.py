@@ -89,12 +89,12 @@ from sarmoco.app.demo import free_udp_port, read_json_line
 from sarmoco.app.simconfig import loopback_config, scenario_config
 from sarmoco.daemon.config import live_imaging
 from sarmoco.daemon.status import LIVE_PAGE_POLL_S
-from sarmoco.daemon.store import open_store
 from sarmoco.daemon.threadcpu import STAGES
 from sarmoco.drivers.clock import GPS_LEAP_SECONDS_DEFAULT
 from sarmoco.errors import ConfigError, SarmocoError
 from sarmoco.sim.pacing import host_gps_ns
 from sarmoco.sim.scenario import PRESETS, load_preset
+from sarmoco.store.reader import open_store
 
 PY = [sys.executable, "-m", "sarmoco"]
 SIM_ARGS = ["--motion", "turbulence", "--motion-seed", "1", "--ins-grade", "tactical"]

@@ -168,9 +168,9 @@ def _cmd_import_cphd(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
-    from sarmoco.daemon.array_report import is_array_store, summary_text, write_array_report
-    from sarmoco.daemon.report import write_report
-    from sarmoco.daemon.store import open_store
+    from sarmoco.products.array_report import is_array_store, summary_text, write_array_report
+    from sarmoco.products.report import write_report
+    from sarmoco.store.reader import open_store
 
     store = Path(args.store)
     out = Path(args.out) if args.out else store.with_suffix(".report")
@@ -190,7 +190,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
 
 
 def _cmd_verify(args: argparse.Namespace) -> int:
-    from sarmoco.daemon.verify import verify_store
+    from sarmoco.store.verify import verify_store
 
     report = verify_store(args.store)
     for fault in report.faults:

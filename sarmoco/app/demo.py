@@ -23,8 +23,8 @@ import numpy as np
 
 from sarmoco.app.simcommand import platform_arguments, scenario_overrides
 from sarmoco.app.simconfig import loopback_config
-from sarmoco.daemon.report import write_report
 from sarmoco.errors import SarmocoError
+from sarmoco.products.report import write_report
 from sarmoco.sim.extended import load_scene
 from sarmoco.sim.insemitters import INS_EMITTERS
 

@@ -2,9 +2,9 @@
 
     sarmoco export STORE [--sicd OUT.nitf] [--cphd OUT.cphd] [--segment K]
 
-The SICD holds the focused image of one reference-track segment (:mod:`sarmoco.app.sicd`),
+The SICD holds the focused image of one reference-track segment (:mod:`sarmoco.products.sicd`),
 the CPHD its recorded echoes as a phase history compensated to the segment's scene centre
-by the INS (:func:`sarmoco.app.cphd.from_store`).
+by the INS (:func:`sarmoco.products.cphd.from_store`).
 Every file written is read back and run through sarkit's consistency checker; a file with
 a failure is an error (exit status 2), never a silent product.
 """
@@ -18,8 +18,8 @@ from typing import Any, BinaryIO
 
 import sarkit.verification as skver
 
-from sarmoco.daemon.store import open_store
 from sarmoco.errors import ConfigError, DataFileError
+from sarmoco.store.reader import open_store
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -65,8 +65,8 @@ def checked(checker: Callable[[BinaryIO], Any], path: Path) -> None:
 
 def run_command(args: argparse.Namespace) -> int:
     """Write the products asked for; 0 when each passed its consistency check."""
-    from sarmoco.app.cphd import from_store, write_cphd
-    from sarmoco.app.sicd import sicd_product, write_sicd
+    from sarmoco.products.cphd import from_store, write_cphd
+    from sarmoco.products.sicd import sicd_product, write_sicd
 
     if args.sicd is None and args.cphd is None:
         raise ConfigError("export: nothing to write (give --sicd and/or --cphd)")

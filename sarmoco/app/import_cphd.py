@@ -1,6 +1,6 @@
 """``sarmoco import-cphd``: focus a CPHD phase history into a store, optionally as SICD.
 
-The image is :func:`sarmoco.app.cphd.focus`'s backprojection on a ground grid of the scene
+The image is :func:`sarmoco.products.cphd.focus`'s backprojection on a ground grid of the scene
 frame (east, north, up about the CPHD's image-area reference point, IARP).
 """
 
@@ -11,11 +11,11 @@ from pathlib import Path
 
 import sarkit.verification as skver
 
-from sarmoco.app.cphd import focus, grid_heading, read_cphd
 from sarmoco.app.export import checked
-from sarmoco.app.sicd import spotlight_product, write_sicd
-from sarmoco.daemon.recorder import Recorder
 from sarmoco.drivers.clock import unix_ns_to_gps_ns
+from sarmoco.products.cphd import focus, grid_heading, read_cphd
+from sarmoco.products.sicd import spotlight_product, write_sicd
+from sarmoco.store.recorder import Recorder
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

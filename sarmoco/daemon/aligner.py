@@ -13,15 +13,15 @@ attitude sample has arrived, so that the arm's rate is a central difference).
   :data:`BRIDGE_FIT_NS` of samples beyond each end; attitude by SLERP: a vehicle's
   velocity does not jump within a fraction of a second, and the autofocus removes
   what the cubic misses), and the pulse is flagged
-  :attr:`~sarmoco.daemon.flags.PulseFlag.NAV_BRIDGED`: it is focused, and the store
+  :attr:`~sarmoco.store.flags.PulseFlag.NAV_BRIDGED`: it is focused, and the store
   says which pulses had bridged navigation. The pulses of the silence wait in the
   ring for :data:`BRIDGE_FIT_NS` of samples after it.
 
 If no bracket within ``bridge_gap_ns`` exists ``latency_budget_ns`` after the
 pulse time, the pulse leaves anyway, flagged:
-:attr:`~sarmoco.daemon.flags.PulseFlag.NAV_GAP` when navigation exists after the
+:attr:`~sarmoco.store.flags.PulseFlag.NAV_GAP` when navigation exists after the
 pulse but the samples around it are too far apart (a long dropout, refused samples),
-:attr:`~sarmoco.daemon.flags.PulseFlag.NAV_TIMEOUT` when the INS has not
+:attr:`~sarmoco.store.flags.PulseFlag.NAV_TIMEOUT` when the INS has not
 reached the pulse time yet. These pulses get NaN navigation and are not focused.
 Waiting the whole budget before calling a gap a gap lets reordered samples fill
 it; a silence longer than the budget cannot be bridged (its first pulses time out).
@@ -38,12 +38,12 @@ from typing import Protocol
 import numpy as np
 
 from sarmoco.daemon.echoring import EchoBatch
-from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.navbuffer import NO_TIME, NavBuffer, NavStream
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.geometry import lever_arm_ned
 from sarmoco.processing.navinterp import PulseNav, bridge_gap, interpolate_nav
 from sarmoco.processing.types import BoolArray, FloatArray, IntArray, NavSamples
+from sarmoco.store.flags import PulseFlag
 
 
 class PulseQueue(Protocol):

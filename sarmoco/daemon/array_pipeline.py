@@ -31,25 +31,31 @@ from typing import Any
 
 import numpy as np
 
-from sarmoco.daemon import schema
 from sarmoco.daemon.aligner import AlignedBlock
 from sarmoco.daemon.channelgroup import ChannelGrouper
 from sarmoco.daemon.config import Config, array_stream_ids
-from sarmoco.daemon.echoring import EchoRing, sample_dtype, sample_shape, to_complex64
-from sarmoco.daemon.flags import FLAG_DTYPE
-from sarmoco.daemon.focuser import radar_params
+from sarmoco.daemon.echoring import EchoRing
+from sarmoco.daemon.ingest import ring_format
 from sarmoco.daemon.links import open_ins, open_radar
 from sarmoco.daemon.navframe import StoreFrame
-from sarmoco.daemon.pipeline import nav_alignment, ring_format
-from sarmoco.daemon.recorder import Recorder
+from sarmoco.daemon.navigation import nav_alignment
 from sarmoco.daemon.runner import open_recorder, record_ins_format
-from sarmoco.drivers.samples import AttitudeSample, VelocitySample
+from sarmoco.drivers.samples import (
+    AttitudeSample,
+    VelocitySample,
+    sample_dtype,
+    sample_shape,
+    to_complex64,
+)
 from sarmoco.drivers.source import Sample, Source
 from sarmoco.errors import DataFileError
 from sarmoco.processing.array.geometry import mimo_layout
 from sarmoco.processing.array.imaging3d import Array3dOptions, ArraySystem, DemProduct, form_dem
 from sarmoco.processing.navinterp import integrate_velocity
 from sarmoco.processing.types import NavSamples
+from sarmoco.store import schema
+from sarmoco.store.flags import FLAG_DTYPE
+from sarmoco.store.recorder import Recorder
 
 log = logging.getLogger(__name__)
 
@@ -63,7 +69,7 @@ def array_system(cfg: Config) -> ArraySystem:
     """The radar, array layout and beams of an ``array``-mode configuration."""
     a = cfg.array
     return ArraySystem(
-        radar=radar_params(cfg),
+        radar=cfg.radar.params(),
         layout=mimo_layout(a.n_tx, a.n_rx, a.epc_spacing_m),
         antenna_length_m=a.antenna_length_m,
         max_look_rad=math.radians(a.max_look_deg),

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from sarmoco.daemon.flags import PulseFlag
 from sarmoco.drivers.samples import EchoPackets
+from sarmoco.store.flags import PulseFlag
 
 MAX_OPEN_PULSES = 8
 """Pulses being assembled at once: the oldest is dropped when a newer one would exceed it."""
@@ -36,7 +36,7 @@ class GroupedPulse:
     samples : ndarray
         ``(C, S)`` complex64 or ``(C, S, 2)`` int16, channel ``c`` in row ``c``.
     flags : int
-        :class:`~sarmoco.daemon.flags.PulseFlag` bits of every channel's packet OR-ed.
+        :class:`~sarmoco.store.flags.PulseFlag` bits of every channel's packet OR-ed.
     """
 
     t_ns: int

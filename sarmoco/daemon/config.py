@@ -21,48 +21,30 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from sarmoco.daemon.schema import ECHO_COMPRESSION
 from sarmoco.errors import ConfigError, ProcessingError
 from sarmoco.keys import key as _key
 from sarmoco.processing.autofocus.settings import AutofocusConfig
 from sarmoco.processing.imaging.presum import PREFILTER_OVERSAMPLING
-from sarmoco.processing.imaging.tile_pga import StripPga
+from sarmoco.processing.imaging.tile_pga import TilePgaConfig
 from sarmoco.processing.mocomp import DEFAULT_ENVELOPE_FRACTION
-from sarmoco.processing.types import C_MPS
+from sarmoco.processing.types import C_MPS, RadarParams
+from sarmoco.store.schema import ECHO_COMPRESSION
 
 
 @dataclass(frozen=True)
-class RadarConfig:
-    """Radar waveform, receiver and echo link."""
+class RadarConfig(RadarParams):
+    """Radar waveform, receiver and echo link.
+
+    The waveform and receiver keys are the fields of the physics' own description,
+    :class:`~sarmoco.processing.types.RadarParams` (their defaults, units and bounds are
+    declared there); the daemon adds the link, the sample format, the channels and the
+    mode.
+    """
 
     link: str = _key(
         "udp://127.0.0.1:49152",
         "Where VITA 49.2 echo packets arrive: udp://HOST:PORT (listen), tcp://HOST:PORT "
         "(connect), or a .vrt file path for replay",
-    )
-    carrier_hz: float = _key(15.0e9, "RF reference (centre) frequency", unit="Hz", gt=0)
-    bandwidth_hz: float = _key(750.0e6, "Chirp bandwidth", unit="Hz", gt=0)
-    pulse_width_s: float = _key(10.0e-6, "Chirp duration", unit="s", gt=0)
-    sample_rate_hz: float = _key(1.0e9, "Complex I/Q sample rate", unit="Hz", gt=0)
-    prf_hz: float = _key(1000.0, "Nominal pulse repetition frequency", unit="Hz", gt=0)
-    n_samples: int = _key(4096, "Complex samples per pulse", gt=0)
-    range_gate_delay_s: float = _key(
-        5.0e-6,
-        "Two-way delay from the pulse time stamp to the first sample (matched) or to the "
-        "dechirp reference (dechirp)",
-        unit="s",
-        ge=0,
-    )
-    receive: Literal["matched", "dechirp"] = _key(
-        "matched", "Receiver: pulsed LFM (matched filter) or dechirp-on-receive (FFT)"
-    )
-    chirp_direction: Literal["up", "down"] = _key(
-        "up", "Sweep of the transmitted chirp: up (frequency rising) or down (falling)"
-    )
-    iq_conjugate: bool = _key(
-        False,
-        "The digitiser delivers the conjugate of the baseband I/Q (spectral inversion: I and Q "
-        "swapped or Q negated, a high-side LO); the samples are conjugated before compression",
     )
     sample_format: Literal["int16", "float32"] = _key("int16", "I/Q sample type on the wire")
     channels: int = _key(
@@ -85,6 +67,12 @@ class RadarConfig:
         "spotlight); array: MIMO downward-looking array, one stream ID per Tx/Rx "
         "pair, imaged in 3-D into a DEM (section array)",
     )
+
+    def params(self) -> RadarParams:
+        """The radar as processing takes it: the :class:`RadarParams` part of these keys."""
+        return RadarParams(
+            **{f.name: getattr(self, f.name) for f in dataclasses.fields(RadarParams)}
+        )
 
     def slant_window_m(self) -> tuple[float, float]:
         """Slant ranges of the first and last range bin of the compressed pulses, m.
@@ -280,12 +268,14 @@ class MocompConfig:
 
 
 @dataclass(frozen=True)
-class AutofocusSection(AutofocusConfig):
+class AutofocusSection(TilePgaConfig, AutofocusConfig):
     """Sliding-subaperture two-step autofocus (docs/methods.md §3) and tile PGA.
 
-    The settings of the sliding autofocus are its own class's fields (this section *is* a
-    :class:`~sarmoco.processing.autofocus.settings.AutofocusConfig`, handed to the engine
-    as it is); the daemon adds the switch and the tile PGA.
+    The settings of the sliding autofocus and of tile PGA are their own classes' fields
+    (this section *is* a :class:`~sarmoco.processing.autofocus.settings.AutofocusConfig`,
+    handed to the engine as it is, and a
+    :class:`~sarmoco.processing.imaging.tile_pga.TilePgaConfig`, handed to tile PGA as it
+    is); the daemon adds the two switches.
     """
 
     enabled: bool = _key(True, "Run the two-step autofocus after INS compensation")
@@ -295,14 +285,6 @@ class AutofocusSection(AutofocusConfig):
         "stripmap PGA on the tile and its two neighbours; with or without the sliding "
         "autofocus): removes phase errors shorter than a subaperture; tiles come out one "
         "tile later",
-    )
-    pga_iterations: int = _key(StripPga.max_iter, "Tile PGA iterations at most", gt=0)
-    pga_window_m: float = _key(
-        StripPga.window_m,
-        "Along-track width of tile PGA's first window around each target; it must hold the "
-        "paired echoes (lambda R f / (2 v) from the peak) of the fastest phase error to remove",
-        unit="m",
-        gt=0,
     )
 
 

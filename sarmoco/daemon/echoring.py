@@ -10,7 +10,7 @@ committed pulses with :meth:`EchoRing.peek_times` and takes them out with
 it is full, a reservation returns ``None``; the producer then reads the waiting
 packets into scratch space and reports them with :meth:`EchoRing.note_dropped`,
 which counts them and flags the next committed pulse
-:attr:`~sarmoco.daemon.flags.PulseFlag.DROPPED_BEFORE`. A full ring polled
+:attr:`~sarmoco.store.flags.PulseFlag.DROPPED_BEFORE`. A full ring polled
 while nothing arrives counts nothing.
 
 Pulses leave the ring in time order, each time once. Any number of producers
@@ -36,17 +36,14 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
 
-from sarmoco.daemon.flags import FLAG_DTYPE, PulseFlag
+from sarmoco.drivers.samples import SampleFormat, sample_dtype, sample_shape, to_complex64
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.types import IntArray
-
-SampleFormat = Literal["complex64", "int16"]
-"""How samples are held: ``complex64`` (float32 I/Q) or ``int16`` I/Q pairs (last axis I, Q)."""
+from sarmoco.store.flags import FLAG_DTYPE, PulseFlag
 
 _FREE, _RESERVED, _COMMITTED, _ABORTED = 0, 1, 2, 3
 """Slot states; ``_ABORTED`` also marks a discarded pulse (a hole waiting to be freed)."""
@@ -54,31 +51,6 @@ _FREE, _RESERVED, _COMMITTED, _ABORTED = 0, 1, 2, 3
 REORDER_WINDOW = 64
 """Waiting pulses among which a late pulse is put back in place: a pulse late by more is
 dropped (bounds the rows moved per late pulse)."""
-
-
-def sample_shape(n_samples: int, sample_format: SampleFormat) -> tuple[int, ...]:
-    """Shape of one pulse's samples in a given format: ``(S,)`` or ``(S, 2)`` for int16 I/Q."""
-    return (n_samples,) if sample_format == "complex64" else (n_samples, 2)
-
-
-def sample_dtype(sample_format: SampleFormat) -> np.dtype[np.generic]:
-    """numpy dtype of the samples in a given format."""
-    return np.dtype(np.complex64) if sample_format == "complex64" else np.dtype(np.int16)
-
-
-def to_complex64(samples: npt.NDArray[np.generic]) -> npt.NDArray[np.complex64]:
-    """Samples of either format as complex64 (int16 I/Q scaled by 1, i.e. in ADC counts).
-
-    Parameters
-    ----------
-    samples : ndarray
-        complex64 ``(..., S)`` (returned as is) or int16 ``(..., S, 2)``.
-    """
-    if samples.dtype == np.complex64:
-        return samples  # type: ignore[return-value]
-    # one conversion pass; the (I, Q) float32 pairs are the complex64 values
-    pairs = np.ascontiguousarray(samples, dtype=np.float32)
-    return pairs.view(np.complex64)[..., 0]
 
 
 @dataclass(frozen=True)
@@ -134,7 +106,7 @@ class EchoBatch:
     channel : ndarray of int32, shape (P,)
         Receive channel (VITA 49 stream ID).
     flags : ndarray of uint32, shape (P,)
-        :class:`~sarmoco.daemon.flags.PulseFlag` bits.
+        :class:`~sarmoco.store.flags.PulseFlag` bits.
     """
 
     samples: npt.NDArray[np.generic]
@@ -241,7 +213,7 @@ class EchoRing:
         """Count ``n`` pulses read while the ring was full and discarded.
 
         The next committed pulse carries
-        :attr:`~sarmoco.daemon.flags.PulseFlag.DROPPED_BEFORE`.
+        :attr:`~sarmoco.store.flags.PulseFlag.DROPPED_BEFORE`.
         """
         if n <= 0:
             return
@@ -265,7 +237,7 @@ class EchoRing:
         channel : int
             Receive channel.
         flags : int
-            :class:`~sarmoco.daemon.flags.PulseFlag` bits known at decode time.
+            :class:`~sarmoco.store.flags.PulseFlag` bits known at decode time.
         """
         i = self._check(slot.seq, 1)
         self._t_ns[i] = t_ns
@@ -292,7 +264,7 @@ class EchoRing:
         t_ns, pulse_id : array_like of int, shape (n,)
             Transmit times (GPS ns) and running pulse numbers.
         channel, flags : array_like of int, shape (n,)
-            Receive channels and :class:`~sarmoco.daemon.flags.PulseFlag` bits.
+            Receive channels and :class:`~sarmoco.store.flags.PulseFlag` bits.
 
         Raises
         ------

@@ -32,7 +32,6 @@ segment, as a batch stores them).
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import math
 import time
@@ -79,14 +78,6 @@ from sarmoco.processing.mocomp import (
 )
 from sarmoco.processing.segments import Segmenter, SegmentLimits
 from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, IntArray, RadarParams
-
-
-def radar_params(cfg: Config) -> RadarParams:
-    """The :class:`RadarParams` of the configured radar: each of its fields is the
-    ``radar`` key of the same name."""
-    return RadarParams(
-        **{f.name: getattr(cfg.radar, f.name) for f in dataclasses.fields(RadarParams)}
-    )
 
 
 @dataclass
@@ -190,8 +181,7 @@ def tile_imaging(cfg: Config, radar: RadarParams) -> tuple[TileFormer, TilePga |
                 geo.height_m,
                 radar.wavelength_m,
                 beam_rad / 2.0,
-                window_m=af.pga_window_m,
-                max_iter=af.pga_iterations,
+                settings=af,
                 guard_m=10.0 * radar.range_resolution_m,
             )
         )
@@ -723,7 +713,7 @@ class Focuser:
     ) -> None:
         self.cfg = cfg
         self._sink = sink
-        self.radar = radar_params(cfg)
+        self.radar = cfg.radar.params()
         self.range_m = rangecomp.range_axis_m(self.radar)
         self.window = None if cfg.imaging.window == "none" else cfg.imaging.window
         look_side = cfg.geometry.look_side

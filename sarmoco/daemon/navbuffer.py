@@ -30,7 +30,6 @@ off.
 
 from __future__ import annotations
 
-import enum
 import threading
 from collections import deque
 from collections.abc import Sequence
@@ -41,6 +40,7 @@ import numpy.typing as npt
 from sarmoco.drivers.samples import AttitudeSample, VelocitySample
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.types import FloatArray, IntArray, NavSamples
+from sarmoco.store.flags import PushResult
 
 NO_TIME = np.iinfo(np.int64).min
 """Marker for "no sample" in :meth:`NavStream.bracket` results."""
@@ -50,15 +50,6 @@ _LATENCY_MEDIAN_OF = 32
 HOLD_EXTRA = 2
 """Samples kept before a held time (:meth:`NavStream.hold`): the aligner's attitude
 window reaches two samples beyond the pulses it interpolates."""
-
-
-class PushResult(enum.IntEnum):
-    """What a stream did with a pushed sample (recorded with the sample)."""
-
-    ACCEPTED = 0
-    DUPLICATE = 1
-    STALE = 2
-    CLOCK_REJECTED = 3
 
 
 class NavStream:

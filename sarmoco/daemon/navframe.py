@@ -5,7 +5,7 @@ first INS sample that names one gives (:attr:`~sarmoco.drivers.samples.VelocityS
 e.g. the autopilot's EKF origin, or the tangent plane at an SBG's first fix). A later
 sample in another frame (an EKF origin stated after the first positions, a reset) has its
 position re-expressed in the store's. The store states that frame in its root attribute
-``geodetic_origin`` (:func:`~sarmoco.daemon.schema.encode_geodetic_origin`).
+``geodetic_origin`` (:func:`~sarmoco.store.schema.encode_geodetic_origin`).
 """
 
 from __future__ import annotations

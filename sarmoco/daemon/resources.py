@@ -20,8 +20,9 @@ from pathlib import Path
 
 from sarmoco.daemon.array_pipeline import READ_PACKETS, RING_PULSES
 from sarmoco.daemon.config import Config
-from sarmoco.daemon.echoring import sample_dtype, sample_shape
-from sarmoco.daemon.pipeline import FOCUS_BACKLOG_S, READ_BLOCK_PULSES, RING_SECONDS, ring_format
+from sarmoco.daemon.ingest import READ_BLOCK_PULSES, RING_SECONDS, ring_format
+from sarmoco.daemon.pipeline import FOCUS_BACKLOG_S
+from sarmoco.drivers.samples import sample_dtype, sample_shape
 from sarmoco.errors import ConfigError
 
 PULSE_META_BYTES = 8 + 8 + 4 + 4 + 1

@@ -12,26 +12,28 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from types import FrameType
 
 from sarmoco.daemon.camera import CameraComponent, Fault, operator_faults
 from sarmoco.daemon.config import Config, StatusConfig, config_to_dict, live_imaging
 from sarmoco.daemon.focuser import SinkFactory
+from sarmoco.daemon.ingest import ring_format
 from sarmoco.daemon.links import open_ins, open_radar
 from sarmoco.daemon.livefeed import LiveFeed
-from sarmoco.daemon.pipeline import Pipeline, RunSummary, ring_format
-from sarmoco.daemon.recorder import Recorder, meta_chunk_pulses
+from sarmoco.daemon.pipeline import Pipeline
 from sarmoco.daemon.sdnotify import Notifier
 from sarmoco.daemon.status import Counters, Health, LiveView, StatusServer
-from sarmoco.daemon.store import StoreNav, StorePulses, open_store
+from sarmoco.daemon.tables import RunSummary
 from sarmoco.daemon.threadcpu import stage_cpu_seconds
 from sarmoco.daemon.warmup import warm_up_kernels
 from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource
 from sarmoco.drivers.samples import Sample
 from sarmoco.drivers.source import Source
 from sarmoco.errors import ConfigError, DataFileError, SarmocoError
+from sarmoco.store.reader import StoreNav, StorePulses, open_store
+from sarmoco.store.recorder import Recorder, meta_chunk_pulses
 
 log = logging.getLogger(__name__)
 
@@ -96,6 +98,22 @@ def record_ins_format(recorder: Recorder, ins: Source) -> None:
 
 REOPEN_S = 1.0
 """Pause between attempts to reopen a failed live link, s."""
+
+
+@dataclass
+class Capture:
+    """One capture interval of a live run (the store's ``captures`` attribute).
+
+    Attributes
+    ----------
+    start_utc : str
+        When the capture started, UTC, ISO 8601.
+    stop_utc : str or None
+        When it stopped, UTC, ISO 8601 (None while capturing, or when the run ended in it).
+    """
+
+    start_utc: str
+    stop_utc: str | None = None
 
 
 @dataclass
@@ -277,8 +295,8 @@ class _LiveRun:
         self.counters.add_source("ins", ins.counters.snapshot)
         self.counters.add_source("cpu_seconds", stage_cpu_seconds)
         self.counters.inc("processing_busy_seconds", 0.0)
-        self.captures: list[dict[str, str | None]] = []
-        """Capture intervals (UTC ISO 8601 start and stop; stop None while capturing)."""
+        self.captures: list[Capture] = []
+        """Capture intervals, oldest first."""
         self.camera = self._start_camera() if cfg.camera.enabled else None
         """The MAVLink camera component (None: ``camera.enabled`` off)."""
         if self.camera is None or self.camera.capturing:
@@ -339,9 +357,9 @@ class _LiveRun:
         """Open (``on``) or close a capture interval: pulses are recorded only within one."""
         now = datetime.datetime.now(datetime.UTC).isoformat()
         if on:
-            self.captures.append({"start_utc": now, "stop_utc": None})
-        elif self.captures and self.captures[-1]["stop_utc"] is None:
-            self.captures[-1]["stop_utc"] = now
+            self.captures.append(Capture(now))
+        elif self.captures and self.captures[-1].stop_utc is None:
+            self.captures[-1].stop_utc = now
         log.info("capture started" if on else "capture stopped", extra={"store": str(self.path)})
 
     def _capturing(self) -> bool:
@@ -427,26 +445,23 @@ class _LiveRun:
     def _ins_horizon_ns(self) -> int | None:
         """Newest INS time an INS log may be offered up to, GPS ns (None: no limit).
 
-        Half the nav buffer's history past the oldest pulse waiting to be focused (where
-        the aligner stands), else past the newest pulse read, else (before the first
-        pulse) past the oldest sample held or waiting. A finished radar link sets no limit.
+        Half the nav buffer's history past the oldest pulse still waiting for its
+        navigation, wherever it waits (echo ring or focus backlog: the samples it needs
+        then stay within the history however far the file is read ahead), else (before
+        the first pulse) past the oldest sample held or waiting. No limit once the radar
+        link has finished and every pulse has been taken by the aligner.
         """
-        if "radar" in self.st.finished:
+        oldest, all_aligned = self.pipe.oldest_unaligned_ns()
+        if all_aligned and "radar" in self.st.finished:
             return None
-        waiting = self.pipe.backlog.oldest_ns()
-        if waiting is not None:
-            reference = waiting
+        if oldest is not None:
+            reference = oldest
+        elif (span := self.pipe.nav.span_ns()) is not None:
+            reference = span[0]
+        elif self._ins_backlog:
+            reference = self._ins_backlog[0].t_gps_ns
         else:
-            newest_pulse = self.pipe.now_ns(live=False)
-            span = self.pipe.nav.span_ns()
-            if newest_pulse is not None:
-                reference = newest_pulse
-            elif span is not None:
-                reference = span[0]
-            elif self._ins_backlog:
-                reference = self._ins_backlog[0].t_gps_ns
-            else:
-                return None
+            return None
         return reference + self.pipe.nav.kinematics.history_ns // 2
 
     # -- recording thread ---------------------------------------------------------------------
@@ -634,12 +649,15 @@ class _LiveRun:
         )
 
     def _idle(self, now: float, idle_exit_s: float | None) -> bool:
-        """Whether no pulse came for ``idle_exit_s`` since pulses began (None: never)."""
+        """Whether no pulse came for ``idle_exit_s`` since pulses began (None: never) and,
+        with an INS log, every pulse has been aligned (its samples are offered only as
+        the pulses need them)."""
         st = self.st
         return (
             idle_exit_s is not None
             and bool(st.first_pulse_mono)
             and (now - st.last_pulse_mono > idle_exit_s)
+            and (not self._ins_file or self.pipe.oldest_unaligned_ns()[1])
         )
 
     def shut_down(self) -> None:
@@ -652,7 +670,8 @@ class _LiveRun:
             self.camera.stop()
         try:
             summary = self.pipe.finish()
-            self.recorder.set_attribute("captures", {"intervals": self.captures})
+            intervals = [asdict(c) for c in self.captures]
+            self.recorder.set_attribute("captures", {"intervals": intervals})
         finally:  # a processing error in the last blocks must not leave the store open
             self.recorder.close()
             if self.status is not None:

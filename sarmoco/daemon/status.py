@@ -39,8 +39,8 @@ import numpy.typing as npt
 
 from sarmoco.daemon.livefeed import LIVE_TILES, LiveFeed
 from sarmoco.daemon.livelevel import level_names
-from sarmoco.daemon.quicklook import gray_of, peak_blocks, png_gray
 from sarmoco.errors import ConfigError
+from sarmoco.grayscale import gray_of, peak_blocks, png_gray
 
 STATUS_HOSTS = ("127.0.0.1", "::1", "localhost")
 """The only addresses the status server binds to."""

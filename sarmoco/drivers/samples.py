@@ -12,6 +12,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, fields
+from typing import Literal
 
 import numpy as np
 import numpy.typing as npt
@@ -173,6 +174,36 @@ class TimeSample:
 
 Sample = VelocitySample | AttitudeSample | EventSample | TimeSample
 """Any navigation-side sample a driver yields."""
+
+
+SampleFormat = Literal["complex64", "int16"]
+"""How a radar source writes a pulse's samples, as the echo ring and the store hold them:
+``complex64`` (float32 I/Q) or ``int16`` I/Q pairs (last axis I, Q)."""
+
+
+def sample_shape(n_samples: int, sample_format: SampleFormat) -> tuple[int, ...]:
+    """Shape of one pulse's samples in a given format: ``(S,)`` or ``(S, 2)`` for int16 I/Q."""
+    return (n_samples,) if sample_format == "complex64" else (n_samples, 2)
+
+
+def sample_dtype(sample_format: SampleFormat) -> np.dtype[np.generic]:
+    """numpy dtype of the samples in a given format."""
+    return np.dtype(np.complex64) if sample_format == "complex64" else np.dtype(np.int16)
+
+
+def to_complex64(samples: npt.NDArray[np.generic]) -> npt.NDArray[np.complex64]:
+    """Samples of either format as complex64 (int16 I/Q scaled by 1, i.e. in ADC counts).
+
+    Parameters
+    ----------
+    samples : ndarray
+        complex64 ``(..., S)`` (returned as is) or int16 ``(..., S, 2)``.
+    """
+    if samples.dtype == np.complex64:
+        return samples  # type: ignore[return-value]
+    # one conversion pass; the (I, Q) float32 pairs are the complex64 values
+    pairs = np.ascontiguousarray(samples, dtype=np.float32)
+    return pairs.view(np.complex64)[..., 0]
 
 
 @dataclass(frozen=True, slots=True)

@@ -16,6 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from sarmoco.errors import ProcessingError
+from sarmoco.keys import key
 
 C_MPS = 299_792_458.0
 """Speed of light in vacuum, m/s."""
@@ -29,6 +30,10 @@ BoolArray = npt.NDArray[np.bool_]
 @dataclass(frozen=True)
 class RadarParams:
     """Waveform and receiver of one radar channel.
+
+    Each field is also a configuration key (:func:`sarmoco.keys.key`, the daemon's
+    ``[radar]`` section is this class plus the link's keys): its default, unit and bounds
+    are in its metadata.
 
     Parameters
     ----------
@@ -62,16 +67,30 @@ class RadarParams:
         oscillator); the range compression conjugates the samples first.
     """
 
-    carrier_hz: float
-    bandwidth_hz: float
-    pulse_width_s: float
-    sample_rate_hz: float
-    prf_hz: float
-    n_samples: int
-    range_gate_delay_s: float
-    receive: Literal["matched", "dechirp"] = "matched"
-    chirp_direction: Literal["up", "down"] = "up"
-    iq_conjugate: bool = False
+    carrier_hz: float = key(15.0e9, "RF reference (centre) frequency", unit="Hz", gt=0)
+    bandwidth_hz: float = key(750.0e6, "Chirp bandwidth", unit="Hz", gt=0)
+    pulse_width_s: float = key(10.0e-6, "Chirp duration", unit="s", gt=0)
+    sample_rate_hz: float = key(1.0e9, "Complex I/Q sample rate", unit="Hz", gt=0)
+    prf_hz: float = key(1000.0, "Nominal pulse repetition frequency", unit="Hz", gt=0)
+    n_samples: int = key(4096, "Complex samples per pulse", gt=0)
+    range_gate_delay_s: float = key(
+        5.0e-6,
+        "Two-way delay from the pulse time stamp to the first sample (matched) or to the "
+        "dechirp reference (dechirp)",
+        unit="s",
+        ge=0,
+    )
+    receive: Literal["matched", "dechirp"] = key(
+        "matched", "Receiver: pulsed LFM (matched filter) or dechirp-on-receive (FFT)"
+    )
+    chirp_direction: Literal["up", "down"] = key(
+        "up", "Sweep of the transmitted chirp: up (frequency rising) or down (falling)"
+    )
+    iq_conjugate: bool = key(
+        False,
+        "The digitiser delivers the conjugate of the baseband I/Q (spectral inversion: I and Q "
+        "swapped or Q negated, a high-side LO); the samples are conjugated before compression",
+    )
 
     def __post_init__(self) -> None:
         for name in ("carrier_hz", "bandwidth_hz", "pulse_width_s", "sample_rate_hz", "prf_hz"):

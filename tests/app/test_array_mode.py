@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 
 from sarmoco.app.cli import main
-from sarmoco.daemon.store import open_store
+from sarmoco.store.reader import open_store
 
 PAPER_AFTER = {"std_m": 0.5927, "within_half_cell": 0.9095}
 """The array paper's Table 2 after compensation (synthetic terrain)."""

@@ -27,9 +27,9 @@ from sarmoco.app.cli import main
 from sarmoco.app.imaging_stream import SegmentStream
 from sarmoco.daemon.config import Config, load_config
 from sarmoco.daemon.runner import replay_files, replay_store
-from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.processing.geometry import ReferenceTrack
 from sarmoco.processing.imaging.tiles import TileLayout
+from sarmoco.store.reader import RunStore, open_store
 from tests.workloads.dask_cluster import separate_cluster
 
 PULSES = 700

@@ -24,16 +24,9 @@ import sarkit.verification as skver
 import tifffile
 
 from sarmoco.app.cli import main
-from sarmoco.app.cphd import read_cphd
 from sarmoco.app.export import failures
-from sarmoco.app.sicd import sicd_product, write_sicd
-from sarmoco.daemon import schema
 from sarmoco.daemon.config import load_config
-from sarmoco.daemon.georeference import georeference, grid_points, segment_images
-from sarmoco.daemon.geotiff import write_geotiffs
-from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.runner import replay_files
-from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.drivers.mavlink import mavutil, tlog_record
 from sarmoco.geodesy import geodetic_to_ned, ned_to_ecef
 from sarmoco.processing.imaging import (
@@ -43,7 +36,14 @@ from sarmoco.processing.imaging import (
     facing_heading,
 )
 from sarmoco.processing.types import C_MPS
+from sarmoco.products.cphd import read_cphd
+from sarmoco.products.georeference import georeference, grid_points, segment_images
+from sarmoco.products.geotiff import write_geotiffs
+from sarmoco.products.sicd import sicd_product, write_sicd
 from sarmoco.sim.insfeed import GEODETIC_ORIGIN
+from sarmoco.store import schema
+from sarmoco.store.reader import RunStore, open_store
+from sarmoco.store.recorder import Recorder
 
 PIXEL_M = 0.1
 """Grid spacing of the scene's tiles (``imaging.pixel_m``), m."""

@@ -33,10 +33,10 @@ import pytest
 from PIL import Image as PilImage
 
 from sarmoco.app.demo import run_loopback
-from sarmoco.daemon.report import PANELS, focus_comparison
-from sarmoco.daemon.store import open_store
+from sarmoco.products.report import PANELS, focus_comparison
 from sarmoco.sim.extended import extended_scenario
 from sarmoco.sim.scenario import Scenario
+from sarmoco.store.reader import open_store
 from tests.app.headless import HeadlessChromium, chromium_or_skip
 from tests.daemon.test_daemon_process import free_port
 from tests.daemon.test_end_to_end import SCALE, targets_in_image

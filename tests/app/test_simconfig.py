@@ -17,7 +17,6 @@ from sarmoco.app.simconfig import (
     write_config,
 )
 from sarmoco.daemon.config import load_config, parse_config
-from sarmoco.daemon.focuser import radar_params
 from sarmoco.errors import ConfigError
 from sarmoco.sim.array_scenario import load_array_preset
 from sarmoco.sim.scenario import load_preset
@@ -68,10 +67,10 @@ def test_both_scenario_kinds_configure_the_scenarios_radar(tmp_path: Path) -> No
         scn.radar, receive="dechirp", chirp_direction="down", iq_conjugate=True
     )
     scn = dataclasses.replace(scn, radar=odd)
-    assert radar_params(scenario_config(scn)) == odd
+    assert scenario_config(scn).radar.params() == odd
     array = load_array_preset(0.1)
     cfg = parse_config(array_config_table(array, tmp_path, "float32"))
-    assert radar_params(cfg) == array.radar
+    assert cfg.radar.params() == array.radar
     assert (cfg.radar.mode, cfg.radar.channels) == ("array", array.layout.n_channels)
     assert cfg.radar.link == str(tmp_path / "radar.vrt")
     assert array.truth_dict()["radar"] == dataclasses.asdict(array.radar)

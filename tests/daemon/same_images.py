@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sarmoco.daemon.store import RunStore
+from sarmoco.store.reader import RunStore
 
 REPLAY_REL_L2 = 1e-5
 """Largest relative L2 difference of a replayed tile from the recorded one (a replay of a

@@ -20,10 +20,10 @@ import pytest
 
 from sarmoco.daemon.aligner import AlignedBlock, Aligner
 from sarmoco.daemon.echoring import EchoRing
-from sarmoco.daemon.flags import NAV_UNUSABLE, PulseFlag
-from sarmoco.daemon.navbuffer import NavBuffer, PushResult
+from sarmoco.daemon.navbuffer import NavBuffer
 from sarmoco.processing.geometry import lever_arm_ned
 from sarmoco.processing.types import C_MPS, FloatArray
+from sarmoco.store.flags import NAV_UNUSABLE, PulseFlag, PushResult
 
 MS = 1_000_000
 LAMBDA_KU = C_MPS / 15e9

@@ -1,6 +1,6 @@
 """The array pipeline (:mod:`sarmoco.daemon.array_pipeline`) aligns its pulses with the
 navigation exactly as the single-channel pipeline does: one constructor
-(:func:`sarmoco.daemon.pipeline.nav_alignment`) serves both."""
+(:func:`sarmoco.daemon.navigation.nav_alignment`) serves both."""
 
 from __future__ import annotations
 

@@ -21,7 +21,7 @@ import numpy as np
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from sarmoco.daemon.store import open_store
+from sarmoco.store.reader import open_store
 from tests.daemon.test_daemon_process import (
     N_PULSES,
     Daemon,

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from sarmoco.daemon.channelgroup import MAX_OPEN_PULSES, ChannelGrouper, GroupedPulse
-from sarmoco.daemon.flags import PulseFlag
 from sarmoco.drivers.samples import EchoPacket, EchoPackets
+from sarmoco.store.flags import PulseFlag
 
 
 def _packet(channel: int, t_ns: int, loss: bool = False) -> EchoPacket:

@@ -12,14 +12,17 @@ import pytest
 
 from sarmoco.app.simconfig import config_table, scenario_config
 from sarmoco.daemon.config import (
+    AutofocusSection,
     RadarConfig,
     describe_keys,
     keys_markdown,
     load_config,
     parse_config,
 )
-from sarmoco.daemon.focuser import Focuser, radar_params
+from sarmoco.daemon.focuser import Focuser, tile_imaging
 from sarmoco.errors import ConfigError, ProcessingError
+from sarmoco.processing.autofocus.settings import AutofocusConfig
+from sarmoco.processing.imaging.tile_pga import TilePgaConfig
 from sarmoco.processing.rangecomp import range_axis_m
 from sarmoco.processing.types import RadarParams
 from sarmoco.sim.scenario import load_preset
@@ -208,7 +211,7 @@ def test_slant_window_is_the_range_axis(receive: str) -> None:
             "imaging": {"swath_m": 10.0},
         }
     )
-    axis = range_axis_m(radar_params(cfg))
+    axis = range_axis_m(cfg.radar.params())
     assert cfg.radar.slant_window_m() == pytest.approx((axis[0], axis[-1]), abs=1e-9)
 
 
@@ -235,12 +238,27 @@ def test_radar_conventions_reach_the_range_compression(direction: str, conjugate
     scn = load_preset("ku-vehicle", 0.1, chirp_direction=direction, iq_conjugate=conjugate)
     cfg = scenario_config(scn)
     assert (cfg.radar.chirp_direction, cfg.radar.iq_conjugate) == (direction, conjugate)
-    assert radar_params(cfg) == scn.radar
+    assert cfg.radar.params() == scn.radar
 
 
-def test_every_radar_parameter_is_a_radar_key_of_its_type() -> None:
-    """The physics' radar description (RadarParams) is built from the ``radar`` keys by name:
-    each of its fields must be a key of the same type."""
-    keys = {f.name: f.type for f in dataclasses.fields(RadarConfig)}
-    for f in dataclasses.fields(RadarParams):
-        assert keys.get(f.name) == f.type, f.name
+def test_a_section_of_a_processing_stage_is_that_stage_s_settings() -> None:
+    """The ``radar`` section is the physics' radar description (RadarParams) plus the
+    link's keys, and the ``autofocus`` section the autofocus and tile PGA settings plus the
+    daemon's switches: each key is declared once, by the class that uses it, and reaches it
+    untranslated (a key redeclared in the daemon could take another default)."""
+    sections = (
+        (RadarConfig, RadarParams),
+        (AutofocusSection, AutofocusConfig),
+        (AutofocusSection, TilePgaConfig),
+    )
+    for section, stage in sections:
+        assert issubclass(section, stage), (section, stage)
+        for f in dataclasses.fields(stage):
+            assert f.name not in vars(section).get("__annotations__", {}), f.name
+    cfg = parse_config({"radar": {"carrier_hz": 9.6e9, "chirp_direction": "down", "link": "r.vrt"},
+                        "autofocus": {"pga": True, "pga_window_m": 7.0}})  # fmt: skip
+    radar = cfg.radar.params()
+    assert type(radar) is RadarParams
+    assert radar == RadarParams(carrier_hz=9.6e9, chirp_direction="down")
+    _, tile_pga = tile_imaging(cfg, radar)
+    assert tile_pga is not None and tile_pga.pga.settings.pga_window_m == 7.0

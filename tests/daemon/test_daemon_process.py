@@ -3,7 +3,7 @@
 The radar and INS come from ``sarmoco sim --out`` files (a scaled ku-vehicle run of
 1000 pulses, which fits the echo ring, so a file link is read without drops), either
 as file links or replayed by the test over UDP on 127.0.0.1. Every check reads the
-store back with :func:`sarmoco.daemon.store.open_store` and compares it with the
+store back with :func:`sarmoco.store.reader.open_store` and compares it with the
 files decoded by the drivers (:class:`~sarmoco.drivers.radar.RadarFileSource`, the
 MAVLink source of the ``.tlog``).
 
@@ -50,16 +50,15 @@ from pymavlink import mavutil
 
 from sarmoco.app.simconfig import write_config
 from sarmoco.daemon.config import Config, load_config
-from sarmoco.daemon.flags import NAV_UNUSABLE, PulseFlag
 from sarmoco.daemon.links import open_ins, vita_decoder
-from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.daemon.runner import replay_store
-from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.drivers.radar import RadarFileSource
 from sarmoco.drivers.samples import AttitudeSample, Sample, VelocitySample
 from sarmoco.drivers.vita49 import VitaStreamFramer
 from sarmoco.errors import DataFileError
 from sarmoco.sim.outfiles import NAV_FILES
+from sarmoco.store.flags import NAV_UNUSABLE, PulseFlag, PushResult
+from sarmoco.store.reader import RunStore, open_store
 
 SCALE = 0.05
 N_PULSES = 1000

@@ -8,9 +8,10 @@ import time
 import numpy as np
 import pytest
 
-from sarmoco.daemon.echoring import REORDER_WINDOW, EchoRing, to_complex64
-from sarmoco.daemon.flags import PulseFlag
+from sarmoco.daemon.echoring import REORDER_WINDOW, EchoRing
+from sarmoco.drivers.samples import to_complex64
 from sarmoco.errors import ProcessingError
+from sarmoco.store.flags import PulseFlag
 
 
 def _fill(ring: EchoRing, pulse_id: int) -> bool:

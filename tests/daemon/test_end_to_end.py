@@ -22,9 +22,9 @@ import pytest
 
 from sarmoco.app.demo import run_loopback
 from sarmoco.daemon.config import load_config
-from sarmoco.daemon.report import write_report
 from sarmoco.daemon.runner import replay_store
-from sarmoco.daemon.store import open_store
+from sarmoco.products.report import write_report
+from sarmoco.store.reader import open_store
 from tests.daemon.same_images import assert_same_images
 
 SCALE = 0.1

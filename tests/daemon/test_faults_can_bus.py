@@ -29,9 +29,9 @@ import numpy as np
 import pytest
 
 from sarmoco.app.demo import run_loopback
-from sarmoco.daemon.flags import NAV_UNUSABLE, PulseFlag
-from sarmoco.daemon.store import open_store
 from sarmoco.sim.player import Pacing
+from sarmoco.store.flags import NAV_UNUSABLE, PulseFlag
+from sarmoco.store.reader import open_store
 from tests.daemon.statuswatch import watching_status
 from tests.daemon.test_faults_ins_link import SCALE, _free_tcp_port
 from tests.daemon.test_faults_wire import SINC_PSLR_DB

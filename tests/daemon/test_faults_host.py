@@ -57,7 +57,7 @@ import numpy as np
 import pytest
 
 from sarmoco.app.benchcmd import committed_now
-from sarmoco.daemon.store import open_store
+from sarmoco.store.reader import open_store
 from tests.conftest import unavailable
 from tests.daemon.test_daemon_process import (
     N_PULSES,

@@ -25,8 +25,8 @@ import numpy as np
 import pytest
 
 from sarmoco.app.demo import run_loopback
-from sarmoco.daemon.flags import NAV_UNUSABLE
-from sarmoco.daemon.store import open_store
+from sarmoco.store.flags import NAV_UNUSABLE
+from sarmoco.store.reader import open_store
 from tests.daemon.test_faults_ins_link import _free_tcp_port, _truth_vel
 from tests.daemon.test_faults_wire import SINC_PSLR_DB
 

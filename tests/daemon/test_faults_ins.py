@@ -26,8 +26,8 @@ import numpy as np
 import pytest
 
 from sarmoco.app.demo import run_loopback
-from sarmoco.daemon.flags import NAV_UNUSABLE, PulseFlag
-from sarmoco.daemon.store import open_store
+from sarmoco.store.flags import NAV_UNUSABLE, PulseFlag
+from sarmoco.store.reader import open_store
 from tests.daemon.test_faults_wire import SINC_PSLR_DB
 
 SCALE = 0.1

@@ -41,9 +41,9 @@ import numpy as np
 import pytest
 
 from sarmoco.app.demo import run_loopback
-from sarmoco.daemon.flags import NAV_UNUSABLE
 from sarmoco.daemon.runner import INS_STALE_S
-from sarmoco.daemon.store import open_store
+from sarmoco.store.flags import NAV_UNUSABLE
+from sarmoco.store.reader import open_store
 from tests.daemon.statuswatch import watching_status
 from tests.daemon.test_faults_ins_link import _free_tcp_port
 from tests.daemon.test_faults_wire import SINC_PSLR_DB

@@ -2,7 +2,7 @@
 
 - **Power loss**: a recorder writing every table (``crash_writer``'s deterministic rows)
   copies its store right after each of its fsyncs (a subclass hooking
-  :meth:`~sarmoco.daemon.recorder.Recorder.sync`: zarr and the file system are real).
+  :meth:`~sarmoco.store.recorder.Recorder.sync`: zarr and the file system are real).
   A copy is what survives a power cut at that moment for files that were fsynced. The
   damage a cut leaves on top of it: every file written after that fsync is, each on its
   own and in no order, either still the fsynced version (or absent) or already the
@@ -26,10 +26,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from sarmoco.daemon.recorder import Recorder
-from sarmoco.daemon.store import open_store
-from tests.daemon import crash_writer as cw
-from tests.daemon.test_recorder import _check_committed
+from sarmoco.store.reader import open_store
+from sarmoco.store.recorder import Recorder
+from tests.store import crash_writer as cw
+from tests.store.test_recorder import _check_committed
 
 KILLS = 60
 CUTS = 20
@@ -125,7 +125,7 @@ import os, signal, sys, time
 from pathlib import Path
 import numpy as np
 from sarmoco.app.benchcmd import committed_now
-from tests.daemon import crash_writer as cw
+from tests.store import crash_writer as cw
 root, n, window = sys.argv[1], int(sys.argv[2]), float(sys.argv[3])
 rng = np.random.default_rng(12)
 for k in range(n):

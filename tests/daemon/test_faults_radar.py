@@ -28,8 +28,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sarmoco.daemon.flags import UNFOCUSABLE, PulseFlag
-from sarmoco.daemon.store import open_store
+from sarmoco.store.flags import UNFOCUSABLE, PulseFlag
+from sarmoco.store.reader import open_store
 from tests.daemon.test_daemon_process import (
     N_PULSES,
     START_TIMEOUT_S,

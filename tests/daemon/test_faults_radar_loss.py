@@ -25,8 +25,8 @@ import numpy.typing as npt
 import pytest
 
 from sarmoco.app.demo import run_loopback
-from sarmoco.daemon.flags import PulseFlag
-from sarmoco.daemon.store import open_store
+from sarmoco.store.flags import PulseFlag
+from sarmoco.store.reader import open_store
 from tests.daemon.test_faults_wire import SCALE, SINC_PSLR_DB
 
 

@@ -34,13 +34,13 @@ import pytest
 
 from sarmoco.app.demo import run_loopback
 from sarmoco.app.simconfig import scenario_config, write_config
-from sarmoco.daemon.flags import PulseFlag
+from sarmoco.daemon.blocks import strictly_increasing
 from sarmoco.daemon.focuser import Focuser
-from sarmoco.daemon.pipeline import _strictly_increasing
-from sarmoco.daemon.store import open_store
 from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
+from sarmoco.store.flags import PulseFlag
+from sarmoco.store.reader import open_store
 from tests.daemon.test_daemon_process import (
     Daemon,
     free_port,
@@ -221,6 +221,6 @@ def test_only_strictly_increasing_pulse_times_reach_the_focuser() -> None:
     (or than the last focused, 4 here) is kept from the focuser."""
     t = np.array([5, 3, 6, 6, 7, 4, 8], dtype=np.int64)
     np.testing.assert_array_equal(
-        _strictly_increasing(t, 4), [True, False, True, False, True, False, True]
+        strictly_increasing(t, 4), [True, False, True, False, True, False, True]
     )
-    assert _strictly_increasing(t[:1], None).all()
+    assert strictly_increasing(t[:1], None).all()

@@ -6,6 +6,11 @@ made four times slower than real time, holding the GIL while it spins (the worst
 for threads). Every pulse sent must be stored, none flagged without navigation; the
 focuser skips ahead (counted in ``/status`` and the store's metrics), and a replay of
 the store focuses every pulse.
+
+A file run (``.vrt`` radar file and ``.tlog`` INS log, both read as fast as the disk
+allows) whose recording thread stalls at its start: the INS log is read no further
+ahead than the navigation history can hold for the pulses still in the echo ring, so
+none of them loses its navigation.
 """
 
 from __future__ import annotations
@@ -23,11 +28,14 @@ import pytest
 
 from sarmoco.app.demo import free_udp_port, read_json_line
 from sarmoco.app.simconfig import scenario_config
-from sarmoco.daemon.flags import NAV_UNUSABLE
+from sarmoco.daemon.config import load_config
 from sarmoco.daemon.focuser import Focuser, FocusOutput
+from sarmoco.daemon.pipeline import Pipeline
 from sarmoco.daemon.runner import _LiveRun, replay_store
-from sarmoco.daemon.store import open_store
 from sarmoco.sim.scenario import load_preset
+from sarmoco.store.flags import NAV_UNUSABLE
+from sarmoco.store.reader import open_store
+from tests.daemon.test_daemon_process import simulate_files
 
 PRESET, SCALE, SECONDS = "ku-vehicle", 0.05, 10.0
 SLOWDOWN = 4.0
@@ -98,3 +106,35 @@ def test_a_slow_focuser_loses_no_pulse_and_leaves_none_without_navigation(
     replay = replay_store(cfg, tmp_path / "run.zarr", tmp_path / "replay.zarr", progress=False)
     assert replay.pulses_processed == n_pulses
     assert replay.pulses_nav_flagged == replay.pulses_focus_skipped == 0
+
+
+def _stalled_once(record: Callable[..., int], stall_s: float) -> Callable[..., int]:
+    """``record`` whose first call first sleeps ``stall_s`` (a recording thread descheduled
+    while the file links are read)."""
+    stalled = threading.Event()
+
+    def stall_then_record(self: Pipeline, *args: Any, **kwargs: Any) -> int:
+        if not stalled.is_set():
+            stalled.set()
+            time.sleep(stall_s)
+        return record(self, *args, **kwargs)
+
+    return stall_then_record
+
+
+def test_a_file_run_whose_recording_stalls_leaves_no_pulse_without_navigation(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    n_pulses = 3000  # 17 s of pulses: the INS log is longer than half the nav history
+    simulate_files(tmp_path, n_pulses)
+    cfg = load_config(tmp_path / "sarmoco.toml")
+    with monkeypatch.context() as stall:
+        stall.setattr(Pipeline, "record", _stalled_once(Pipeline.record, 2.0))
+        run = _LiveRun(cfg, tmp_path / "run.zarr", threading.Event())
+        try:
+            run.supervise(idle_exit_s=4.0)  # longer than the stall
+        finally:
+            run.shut_down()
+    pulses = open_store(tmp_path / "run.zarr").read("pulses", ["t_ns", "flags"])
+    assert pulses["t_ns"].size == n_pulses
+    assert np.count_nonzero(pulses["flags"] & NAV_UNUSABLE) == 0, "pulses without navigation"

@@ -25,9 +25,9 @@ from PIL import Image as PilImage
 
 from sarmoco.app.simconfig import write_config
 from sarmoco.daemon.livefeed import LiveFeed
-from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.status import LiveView
 from sarmoco.processing.types import Image
+from sarmoco.store.recorder import Recorder
 from tests.daemon.test_daemon_process import Daemon, free_port, simulate_files
 
 N_PULSES = 3000

@@ -10,9 +10,9 @@ import numpy as np
 from PIL import Image as PilImage
 
 from sarmoco.daemon.livefeed import LiveFeed
-from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.status import LiveView
 from sarmoco.processing.types import Image
+from sarmoco.store.recorder import Recorder
 
 NOISE_BELOW_SCENE_DB = 30.0
 """The noise tile's level under the scene tile's clutter, dB."""

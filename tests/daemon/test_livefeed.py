@@ -12,12 +12,12 @@ from pathlib import Path
 import numpy as np
 from PIL import Image as PilImage
 
-from sarmoco.daemon import schema
 from sarmoco.daemon.livefeed import LIVE_AUTOFOCUS_ROWS, LIVE_TILES, LiveFeed
-from sarmoco.daemon.recorder import Recorder
 from sarmoco.daemon.status import LiveView
 from sarmoco.processing.autofocus.report import SubapertureReport
 from sarmoco.processing.types import Image
+from sarmoco.store import schema
+from sarmoco.store.recorder import Recorder
 
 
 def _tile(k: int, rng: np.random.Generator) -> Image:

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from PIL import Image as PilImage
 
-from sarmoco.daemon.report import motion_comparison, write_report
-from sarmoco.daemon.store import open_store
 from sarmoco.errors import RecorderError
+from sarmoco.products.report import motion_comparison, write_report
+from sarmoco.store.reader import open_store
 
 PULSES = 320
 """Pulses simulated: about ten autofocus subapertures at ku-vehicle x0.1."""

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from sarmoco.daemon.navbuffer import NO_TIME, NavBuffer, NavStream, PushResult
+from sarmoco.daemon.navbuffer import NO_TIME, NavBuffer, NavStream
 from sarmoco.drivers.samples import AttitudeSample, Validity, VelocitySample
 from sarmoco.processing.types import NavSamples
+from sarmoco.store.flags import PushResult
 
 MS = 1_000_000
 

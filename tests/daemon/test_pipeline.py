@@ -19,21 +19,22 @@ import pytest
 
 from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.config import Config, parse_config
-from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.links import open_radar
-from sarmoco.daemon.pipeline import Pipeline, tile_metrics
-from sarmoco.daemon.report import strip, write_report
+from sarmoco.daemon.pipeline import Pipeline
 from sarmoco.daemon.runner import open_recorder
 from sarmoco.daemon.status import Counters
-from sarmoco.daemon.store import open_store
+from sarmoco.daemon.tables import tile_metrics
 from sarmoco.drivers.radar import RadarUdpSource
 from sarmoco.drivers.samples import AttitudeSample, EchoPackets, Validity, VelocitySample
 from sarmoco.drivers.vita49 import encode_signal_packet
 from sarmoco.processing.metrics import PointTargetMetrics, point_target_metrics
 from sarmoco.processing.types import Image
+from sarmoco.products.report import strip, write_report
 from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
+from sarmoco.store.flags import PulseFlag
+from sarmoco.store.reader import open_store
 
 MOTION = MotionSpec(
     kind="turbulence",

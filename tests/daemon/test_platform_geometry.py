@@ -28,7 +28,7 @@ import pytest
 import tomli_w
 from scipy.spatial.transform import Rotation
 
-from sarmoco.daemon.report import write_report
+from sarmoco.products.report import write_report
 from tests.daemon.test_end_to_end import assert_focused
 
 CASES = [(45.0, "right"), (135.0, "left"), (225.0, "right"), (315.0, "left")]

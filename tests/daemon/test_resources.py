@@ -101,7 +101,7 @@ def test_the_plan_is_what_the_pipeline_allocates(repo_root: Path, tmp_path: Path
                       ring._state)
         )  # fmt: skip
         assert buffers["echo ring"] == held
-        assert buffers["read scratch"] == pipe._scratch.nbytes
+        assert buffers["read scratch"] == pipe.radar._scratch.nbytes
         pipe.finish()
     assert sum(buffers.values()) < machine_memory_bytes()
 

@@ -29,13 +29,13 @@ import numpy as np
 import pytest
 
 from sarmoco.app.simconfig import scenario_config
-from sarmoco.daemon.flags import PulseFlag
-from sarmoco.daemon.store import open_store
 from sarmoco.processing.geometry import fit_reference_track
 from sarmoco.processing.metrics import PointTargetMetrics
 from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
+from sarmoco.store.flags import PulseFlag
+from sarmoco.store.reader import open_store
 from tests.daemon.test_pipeline import _target_metrics, feed
 
 MAX_RELATIVE_POSITION_M = 0.1

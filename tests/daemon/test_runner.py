@@ -14,11 +14,11 @@ import sys
 import numpy as np
 import pytest
 
-from sarmoco.daemon import schema
 from sarmoco.daemon.config import Config, load_config
-from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.daemon.runner import replay_files, replay_store
-from sarmoco.daemon.store import RunStore, open_store
+from sarmoco.store import schema
+from sarmoco.store.flags import PushResult
+from sarmoco.store.reader import RunStore, open_store
 from tests.daemon.same_images import assert_same_images
 
 PULSES = 800

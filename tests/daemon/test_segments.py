@@ -20,18 +20,18 @@ import numpy as np
 import pytest
 
 from sarmoco.app.simconfig import scenario_config
-from sarmoco.daemon.flags import PulseFlag
 from sarmoco.daemon.focuser import Focuser, segment_limits
-from sarmoco.daemon.report import bright_points, strip
-from sarmoco.daemon.store import open_store
 from sarmoco.processing.geometry import ReferenceTrack
 from sarmoco.processing.imaging.tiles import Tile
 from sarmoco.processing.metrics import point_target_metrics
 from sarmoco.processing.segments import Segmenter
 from sarmoco.processing.types import Image
+from sarmoco.products.report import bright_points, strip
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
 from sarmoco.sim.survey import SurveyPattern, survey_scenario, survey_spec
+from sarmoco.store.flags import PulseFlag
+from sarmoco.store.reader import open_store
 from tests.daemon.test_pipeline import feed
 
 SPEC = survey_spec(legs=2, leg_s=14.0, seed=1)

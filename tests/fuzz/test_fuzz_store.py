@@ -1,7 +1,7 @@
 """Fuzzing the store reader on damaged stores.
 
 A small real store (every table, raw echoes, raw INS bytes, an image tile) is written
-by the :class:`~sarmoco.daemon.recorder.Recorder`; each example copies it and damages
+by the :class:`~sarmoco.store.recorder.Recorder`; each example copies it and damages
 its files (``zarr.json`` metadata and chunk files): truncated, bit-flipped, deleted or
 overwritten with noise. Everything a user or a replay reads is then read back: the
 tables, their xarray datasets, the tiles, the raw INS bytes, the store as navigation and
@@ -24,12 +24,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sarmoco.daemon.recorder import Recorder
-from sarmoco.daemon.schema import AUTOFOCUS, COMMITTED_ATTR
-from sarmoco.daemon.store import StoreNav, StorePulses, open_store
 from sarmoco.errors import RecorderError
-from tests.daemon import crash_writer as cw
+from sarmoco.store.reader import StoreNav, StorePulses, open_store
+from sarmoco.store.recorder import Recorder
+from sarmoco.store.schema import AUTOFOCUS, COMMITTED_ATTR
 from tests.fuzz.bounds import assert_named_error, bounded_allocation
+from tests.store import crash_writer as cw
 
 FUZZ = settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 N_PULSES = 40

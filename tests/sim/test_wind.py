@@ -21,13 +21,13 @@ from pymavlink import mavutil
 from scipy.spatial.transform import Rotation
 
 from sarmoco.app.simcommand import platform_arguments, scenario_overrides
-from sarmoco.daemon.report import write_report
 from sarmoco.drivers.can_source import CanLogSource
 from sarmoco.drivers.samples import AttitudeSample, Sample, VelocitySample
 from sarmoco.drivers.sbg import SbgFileSource
 from sarmoco.drivers.source import Source
 from sarmoco.errors import ConfigError
 from sarmoco.processing.rangecomp import compress
+from sarmoco.products.report import write_report
 from sarmoco.sim.emit_can import SbgCanEmitter
 from sarmoco.sim.emit_sbg import SbgEmitter
 from sarmoco.sim.emitter import Emitter

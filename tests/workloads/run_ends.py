@@ -18,14 +18,14 @@ from pathlib import Path
 
 from sarmoco.app.simconfig import config_table, write_config
 from sarmoco.daemon.config import load_config
-from sarmoco.daemon.report import bright_points, strip
 from sarmoco.daemon.runner import replay_files
-from sarmoco.daemon.store import open_store
+from sarmoco.products.report import bright_points, strip
 from sarmoco.sim.faults import Faults
 from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.outfiles import NAV_FILES, RADAR_FILE, write_run
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import Target, load_preset
+from sarmoco.store.reader import open_store
 
 LOG = Path(__file__).resolve().parents[3] / "shared/data/mavlink/arduplane_quadplane_sitl.tlog"
 """The real ArduPilot flight log whose motion the run flies."""

@@ -51,12 +51,12 @@ import zarr
 from sarmoco.app.benchcmd import PY, SIM_ARGS, proc_cpu_s, proc_status_kb, rss_trend_mb_per_min
 from sarmoco.app.demo import free_udp_port, read_json_line
 from sarmoco.app.simconfig import config_table, write_config
-from sarmoco.daemon import schema
 from sarmoco.daemon.config import load_config
-from sarmoco.daemon.flags import NAV_UNUSABLE
-from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.errors import SarmocoError
 from sarmoco.sim.scenario import load_preset
+from sarmoco.store import schema
+from sarmoco.store.flags import NAV_UNUSABLE
+from sarmoco.store.reader import RunStore, open_store
 from tests.daemon.test_daemon_process import NotifyListener, http_get
 from tests.daemon.test_faults_wire import wait_idle
 

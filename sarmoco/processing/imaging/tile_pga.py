@@ -47,6 +47,7 @@ import numpy as np
 from scipy import fft as sfft
 
 from sarmoco.errors import ProcessingError
+from sarmoco.keys import key
 from sarmoco.processing.imaging.tiles import Tile
 from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, IntArray
 
@@ -62,6 +63,25 @@ SELECT_DB = 20.0
 
 
 @dataclass(frozen=True)
+class TilePgaConfig:
+    """Settings of tile PGA.
+
+    Each field is a configuration key (:func:`sarmoco.keys.key`): the daemon's
+    ``[autofocus]`` section is :class:`~sarmoco.processing.autofocus.settings.AutofocusConfig`
+    plus this class plus the daemon's switches, and is handed to :class:`StripPga` as it is.
+    """
+
+    pga_iterations: int = key(6, "Tile PGA iterations at most", gt=0)
+    pga_window_m: float = key(
+        12.0,
+        "Along-track width of tile PGA's first window around each target; it must hold the "
+        "paired echoes (lambda R f / (2 v) from the peak) of the fastest phase error to remove",
+        unit="m",
+        gt=0,
+    )
+
+
+@dataclass(frozen=True)
 class StripPga:
     """Image-domain stripmap PGA on a ground grid along a straight track.
 
@@ -73,12 +93,11 @@ class StripPga:
         Carrier wavelength, m.
     half_beam_rad : float
         Half the azimuth angle the pixels took pulses over (beam culling), rad.
-    window_m : float
-        Along-track width of the first iteration's window around each target, m; it must
-        hold the paired echoes of the fastest phase error to be corrected
-        (``λ R f / (2 v)`` from the peak for an error of ``f`` Hz).
-    max_iter : int
-        At most this many iterations.
+    settings : TilePgaConfig
+        ``pga_window_m``: along-track width of the first iteration's window around each
+        target, m; it must hold the paired echoes of the fastest phase error to be
+        corrected (``λ R f / (2 v)`` from the peak for an error of ``f`` Hz).
+        ``pga_iterations``: at most this many iterations.
     n_lines : int
         Range columns (brightest peaks first) used for the estimate.
     tol_rad : float
@@ -91,22 +110,20 @@ class StripPga:
     height_m: float
     wavelength_m: float
     half_beam_rad: float
-    window_m: float = 12.0
-    max_iter: int = 6
+    settings: TilePgaConfig = field(default_factory=TilePgaConfig)
     n_lines: int = 32
     tol_rad: float = 0.02
     guard_m: float = 2.0
 
     def __post_init__(self) -> None:
-        for name in (
-            "wavelength_m",
-            "half_beam_rad",
-            "window_m",
-            "max_iter",
-            "n_lines",
-        ):
+        for name in ("wavelength_m", "half_beam_rad", "n_lines"):
             if not getattr(self, name) > 0:
                 raise ProcessingError(f"StripPga.{name}: {getattr(self, name)!r} is not > 0")
+        for name in ("pga_window_m", "pga_iterations"):
+            if not getattr(self.settings, name) > 0:
+                raise ProcessingError(
+                    f"StripPga.settings.{name}: {getattr(self.settings, name)!r} is not > 0"
+                )
 
     def focus(
         self, data: ComplexArray, pixel_m: float, ground_range_m: FloatArray
@@ -171,10 +188,10 @@ class StripPga:
         pad, n0 = axis.pad, axis.n0
         rows = np.arange(axis.n_fft)
         total = np.zeros(axis.n_fft)
-        width = max(MIN_WINDOW_PX, round(self.window_m / axis.pixel_m))
+        width = max(MIN_WINDOW_PX, round(self.settings.pga_window_m / axis.pixel_m))
         focused = np.asarray(sfft.ifft(np.abs(axis.kernel(rho)) ** 2, axis=0))
         img = axis.recompress(hist, rho)
-        for it in range(self.max_iter):
+        for it in range(self.settings.pga_iterations):
             peaks = pad + np.argmax(np.abs(img[pad : pad + n0]), axis=0)
             if it:
                 width = max(MIN_WINDOW_PX, min(width, _window_width(img, peaks)))

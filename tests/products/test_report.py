@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 
 from sarmoco.app.simconfig import scenario_config
-from sarmoco.daemon.report import PANELS, bright_points, write_report
 from sarmoco.processing.types import Image
+from sarmoco.products.report import PANELS, bright_points, write_report
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
 from sarmoco.sim.trajectory import MotionSpec

@@ -30,17 +30,8 @@ import numpy as np
 import numpy.typing as npt
 
 from sarmoco.daemon.config import Config, parse_config
-from sarmoco.daemon.echoring import to_complex64
-from sarmoco.daemon.focuser import imaged_beam_rad, radar_params, reference_look_rad
-from sarmoco.daemon.geotiff import write_geotiffs
-from sarmoco.daemon.quicklook import (
-    plot_cuts,
-    plot_image,
-    plot_overlays,
-    plot_panels,
-    plot_series,
-)
-from sarmoco.daemon.store import RunStore, open_store
+from sarmoco.daemon.focuser import imaged_beam_rad, reference_look_rad
+from sarmoco.drivers.samples import to_complex64
 from sarmoco.errors import ProcessingError, RecorderError
 from sarmoco.processing import rangecomp
 from sarmoco.processing.geometry import ReferenceTrack, look_angle, vector_to_imaging
@@ -58,6 +49,15 @@ from sarmoco.processing.metrics import (
 )
 from sarmoco.processing.mocomp import LosState, integrate_los
 from sarmoco.processing.types import Image
+from sarmoco.products.geotiff import write_geotiffs
+from sarmoco.products.quicklook import (
+    plot_cuts,
+    plot_image,
+    plot_overlays,
+    plot_panels,
+    plot_series,
+)
+from sarmoco.store.reader import RunStore, open_store
 
 BRIGHT_POINTS = 5
 """How many of the brightest scatterers are measured."""
@@ -287,7 +287,7 @@ def focus_comparison(
     except RecorderError as exc:
         raise RecorderError(f"{store.path}: no raw echoes recorded (recorder.raw_echoes)") from exc
     cfg: Config = parse_config(store.attrs["config"])
-    radar = radar_params(cfg)
+    radar = cfg.radar.params()
     motion = store.read("motion", ["pulse_id", "t_ns", "vel_ned", "d_los_m"])
     pulses = store.read("pulses", ["pulse_id"])
     # the segment: pulses from the track's start on, up to the first not compensated (turn)
@@ -349,7 +349,7 @@ def _ideal_resolution_m(cfg: Config, slant_m: float, ground_m: float) -> tuple[f
 
     ``slant_m``, ``ground_m``: the target's slant and ground range, m.
     """
-    radar = radar_params(cfg)
+    radar = cfg.radar.params()
     beam = math.radians(cfg.imaging.azimuth_beamwidth_deg)
     azimuth = radar.wavelength_m / (4.0 * math.sin(beam / 2.0))
     return azimuth, radar.range_resolution_m * slant_m / ground_m

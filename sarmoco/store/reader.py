@@ -1,6 +1,6 @@
 """Reading a run store back: committed rows only, as numpy or xarray, or as sources.
 
-A store written by :class:`~sarmoco.daemon.recorder.Recorder` may come from a
+A store written by :class:`~sarmoco.store.recorder.Recorder` may come from a
 run that crashed: arrays may be longer than their data, and rows past a
 table's ``committed`` attribute may hold anything. Everything here reads below
 ``committed`` and nothing else. ``xarray.open_zarr(path, group=...)`` also
@@ -27,15 +27,15 @@ import zarr
 from zarr.core.metadata import ArrayV3Metadata
 
 from sarmoco.closing import Closing
-from sarmoco.daemon import schema
-from sarmoco.daemon.navbuffer import PushResult
-from sarmoco.daemon.schema import COMMITTED_ATTR
-from sarmoco.daemon.verify import DAMAGE, chunk_present, chunk_rows, describe
 from sarmoco.drivers.samples import EchoPackets, Sample
 from sarmoco.drivers.source import Source
 from sarmoco.errors import RecorderError
 from sarmoco.processing.array.imaging3d import DemProduct
 from sarmoco.processing.types import Image
+from sarmoco.store import schema
+from sarmoco.store.flags import PushResult
+from sarmoco.store.schema import COMMITTED_ATTR
+from sarmoco.store.verify import DAMAGE, chunk_present, chunk_rows, describe
 
 log = logging.getLogger(__name__)
 _P = ParamSpec("_P")
@@ -301,7 +301,7 @@ class RunStore:
     @_reading
     def dem(self, name: str) -> tuple[DemProduct, float]:
         """DEM product ``name`` of an array run and its height resolution cell, m
-        (:func:`~sarmoco.daemon.schema.decode_dem`).
+        (:func:`~sarmoco.store.schema.decode_dem`).
 
         Raises
         ------

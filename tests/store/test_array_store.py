@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 import zarr
 
-from sarmoco.daemon import schema
-from sarmoco.daemon.recorder import Recorder
-from sarmoco.daemon.store import open_store
 from sarmoco.errors import RecorderError
 from sarmoco.processing.array.imaging3d import DemProduct
 from sarmoco.processing.geometry import ReferenceTrack
+from sarmoco.store import schema
+from sarmoco.store.reader import open_store
+from sarmoco.store.recorder import Recorder
 
 
 def _dem() -> DemProduct:

@@ -1,4 +1,4 @@
-"""The recorder's writer thread (sarmoco.daemon.writer): order, back-pressure, failures.
+"""The recorder's writer thread (sarmoco.store.writer): order, back-pressure, failures.
 
 Its durability under power loss and SIGKILL is tested with the other recorder crash tests
 (test_faults_power.py, parametrised over the writer thread).
@@ -18,13 +18,13 @@ import pytest
 from zarr.core.buffer import Buffer
 from zarr.core.sync import sync as zarr_sync
 
-from sarmoco.daemon.flags import PulseFlag
-from sarmoco.daemon.recorder import Recorder, _SyncingStore
-from sarmoco.daemon.store import open_store
-from sarmoco.daemon.writer import OrderedWriter
 from sarmoco.errors import RecorderError
-from tests.daemon import crash_writer as cw
-from tests.daemon.test_recorder import _check_committed
+from sarmoco.store.flags import PulseFlag
+from sarmoco.store.reader import open_store
+from sarmoco.store.recorder import Recorder, _SyncingStore
+from sarmoco.store.writer import OrderedWriter
+from tests.store import crash_writer as cw
+from tests.store.test_recorder import _check_committed
 
 
 def test_writes_run_in_order_on_the_writer_thread_and_a_full_queue_blocks() -> None:

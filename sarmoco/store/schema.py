@@ -1,9 +1,9 @@
 """The run store's schema: every table, column, dtype and attribute, and their codecs.
 
 This module is the one owner of the store layout. The recorder
-(:mod:`sarmoco.daemon.recorder`) creates what is declared here, the pipeline
+(:mod:`sarmoco.store.recorder`) creates what is declared here, the pipeline
 encodes its rows with the encoders here, and the reader
-(:mod:`sarmoco.daemon.store`) and the replay decode them with the decoders
+(:mod:`sarmoco.store.reader`) and the replay decode them with the decoders
 beside them. A change of the layout is a change of this file (and of
 :data:`STORE_LAYOUT_VERSION`).
 
@@ -63,21 +63,22 @@ import numpy.typing as npt
 from zarr.codecs import BloscCodec, Crc32cCodec, ZstdCodec
 from zarr.core.array_spec import ArrayConfigParams
 
-from sarmoco.daemon.echoring import SampleFormat, sample_dtype, sample_shape
-from sarmoco.daemon.flags import FLAG_DTYPE, PulseFlag
-from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.drivers.samples import (
     AttitudeSample,
     EchoPackets,
+    SampleFormat,
     TangentFrame,
     Validity,
     VelocitySample,
+    sample_dtype,
+    sample_shape,
 )
 from sarmoco.errors import RecorderError
 from sarmoco.processing.array.imaging3d import DemProduct
 from sarmoco.processing.autofocus.report import SubapertureReport
 from sarmoco.processing.beam import DopplerCentroid
 from sarmoco.processing.geometry import ReferenceTrack
+from sarmoco.store.flags import FLAG_DTYPE, PulseFlag, PushResult
 
 STORE_LAYOUT_VERSION = 2
 """Value of the root attribute :data:`LAYOUT_ATTR`; bumped when the layout changes."""
@@ -674,7 +675,7 @@ def decode_dem(
 @dataclass(frozen=True)
 class GeodeticOrigin:
     """Where a run is on Earth: the tangent point of the local NED frame of the store's
-    positions (``nav/pos_ned``, ``motion/pos_ned``; :mod:`sarmoco.daemon.navframe`).
+    positions (``nav/pos_ned``, ``motion/pos_ned``), chosen by the daemon as it records.
 
     Attributes
     ----------

@@ -1,7 +1,7 @@
 """Does a store prove its own integrity? Every chunk read and its checksum checked.
 
 Every array of a store ends its codecs with a CRC-32C of each chunk
-(:data:`~sarmoco.daemon.schema.CHUNK_CHECKSUM`), and every chunk is written even when it
+(:data:`~sarmoco.store.schema.CHUNK_CHECKSUM`), and every chunk is written even when it
 holds only the fill value. :func:`verify_store` reads every chunk a reader would read (rows
 below a table's ``committed`` count, the tiles below the images' count, every chunk of the
 other arrays) and reports each one that is missing, fails its checksum or does not decode,
@@ -19,8 +19,8 @@ from pathlib import Path
 import zarr
 from zarr.codecs import Crc32cCodec
 
-from sarmoco.daemon import schema
 from sarmoco.errors import RecorderError
+from sarmoco.store import schema
 
 DAMAGE = (OSError, ValueError, KeyError, IndexError, TypeError, RuntimeError)
 """What zarr, numcodecs and json raise on damaged bytes: a checksum that does not match or a

@@ -1,6 +1,6 @@
 """The store schema: what the encoders write to a real zarr store decodes back the same.
 
-Each codec pair of :mod:`sarmoco.daemon.schema` is run through a store on disk
+Each codec pair of :mod:`sarmoco.store.schema` is run through a store on disk
 (encode → :class:`Recorder` → files → :class:`RunStore` → decode), and every
 table the recorder creates is checked against its declaration.
 """
@@ -13,11 +13,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sarmoco.daemon import schema
-from sarmoco.daemon.flags import PulseFlag
-from sarmoco.daemon.navbuffer import PushResult
-from sarmoco.daemon.recorder import Recorder
-from sarmoco.daemon.store import StoreNav, StorePulses, open_store
 from sarmoco.drivers.samples import (
     AttitudeSample,
     EchoPacket,
@@ -28,6 +23,10 @@ from sarmoco.drivers.samples import (
 from sarmoco.errors import RecorderError
 from sarmoco.processing.autofocus.report import SubapertureReport
 from sarmoco.processing.geometry import ReferenceTrack
+from sarmoco.store import schema
+from sarmoco.store.flags import PulseFlag, PushResult
+from sarmoco.store.reader import StoreNav, StorePulses, open_store
+from sarmoco.store.recorder import Recorder
 
 T0 = 1_400_000_000_000_000_000
 """A GPS time, ns."""

@@ -1,20 +1,20 @@
 """The run recorder: one zarr v3 store per run, readable after a crash.
 
-The layout (tables, columns, attributes) is declared in :mod:`sarmoco.daemon.schema`;
+The layout (tables, columns, attributes) is declared in :mod:`sarmoco.store.schema`;
 this module writes it.
 
 Crash safety: the zarr local store writes every chunk and metadata file to a
 temporary name and renames it into place, so a file is either old or new,
 never torn. Arrays grow by whole steps *before* rows are written, rows are
 written, and only then does ``committed`` advance; a reader trusts rows below
-``committed`` and nothing else (:mod:`sarmoco.daemon.store`). Files written are
+``committed`` and nothing else (:mod:`sarmoco.store.reader`). Files written are
 fsynced (with their directories) every ``fsync_interval_s``, and at close.
 :meth:`Recorder.close` trims every array to its committed length and marks the
 store ``complete``.
 
 Several threads may call a recorder (a live run's recording and focusing parts): its
 calls run one at a time, each whole. With a ``writer_queue`` the writes themselves run,
-in call order, on the recorder's writer thread (:mod:`sarmoco.daemon.writer`), off the
+in call order, on the recorder's writer thread (:mod:`sarmoco.store.writer`), off the
 callers'.
 """
 
@@ -35,7 +35,7 @@ import time
 import uuid
 from collections.abc import Awaitable, Callable, Coroutine, Iterator, Mapping
 from pathlib import Path
-from typing import Any, Concatenate, ParamSpec, TypeVar
+from typing import Any, Concatenate, ParamSpec, Protocol, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -45,13 +45,12 @@ from zarr.core.sync import sync as zarr_sync
 from zarr.storage import LocalStore
 
 from sarmoco.closing import Closing
-from sarmoco.daemon import schema
-from sarmoco.daemon.echoring import SampleFormat
-from sarmoco.daemon.livefeed import LiveFeed
-from sarmoco.daemon.schema import COMMITTED_ATTR, TableSpec
-from sarmoco.daemon.writer import OrderedWriter
+from sarmoco.drivers.samples import SampleFormat
 from sarmoco.errors import RecorderError
 from sarmoco.processing.types import Image
+from sarmoco.store import schema
+from sarmoco.store.schema import COMMITTED_ATTR, TableSpec
+from sarmoco.store.writer import OrderedWriter
 
 _P = ParamSpec("_P")
 _R = TypeVar("_R")
@@ -220,7 +219,7 @@ async def _gather(writes: list[Coroutine[Any, Any, None]]) -> None:
 def _settle_zarr_tasks() -> None:
     """Wait until every other task on zarr's event loop has ended, retrieving their exceptions.
 
-    Called when a write fails (:class:`~sarmoco.daemon.writer.OrderedWriter`'s
+    Called when a write fails (:class:`~sarmoco.store.writer.OrderedWriter`'s
     ``on_failure``, :func:`_settling`). A zarr write returns at its first failure
     (``asyncio.gather``) while the other writes it started go on; if one of those fails
     too, its exception is retrieved only by a callback of that gather, which never runs
@@ -324,7 +323,7 @@ def write_tile(
     reference_track: Mapping[str, Any] | None = None,
 ) -> None:
     """Write a tile's pixels into the ``data`` array :func:`create_tile` made (a region
-    write of the whole array) and its attributes (:func:`~sarmoco.daemon.schema.encode_tile_attrs`).
+    write of the whole array) and its attributes (:func:`~sarmoco.store.schema.encode_tile_attrs`).
 
     Raises
     ------
@@ -604,8 +603,19 @@ class Table:
                 arr.resize((self.committed, *arr.shape[1:]))
 
 
+class RecordingListener(Protocol):
+    """What a :class:`Recorder` tells, in memory, of what it records (the daemon's live
+    page feed is one); called on the thread that records."""
+
+    def add_tile(self, index: int, image: Image) -> None:
+        """A tile was recorded at store index ``index``."""
+
+    def add_autofocus(self, columns: Mapping[str, npt.ArrayLike]) -> None:
+        """Rows of the ``autofocus`` table were recorded, by column."""
+
+
 class Recorder(Closing):
-    """Writes one run into a new zarr v3 store (layout: :mod:`sarmoco.daemon.schema`).
+    """Writes one run into a new zarr v3 store (layout: :mod:`sarmoco.store.schema`).
 
     Parameters
     ----------
@@ -634,13 +644,13 @@ class Recorder(Closing):
         Rows per chunk of the other tables.
     echo_compression : str
         Lossless compressor of the raw echoes, a key of
-        :data:`~sarmoco.daemon.schema.ECHO_COMPRESSION` (``"none"``: stored as they are).
-    live : LiveFeed, optional
-        The live page's feed: each tile and autofocus row recorded is handed to it in
-        memory, so that the page never opens the store.
+        :data:`~sarmoco.store.schema.ECHO_COMPRESSION` (``"none"``: stored as they are).
+    live : RecordingListener, optional
+        Told in memory of each tile and autofocus row recorded (the daemon's live page
+        feed), so that the live page never opens the store.
     writer_queue : int
         Writes that may wait for the recorder's writer thread
-        (:class:`~sarmoco.daemon.writer.OrderedWriter`): every method then checks its
+        (:class:`~sarmoco.store.writer.OrderedWriter`): every method then checks its
         arguments, copies them and returns, and the thread writes in call order (the
         ``committed`` counts advance after their rows, fsync every interval, as on one
         thread); a failed write is raised by the next call, and is
@@ -660,7 +670,7 @@ class Recorder(Closing):
         meta_chunk_pulses: int | None = None,
         chunk_rows: int = 1024,
         echo_compression: str = "none",
-        live: LiveFeed | None = None,
+        live: RecordingListener | None = None,
         writer_queue: int = 0,
     ) -> None:
         self.path = Path(path)
@@ -742,8 +752,14 @@ class Recorder(Closing):
 
         Parameters
         ----------
-        t_ns, pulse_id, channel, flags : array_like, shape (P,)
-            As in :class:`~sarmoco.daemon.echoring.EchoBatch`.
+        t_ns : array_like of int64, shape (P,)
+            Transmit times, GPS ns.
+        pulse_id : array_like of int64, shape (P,)
+            Running pulse numbers given by the producer.
+        channel : array_like of int32, shape (P,)
+            Receive channels (VITA 49 stream IDs).
+        flags : array_like of uint32, shape (P,)
+            :class:`~sarmoco.store.flags.PulseFlag` bits.
         samples : array_like, optional
             Raw samples ``(P, S)`` complex64 or ``(P, S, 2)`` int16, in the
             recorder's ``sample_format``; required when raw echoes are recorded.
@@ -825,7 +841,7 @@ class Recorder(Closing):
         Parameters
         ----------
         spec : TableSpec
-            The table, e.g. :data:`~sarmoco.daemon.schema.AUTOFOCUS`; created by the
+            The table, e.g. :data:`~sarmoco.store.schema.AUTOFOCUS`; created by the
             first call.
         columns : mapping of str to array_like
             Every column of ``spec``, with the same number of rows.
@@ -862,7 +878,7 @@ class Recorder(Closing):
             Quality numbers of the tile (PSLR dB, entropy...), stored as attributes.
         reference_track : mapping, optional
             The track whose imaging frame the axes are in
-            (:func:`~sarmoco.daemon.schema.encode_reference_track`).
+            (:func:`~sarmoco.store.schema.encode_reference_track`).
         """
         index = self.n_images
         if self._writer.threaded:
@@ -889,7 +905,7 @@ class Recorder(Closing):
 
     @_one_at_a_time
     def flag_pulses(self, rows: npt.ArrayLike, flags: int) -> None:
-        """Set ``flags`` (:class:`~sarmoco.daemon.flags.PulseFlag` bits) on recorded pulses.
+        """Set ``flags`` (:class:`~sarmoco.store.flags.PulseFlag` bits) on recorded pulses.
 
         Parameters
         ----------
@@ -931,7 +947,7 @@ class Recorder(Closing):
         attrs: Mapping[str, Any],
     ) -> None:
         """Record a DEM product as ``dem/<name>`` (content from
-        :func:`~sarmoco.daemon.schema.encode_dem`).
+        :func:`~sarmoco.store.schema.encode_dem`).
 
         Parameters
         ----------

@@ -1,15 +1,11 @@
 """Quicklook PNGs for an operator: the image in dB, the motion solution, autofocus estimates.
 
-Drawn with matplotlib's object API (``Figure``, no pyplot state, no display); the live
-page's tile strip is encoded directly (:func:`peak_blocks`, :func:`gray_of`, :func:`png_gray`),
-a few ms a tile.
-Axes are in metres and seconds.
+Drawn with matplotlib's object API (``Figure``, no pyplot state, no display), in the
+intensity scale of :mod:`sarmoco.grayscale`. Axes are in metres and seconds.
 """
 
 from __future__ import annotations
 
-import struct
-import zlib
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -17,8 +13,7 @@ import numpy as np
 import numpy.typing as npt
 from matplotlib.figure import Figure
 
-DYNAMIC_RANGE_DB = 40.0
-"""Intensity range shown below the image peak, dB."""
+from sarmoco.grayscale import DYNAMIC_RANGE_DB, intensity_db
 
 
 def _nice_length(span_m: float) -> float:
@@ -151,12 +146,6 @@ def plot_overlays(
     return path
 
 
-def _db(data: npt.NDArray[np.generic], reference: float) -> npt.NDArray[np.float64]:
-    """Intensity of ``data`` in dB re the power ``reference``, floored at -DYNAMIC_RANGE_DB."""
-    power = np.abs(np.asarray(data)) ** 2 / reference
-    return np.asarray(10.0 * np.log10(np.maximum(power, 10 ** (-DYNAMIC_RANGE_DB / 10))))
-
-
 def plot_panels(
     panels: Mapping[str, npt.NDArray[np.generic]],
     axis0_m: npt.NDArray[np.float64],
@@ -183,7 +172,7 @@ def plot_panels(
     extent = (float(axis1_m[0]), float(axis1_m[-1]), float(axis0_m[0]), float(axis0_m[-1]))
     im = None
     for ax, (name, data) in zip(axes, panels.items(), strict=True):
-        im = ax.imshow(_db(data, peak), origin="lower", extent=extent, cmap="gray",
+        im = ax.imshow(intensity_db(data, peak), origin="lower", extent=extent, cmap="gray",
                        vmin=-DYNAMIC_RANGE_DB, vmax=0.0, aspect="equal",
                        interpolation="nearest")  # fmt: skip
         ax.set_title(name)
@@ -221,9 +210,9 @@ def plot_cuts(
     for ax, (direction, curves) in zip(axes, cuts.items(), strict=True):
         peak = max(float(np.max(np.abs(v)) ** 2) for _, v in curves.values()) or 1.0
         for name, (x, v) in curves.items():
-            ax.plot(x, _db(v, peak), linewidth=1.0, label=name)
+            ax.plot(x, intensity_db(v, peak), linewidth=1.0, label=name)
         x, amp = ideal[direction]
-        ax.plot(x, _db(amp, 1.0), "k--", linewidth=0.9, label="ideal sinc")
+        ax.plot(x, intensity_db(amp, 1.0), "k--", linewidth=0.9, label="ideal sinc")
         ax.set_xlabel(direction)
         ax.set_ylim(-DYNAMIC_RANGE_DB, 1.0)
         ax.grid(alpha=0.3)
@@ -233,50 +222,3 @@ def plot_cuts(
     fig.tight_layout()
     fig.savefig(path)
     return path
-
-
-def peak_blocks(data: npt.NDArray[np.generic], max_px: int = 600) -> npt.NDArray[np.float32]:
-    """An image's magnitude laid out as a picture and decimated to at most ``max_px`` a side.
-
-    Axis 0 of ``data`` (along track) becomes the horizontal axis of the picture and axis 1
-    (ground range) the vertical one, far range at the top. Each axis is decimated to the
-    peak of each block of pixels.
-    """
-    mag = np.abs(np.asarray(data)).T[::-1]
-    k0, k1 = (max(1, -(-n // max_px)) for n in mag.shape)
-    n0, n1 = mag.shape[0] // k0 * k0, mag.shape[1] // k1 * k1
-    return np.asarray(
-        mag[:n0, :n1].reshape(n0 // k0, k0, n1 // k1, k1).max(axis=(1, 3)), dtype=np.float32
-    )
-
-
-def gray_of(mag: npt.NDArray[np.floating], peak: float) -> npt.NDArray[np.uint8]:
-    """Magnitudes as 8-bit gray: ``peak`` to 255, ``DYNAMIC_RANGE_DB`` below it and less to 0."""
-    db = _db(mag, peak**2 if peak > 0 else 1.0)
-    return np.asarray(np.round((db / DYNAMIC_RANGE_DB + 1.0) * 255.0), dtype=np.uint8)
-
-
-def gray_db(data: npt.NDArray[np.generic], max_px: int = 600) -> npt.NDArray[np.uint8]:
-    """An image's intensity as 8-bit gray, ``DYNAMIC_RANGE_DB`` below its peak to 255
-    (:func:`peak_blocks` laid out and decimated, :func:`gray_of` its own peak)."""
-    mag = peak_blocks(data, max_px)
-    return gray_of(mag, float(mag.max()) if mag.size else 0.0)
-
-
-def png_gray(pixels: npt.NDArray[np.uint8]) -> bytes:
-    """Encode 8-bit gray pixels (rows top to bottom) as a PNG file (no dependency)."""
-    height, width = pixels.shape
-
-    def chunk(kind: bytes, body: bytes) -> bytes:
-        crc = zlib.crc32(kind + body) & 0xFFFFFFFF
-        return struct.pack(">I", len(body)) + kind + body + struct.pack(">I", crc)
-
-    rows = np.zeros((height, width + 1), dtype=np.uint8)  # filter byte 0 (none) per row
-    rows[:, 1:] = pixels
-    header = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
-    return (
-        b"\x89PNG\r\n\x1a\n"
-        + chunk(b"IHDR", header)
-        + chunk(b"IDAT", zlib.compress(rows.tobytes(), 6))
-        + chunk(b"IEND", b"")
-    )

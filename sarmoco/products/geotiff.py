@@ -1,12 +1,12 @@
 """A georeferenced quicklook: GeoTIFF of each reference-track segment, for a GIS.
 
 Written with tifffile (pure Python, no system GDAL): 8-bit gray in dB as the PNG quicklook
-draws it (:func:`~sarmoco.daemon.quicklook.gray_db`, full resolution: along track to the
+draws it (:func:`~sarmoco.grayscale.gray_db`, full resolution: along track to the
 right, far range at the top), with the GeoTIFF tags a GIS reads: ModelTransformationTag
 (an affine map from raster to longitude and latitude, WGS-84; the grid is a rotated
 rectangle on the ground, so the map has rotation terms) and GeoKeyDirectoryTag
 (geographic model, pixel-is-area, EPSG:4326). The affine map is fitted to every pixel's
-position from :mod:`sarmoco.daemon.georeference`; its largest residual is returned.
+position from :mod:`sarmoco.products.georeference`; its largest residual is returned.
 """
 
 from __future__ import annotations
@@ -17,10 +17,10 @@ from pathlib import Path
 import numpy as np
 import tifffile
 
-from sarmoco.daemon.georeference import georeference, grid_points, segment_images
-from sarmoco.daemon.quicklook import gray_db
-from sarmoco.daemon.store import RunStore
+from sarmoco.grayscale import gray_db
 from sarmoco.processing.types import FloatArray
+from sarmoco.products.georeference import georeference, grid_points, segment_images
+from sarmoco.store.reader import RunStore
 
 MODEL_TRANSFORMATION_TAG = 34264
 GEO_KEY_DIRECTORY_TAG = 34735

@@ -15,10 +15,10 @@ import time
 import numpy as np
 import numpy.typing as npt
 
-from sarmoco.daemon.recorder import Recorder
-from sarmoco.daemon.schema import AUTOFOCUS, encode_autofocus
 from sarmoco.processing.autofocus.report import SubapertureReport
 from sarmoco.processing.types import Image
+from sarmoco.store.recorder import Recorder
+from sarmoco.store.schema import AUTOFOCUS, encode_autofocus
 
 N_SAMPLES = 64
 IMAGE_EVERY = 5

@@ -10,8 +10,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from sarmoco.daemon.recorder import Recorder, _SyncingStore, meta_chunk_pulses
-from sarmoco.daemon.store import open_store
+from sarmoco.store.reader import open_store
+from sarmoco.store.recorder import Recorder, _SyncingStore, meta_chunk_pulses
 
 PRF_HZ = 20_000.0
 """The pulse rate of thz-spotlight: a recording pass every 10 ms takes 200 pulses."""

@@ -29,11 +29,11 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from sarmoco.daemon.store import RunStore
 from sarmoco.errors import DataFileError, ProcessingError, RecorderError
 from sarmoco.processing.array.dem import evaluate_dem, truth_on_product
 from sarmoco.processing.array.imaging3d import DemProduct
 from sarmoco.processing.types import FloatArray
+from sarmoco.store.reader import RunStore
 
 DEM_PRODUCTS = {"dem": "compensated", "dem_uncompensated": "uncompensated"}
 """Report key of each DEM product of the store."""

@@ -20,12 +20,12 @@ import pytest
 
 from sarmoco.app.cli import main
 from sarmoco.daemon.config import Config, load_config
-from sarmoco.daemon.recorder import Recorder
-from sarmoco.daemon.report import write_report
 from sarmoco.daemon.runner import replay_files, replay_store
-from sarmoco.daemon.store import open_store
-from sarmoco.daemon.verify import verify_store
 from sarmoco.processing.types import Image
+from sarmoco.products.report import write_report
+from sarmoco.store.reader import open_store
+from sarmoco.store.recorder import Recorder
+from sarmoco.store.verify import verify_store
 
 PULSES = 800
 CHUNK = 256

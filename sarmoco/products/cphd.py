@@ -30,7 +30,6 @@ import numpy.typing as npt
 import sarkit.cphd as skcphd
 
 from sarmoco import __version__
-from sarmoco.daemon.store import RunStore
 from sarmoco.drivers.clock import gps_ns_to_unix_ns
 from sarmoco.drivers.gotcha import GotchaPass
 from sarmoco.errors import DataFileError, RecorderError
@@ -42,6 +41,7 @@ from sarmoco.processing.imaging import (
     facing_heading,
 )
 from sarmoco.processing.types import C_MPS, FloatArray, Image
+from sarmoco.store.reader import RunStore
 
 CPHD_NS = "http://api.nsgreg.nga.mil/schema/cphd/1.1.0"
 """Namespace of the CPHD version written."""
@@ -173,7 +173,7 @@ def from_store(store: RunStore, segment: int = 0) -> FxPhaseHistory:
     Each pulse is range compressed (unweighted) and turned into its range spectrum
     deramped to the segment's scene centre point (SRP: the centre pixel of its image, on
     the ground) from the antenna position the INS gave (the trapezoid-integrated INS
-    velocity of the antenna, :func:`~sarmoco.daemon.georeference.run_track`, the position
+    velocity of the antenna, :func:`~sarmoco.products.georeference.run_track`, the position
     the INS-only compensation uses). The data are thus compensated to the SRP by the INS;
     the PVP positions are those antenna positions, in ECEF through the store's
     georeference. The TOA swath saved is the segment image's slant-range extent about the
@@ -185,15 +185,14 @@ def from_store(store: RunStore, segment: int = 0) -> FxPhaseHistory:
         No absolute position, no raw echoes, or no such segment.
     """
     from sarmoco.daemon.config import parse_config
-    from sarmoco.daemon.echoring import to_complex64
-    from sarmoco.daemon.focuser import radar_params
-    from sarmoco.daemon.georeference import georeference, grid_points, run_track, segment_images
+    from sarmoco.drivers.samples import to_complex64
     from sarmoco.processing import rangecomp
     from sarmoco.processing.imaging.phase_history import phase_history_from_compressed
+    from sarmoco.products.georeference import georeference, grid_points, run_track, segment_images
 
     geo = georeference(store)
     cfg = parse_config(store.attrs["config"])
-    radar = radar_params(cfg)
+    radar = cfg.radar.params()
     segments = segment_images(store)
     if not 0 <= segment < len(segments):
         raise RecorderError(f"{store.path}: segment {segment} (the store has {len(segments)})")

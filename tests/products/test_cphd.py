@@ -17,9 +17,7 @@ import sarkit.sicd as sksicd
 import sarkit.verification as skver
 
 from sarmoco.app.cli import main
-from sarmoco.app.cphd import FxPhaseHistory, from_gotcha, read_cphd, write_cphd
 from sarmoco.app.export import failures
-from sarmoco.daemon.store import open_store
 from sarmoco.drivers.gotcha import GotchaPass, read_gotcha
 from sarmoco.errors import DataFileError
 from sarmoco.processing.imaging import (
@@ -29,6 +27,8 @@ from sarmoco.processing.imaging import (
     facing_heading,
 )
 from sarmoco.processing.types import C_MPS
+from sarmoco.products.cphd import FxPhaseHistory, from_gotcha, read_cphd, write_cphd
+from sarmoco.store.reader import open_store
 
 SIZE, PIXEL_M = 96, 0.2
 """Image of the import: pixels per side and spacing, m (the CLI's --size, --pixel-m)."""

@@ -14,11 +14,7 @@ import numpy as np
 import pytest
 from sarkit import wgs84
 
-from sarmoco.daemon import schema
-from sarmoco.daemon.navbuffer import PushResult
 from sarmoco.daemon.navframe import StoreFrame
-from sarmoco.daemon.recorder import Recorder
-from sarmoco.daemon.store import open_store
 from sarmoco.drivers import sbg_codec as codec
 from sarmoco.drivers.samples import AttitudeSample, TangentFrame, Validity, VelocitySample
 from sarmoco.drivers.sbg import SbgDecoder
@@ -31,6 +27,10 @@ from sarmoco.geodesy import (
     ned_to_ecef,
     ned_to_geodetic,
 )
+from sarmoco.store import schema
+from sarmoco.store.flags import PushResult
+from sarmoco.store.reader import open_store
+from sarmoco.store.recorder import Recorder
 from tests.drivers.test_sbg import LEAP, OK_STATUS, utc_msg
 
 POINTS = np.array(

@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 import xarray as xr
 
-from sarmoco.daemon.recorder import Recorder
-from sarmoco.daemon.schema import AUTOFOCUS
-from sarmoco.daemon.store import RunStore, open_store
 from sarmoco.errors import RecorderError
 from sarmoco.processing.types import Image
-from tests.daemon import crash_writer as cw
+from sarmoco.store.reader import RunStore, open_store
+from sarmoco.store.recorder import Recorder
+from sarmoco.store.schema import AUTOFOCUS
+from tests.store import crash_writer as cw
 
 WRITER = Path(cw.__file__)
 

@@ -1,6 +1,6 @@
 """``xarray.open_zarr(store, group=...)`` on a run store, with no sarmoco code: every group
 opens with named dimensions, and times and image axes come out as coordinates (the
-``coordinates`` attributes the recorder writes from :mod:`sarmoco.daemon.schema`).
+``coordinates`` attributes the recorder writes from :mod:`sarmoco.store.schema`).
 """
 
 from __future__ import annotations
@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import xarray as xr
 
-from sarmoco.daemon.recorder import Recorder
-from sarmoco.daemon.schema import AUTOFOCUS
-from sarmoco.daemon.store import open_store
-from tests.daemon import crash_writer as cw
+from sarmoco.store.reader import open_store
+from sarmoco.store.recorder import Recorder
+from sarmoco.store.schema import AUTOFOCUS
+from tests.store import crash_writer as cw
 
 ROWS = 12
 

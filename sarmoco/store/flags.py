@@ -1,4 +1,5 @@
-"""Per-pulse quality flags, one bit each, recorded with every pulse.
+"""Per-pulse quality flags, one bit each, recorded with every pulse, and what the nav
+buffer did with each navigation sample (:class:`PushResult`, recorded with the sample).
 
 A flag never changes the data: it says what the daemon knows about a pulse
 (navigation missing, receiver trouble, pulses lost before it). The processor
@@ -86,3 +87,12 @@ NAV_FLAGS = NAV_UNUSABLE | PulseFlag.NAV_BRIDGED
 """Flags the aligner sets (after the pulse was first recorded)."""
 UNFOCUSABLE = NAV_UNUSABLE | PulseFlag.CONTEXT_MISMATCH
 """Flags under which a pulse is recorded but not focused (its echo blanked)."""
+
+
+class PushResult(enum.IntEnum):
+    """What a nav buffer stream did with a pushed sample (recorded with the sample)."""
+
+    ACCEPTED = 0
+    DUPLICATE = 1
+    STALE = 2
+    CLOCK_REJECTED = 3

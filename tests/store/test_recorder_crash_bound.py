@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from sarmoco.daemon.store import open_store
+from sarmoco.store.reader import open_store
 
 CHUNK = 128
 BLOCKS = (100, 100, 60, 200, 77)
@@ -25,7 +25,7 @@ BLOCKS = (100, 100, 60, 200, 77)
 CHILD = """
 import sys
 import numpy as np
-from sarmoco.daemon.recorder import Recorder
+from sarmoco.store.recorder import Recorder
 
 rec = Recorder(sys.argv[1], 4096, "int16", chunk_pulses={chunk})
 n = 0

@@ -4,7 +4,7 @@ The motion compensation works in the *run frame*: NED axes, origin at the antenn
 centre (APC) of the first focused pulse, positions the trapezoid-integrated INS velocity of
 the APC (the INS-only D_los, docs/methods.md §3). Reference tracks and image grids are in
 that frame. The store also keeps the INS's geodetic positions (``nav/lla``) and the
-geodetic origin of the run (the first of them, :class:`~sarmoco.daemon.schema.GeodeticOrigin`).
+geodetic origin of the run (the first of them, :class:`~sarmoco.store.schema.GeodeticOrigin`).
 :func:`georeference` ties the two: the run frame is shifted by the mean difference between
 the INS's positions (as NED about the geodetic origin) and the integrated track at the same
 instants, so that
@@ -21,10 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sarmoco.daemon import schema
 from sarmoco.daemon.config import parse_config
-from sarmoco.daemon.navbuffer import PushResult
-from sarmoco.daemon.store import RunStore
 from sarmoco.errors import RecorderError
 from sarmoco.geodesy import (
     ecef_to_geodetic,
@@ -35,6 +32,9 @@ from sarmoco.geodesy import (
 from sarmoco.processing.geometry import ReferenceTrack, lever_arm_ned
 from sarmoco.processing.mocomp import LosState, integrate_los
 from sarmoco.processing.types import FloatArray, Image, IntArray
+from sarmoco.store import schema
+from sarmoco.store.flags import PushResult
+from sarmoco.store.reader import RunStore
 
 
 @dataclass(frozen=True)

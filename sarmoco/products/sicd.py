@@ -1,14 +1,14 @@
 """SICD (NGA.STND.0024, version 1.4.0) of our focused images, written with sarkit.
 
 A store's SICD (:func:`sicd_product`) holds the tiles of one reference-track segment joined
-along track (:func:`~sarmoco.daemon.georeference.segment_images`); a phase history's
+along track (:func:`~sarmoco.products.georeference.segment_images`); a phase history's
 (:func:`spotlight_product`, e.g. GOTCHA through CPHD) its backprojection on a ground grid
 about the image-area reference point. The pixels are ours, unchanged: for a store
 SICD rows are our axis 1 (ground range y), columns our axis 0 (along-track x; reversed for
 a left-looking radar, so that the grid normal points away from the Earth), i.e. the SICD
 array is ``data.T`` (``data.T[:, ::-1]`` looking left).
 
-The geometry the metadata states (docs/methods.md §1, :mod:`sarmoco.daemon.georeference`):
+The geometry the metadata states (docs/methods.md §1, :mod:`sarmoco.products.georeference`):
 
 * ``Grid``: ImagePlane GROUND, Type PLANE (a uniformly sampled ground grid, backprojected),
   Row along the imaging-frame y, Col along x, both in ECEF; the spatial-frequency support
@@ -41,20 +41,19 @@ import sarkit.sicd as sksicd
 from scipy.signal import get_window
 
 from sarmoco import __version__
-from sarmoco.app.cphd import FxPhaseHistory, gps_utc
 from sarmoco.daemon.config import Config, parse_config
-from sarmoco.daemon.focuser import radar_params
-from sarmoco.daemon.georeference import (
+from sarmoco.errors import RecorderError
+from sarmoco.geodesy import ecef_to_geodetic
+from sarmoco.processing.types import FloatArray, Image
+from sarmoco.products.cphd import FxPhaseHistory, gps_utc
+from sarmoco.products.georeference import (
     Georeference,
     SegmentImage,
     georeference,
     grid_points,
     segment_images,
 )
-from sarmoco.daemon.store import RunStore
-from sarmoco.errors import RecorderError
-from sarmoco.geodesy import ecef_to_geodetic
-from sarmoco.processing.types import FloatArray, Image
+from sarmoco.store.reader import RunStore
 
 SICD_NS = "urn:SICD:1.4.0"
 """Namespace of the SICD version written."""
@@ -206,7 +205,7 @@ def sicd_product(store: RunStore, segment: int = 0) -> SicdProduct:
 
 
 def _strip(store: RunStore, cfg: Config, geo: Georeference, seg: SegmentImage) -> _Description:
-    radar = radar_params(cfg)
+    radar = cfg.radar.params()
     image, track = seg.image, seg.track
     left = cfg.geometry.look_side == "left"
     sign = -1.0 if left else 1.0
@@ -267,7 +266,7 @@ def _strip(store: RunStore, cfg: Config, geo: Georeference, seg: SegmentImage) -
 
 
 def spotlight_product(ph: FxPhaseHistory, image: Image, heading_rad: float) -> SicdProduct:
-    """The SICD of a phase history's backprojection (:func:`sarmoco.app.cphd.focus`).
+    """The SICD of a phase history's backprojection (:func:`sarmoco.products.cphd.focus`).
 
     Parameters
     ----------

@@ -1,0 +1,163 @@
+"""Block assembly and focusing: aligned pulses into processing blocks, through the focuser.
+
+The aligner releases pulses with their navigation as the INS allows, in blocks of any
+size; :class:`BlockFocusing` gathers them and hands the focuser
+(:class:`~sarmoco.daemon.focuser.Focuser`) ``imaging.block_pulses`` at a time, so that a
+live run and a replay of its store cut the stream alike (the autofocus estimates depend
+on the cuts at the level of rounding). On the way:
+
+- pulses not later than every pulse focused before are kept from the focuser (it needs
+  strictly increasing times), counted in ``pulses_out_of_order``;
+- the focuser starts at the first pulse with navigation, on a reference track along the
+  mean velocity of ``mocomp.heading_window_s`` of flight (the pulses are held until they
+  cover it); the pulses before it are recorded unfocused;
+- pulses without navigation keep their place with zero echoes
+  (:class:`~sarmoco.daemon.navigation.GapFill`).
+
+Every pulse ends in the motion table (:class:`~sarmoco.daemon.tables.RunTables`), with a
+solution or without, and is counted processed, unfocused or out of order.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from sarmoco.daemon.aligner import AlignedBlock
+from sarmoco.daemon.config import Config
+from sarmoco.daemon.focuser import Focuser, SinkFactory
+from sarmoco.daemon.navigation import GapFill, NavPulses
+from sarmoco.daemon.tables import RunTables
+from sarmoco.processing.types import BoolArray, IntArray
+from sarmoco.store.flags import NAV_UNUSABLE
+
+log = logging.getLogger(__name__)
+
+
+class BlockFocusing:
+    """Aligned pulses gathered into processing blocks and focused (see the module doc).
+
+    Parameters
+    ----------
+    cfg : Config
+        Daemon configuration (``imaging.block_pulses``, ``mocomp.heading_window_s``, and
+        the focuser's own).
+    tables : RunTables
+        Where the pulses' motion and the products are recorded and counted.
+    sink : SinkFactory, optional
+        Imaging deferred (:class:`~sarmoco.daemon.focuser.Focuser`).
+    """
+
+    def __init__(self, cfg: Config, tables: RunTables, sink: SinkFactory | None = None) -> None:
+        self.cfg = cfg
+        self.tables = tables
+        self.sink = sink
+        self.focuser: Focuser | None = None
+        """The focusing chain, from the first pulse with navigation on (None before)."""
+        self._gaps: GapFill | None = None
+        self._pending: list[NavPulses] = []
+        """Aligned pulses not focused yet, oldest first."""
+        self._pending_n = 0
+        self._focused_ns: int | None = None
+        """Time of the newest pulse given to the focuser, GPS ns."""
+
+    def accept(self, block: AlignedBlock) -> None:
+        """Take an aligned block: record its navigation flags, and focus every whole
+        processing block gathered (once the first track's heading window is held)."""
+        self.tables.nav_flags(block)
+        self._pending.append(NavPulses.of(block))
+        self._pending_n += len(block)
+        if self.focuser is None and not self._heading_window_held():
+            return  # the first track waits for its heading window
+        block_pulses = self.cfg.imaging.block_pulses
+        while self._pending_n >= block_pulses:
+            self._focus_pending(block_pulses)
+
+    def finish(self) -> None:
+        """Focus every pulse still gathered (a block at a time) and close the focuser."""
+        while self._pending_n > 0:  # a block at a time: held for the heading window, or the last
+            self._focus_pending(min(self._pending_n, self.cfg.imaging.block_pulses))
+        if self.focuser is not None:
+            self.tables.products(self.focuser.finish(), self.focuser.autofocus)
+
+    def _focus_pending(self, n: int) -> None:
+        """Focus the first ``n`` pulses gathered, and record their motion and products."""
+        if not self._pending:
+            return
+        pending = NavPulses.cat(self._pending)
+        self._pending = [pending.since(n)] if n < len(pending) else []
+        self._pending_n = len(pending) - n
+        in_order = self._in_time_order(pending.upto(n))
+        if in_order is None:
+            return
+        summary = self.tables.summary
+        summary.pulses_nav_flagged += int(np.count_nonzero(in_order.flags & NAV_UNUSABLE))
+        p = in_order if self.focuser is not None else self._start(in_order, pending)
+        if p is None:
+            return  # no navigation yet: the aperture has not begun
+        assert self.focuser is not None and self._gaps is not None
+        p = self._gaps.fill(p)
+        out = self.focuser.push(p.raw, p.t_ns, p.vel_ned, p.usable, p.quat)
+        self.tables.motion(p, out)
+        self.tables.products(out, self.focuser.autofocus)
+
+    def _in_time_order(self, p: NavPulses) -> NavPulses | None:
+        """``p`` without the pulses not after every pulse focused before (counted in
+        :attr:`~sarmoco.daemon.tables.RunSummary.pulses_out_of_order`: the focuser needs
+        strictly increasing times); None if none is left."""
+        fresh = strictly_increasing(p.t_ns, self._focused_ns)
+        if not fresh.all():
+            self.tables.summary.pulses_out_of_order += int(np.count_nonzero(~fresh))
+            log.warning("pulses out of time order kept from the focuser",
+                        extra={"pulses": int(np.count_nonzero(~fresh))})  # fmt: skip
+            p = p.rows(fresh)
+            if len(p) == 0:
+                return None
+        self._focused_ns = int(p.t_ns[-1])
+        return p
+
+    def _heading_window_held(self) -> bool:
+        """Whether the pulses gathered and not focused cover ``mocomp.heading_window_s``
+        from the first one with navigation (or none has navigation: nothing to wait for)."""
+        first = next((int(p.t_ns[p.usable][0]) for p in self._pending if p.usable.any()), None)
+        if first is None or self.cfg.mocomp.heading_window_s == 0.0:
+            return True
+        window_ns = round(self.cfg.mocomp.heading_window_s * 1e9)
+        return int(self._pending[-1].t_ns[-1]) >= first + window_ns
+
+    def _start(self, p: NavPulses, held: NavPulses) -> NavPulses | None:
+        """Start the focuser at the first pulse of ``p`` with navigation; the pulses from
+        there on (the pulses before it are recorded unfocused).
+
+        The first reference track follows the mean velocity of the usable pulses ``held``
+        (``p`` and the pulses gathered after it) within ``mocomp.heading_window_s`` of that
+        first one (0: of the first ``imaging.block_pulses`` usable pulses of ``p``), however
+        the blocks were cut (live and replay cut them differently: the reference track must
+        not depend on it). None while no pulse has navigation.
+        """
+        if not p.usable.any():
+            self.tables.unfocused(p)
+            return None
+        first_usable = int(np.argmax(p.usable))
+        self.tables.unfocused(p.upto(first_usable))
+        p = p.since(first_usable)
+        t0 = int(p.t_ns[0])
+        first = slice(0, self.cfg.imaging.block_pulses)
+        window_s = self.cfg.mocomp.heading_window_s
+        if window_s == 0.0:
+            start_vel = p.vel_ned[p.usable][first].mean(axis=0)
+        else:
+            window = held.usable & (held.t_ns >= t0) & (held.t_ns < t0 + round(window_s * 1e9))
+            start_vel = held.vel_ned[window].mean(axis=0)
+        self.focuser = Focuser(self.cfg, t0, start_vel, self.sink, quat=p.quat[p.usable][first])
+        self.tables.reference_track(self.focuser.track)
+        self._gaps = GapFill(t0, p.vel_ned[0], p.quat[0])
+        return p
+
+
+def strictly_increasing(t_ns: IntArray, after_ns: int | None) -> BoolArray:
+    """Mask of the pulses later than ``after_ns`` (GPS ns) and than every pulse before them."""
+    floor = np.iinfo(np.int64).min if after_ns is None else after_ns
+    before = np.maximum.accumulate(np.concatenate([[floor], t_ns[:-1]]))
+    return np.asarray(t_ns > before, dtype=bool)
