@@ -33,7 +33,7 @@ from sarmoco.drivers.samples import Sample
 from sarmoco.drivers.source import Source
 from sarmoco.errors import ConfigError, DataFileError, SarmocoError
 from sarmoco.store.reader import StoreNav, StorePulses, open_store
-from sarmoco.store.recorder import Recorder
+from sarmoco.store.recorder import Recorder, meta_chunk_pulses
 
 log = logging.getLogger(__name__)
 
@@ -77,6 +77,8 @@ def open_recorder(cfg: Config, path: Path, live: LiveFeed | None = None) -> Reco
         chunk_pulses=cfg.recorder.chunk_pulses,
         echo_compression=cfg.recorder.echo_compression,
         fsync_interval_s=cfg.recorder.fsync_interval_s,
+        flush_interval_s=cfg.recorder.flush_interval_s,
+        meta_chunk_pulses=meta_chunk_pulses(cfg.recorder.chunk_pulses, cfg.radar.prf_hz),
         live=live,
         writer_queue=cfg.recorder.writer_queue,
     )
@@ -479,6 +481,7 @@ class _LiveRun:
         while not self.st.stop.is_set():
             try:
                 stored = self.pipe.record(self.pipe.now_ns(live=True))
+                self.pipe.recorder.flush_due()
             except SarmocoError as exc:
                 self._recording_failure = exc
                 self._processing_failed(exc)
