@@ -607,8 +607,9 @@ class RecordingListener(Protocol):
     """What a :class:`Recorder` tells, in memory, of what it records (the daemon's live
     page feed is one); called on the thread that records."""
 
-    def add_tile(self, index: int, image: Image) -> None:
-        """A tile was recorded at store index ``index``."""
+    def add_tile(self, index: int, image: Image, t0_ns: int, t1_ns: int) -> None:
+        """A tile was recorded at store index ``index``, formed of the pulses from ``t0_ns``
+        to ``t1_ns`` (GPS ns)."""
 
     def add_autofocus(self, columns: Mapping[str, npt.ArrayLike]) -> None:
         """Rows of the ``autofocus`` table were recorded, by column."""
