@@ -500,8 +500,9 @@ class RecordingListener(Protocol):
     """What a :class:`Recorder` tells, in memory, of what it records (the daemon's live
     page feed is one); called on the thread that records."""
 
-    def add_tile(self, index: int, image: Image) -> None:
-        """A tile was recorded at store index ``index``."""
+    def add_tile(self, index: int, image: Image, t0_ns: int, t1_ns: int) -> None:
+        """A tile was recorded at store index ``index``, formed of the pulses from ``t0_ns``
+        to ``t1_ns`` (GPS ns)."""
 
     def add_autofocus(self, columns: Mapping[str, npt.ArrayLike]) -> None:
         """Rows of the ``autofocus`` table were recorded, by column."""
@@ -766,7 +767,7 @@ class Recorder(Closing):
         self._writer.submit(self._write_image, index, image, t0_ns, t1_ns, metrics, reference_track)
         self.n_images = index + 1
         if self.live is not None:
-            self.live.add_tile(index, image)
+            self.live.add_tile(index, image, t0_ns, t1_ns)
         return index
 
     def _write_image(
