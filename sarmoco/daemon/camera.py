@@ -30,8 +30,10 @@ component ids (``camera.system_id``, ``camera.component_id``):
 - CAMERA_IMAGE_CAPTURED for each image product the run stored (a focused tile,
   :class:`Product`), within a second of its recording and for the last ones when the
   component stops; again on MAV_CMD_REQUEST_MESSAGE with its index in ``param2`` (how a
-  ground station lists the images it missed). CAMERA_CAPTURE_STATUS counts them
-  (``image_count``).
+  ground station lists the images it missed; MAV_CMD_REQUEST_CAMERA_IMAGE_CAPTURE with it
+  in ``param1`` likewise). CAMERA_CAPTURE_STATUS counts them (``image_count``).
+- STORAGE_INFORMATION (on MAV_CMD_REQUEST_MESSAGE or MAV_CMD_REQUEST_STORAGE_INFORMATION):
+  one storage, ready, the free space of the store's file system.
 
 Everything runs on one thread of its own (:meth:`CameraComponent.start`); a malformed
 or hostile message is counted (``camera_bad_messages``) and never ends it.
@@ -422,10 +424,10 @@ class CameraComponent:
 
     def _announce_products(self) -> None:
         """CAMERA_IMAGE_CAPTURED for each product stored since the last announcement."""
-        products = self._products()
-        for product in products[self._announced :]:
+        new = self._products()[self._announced :]
+        for product in new:
             self._image_captured(product)
-        self._announced = len(products)
+        self._announced += len(new)
 
     def _image_captured(self, p: Product) -> None:
         if p.lat_lon_alt is None:
@@ -443,6 +445,15 @@ class CameraComponent:
         self._conn.mav.camera_information_send(
             self._boot_ms(), _text32(VENDOR), _text32(self.model), 0, math.nan, math.nan,
             math.nan, 0, 0, 0, CAPABILITIES, 0, b"",
+        )  # fmt: skip
+
+    def _storage(self) -> None:
+        """STORAGE_INFORMATION: one storage, ready, its free space (MiB) that of the store."""
+        free = self._free_bytes()
+        self._conn.mav.storage_information_send(
+            self._boot_ms(), 1, 1, mav.STORAGE_STATUS_READY, math.nan, math.nan,
+            math.nan if free is None else free / 2**20, math.nan, math.nan,
+            mav.STORAGE_TYPE_OTHER, b"sarmoco store",
         )  # fmt: skip
 
     def _capture_status(self) -> None:
@@ -477,11 +488,16 @@ class CameraComponent:
                 mav.MAVLINK_MSG_ID_CAMERA_INFORMATION: self._information,
                 mav.MAVLINK_MSG_ID_CAMERA_CAPTURE_STATUS: self._capture_status,
                 mav.MAVLINK_MSG_ID_CAMERA_IMAGE_CAPTURED: self._stored(_whole(msg.param2)),
+                mav.MAVLINK_MSG_ID_STORAGE_INFORMATION: self._storage,
             }.get(_whole(msg.param1))
         elif cmd == mav.MAV_CMD_REQUEST_CAMERA_INFORMATION:
             answer = self._information
         elif cmd == mav.MAV_CMD_REQUEST_CAMERA_CAPTURE_STATUS:
             answer = self._capture_status
+        elif cmd == mav.MAV_CMD_REQUEST_CAMERA_IMAGE_CAPTURE:
+            answer = self._stored(_whole(msg.param1))
+        elif cmd == mav.MAV_CMD_REQUEST_STORAGE_INFORMATION:
+            answer = self._storage
         elif cmd == mav.MAV_CMD_IMAGE_START_CAPTURE and _whole(msg.param3) == 1:
             answer = None  # a single still (a distance trigger): a strip has no snapshot
         elif cmd in START or cmd in STOP:

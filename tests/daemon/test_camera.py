@@ -299,8 +299,8 @@ def test_each_stored_product_is_announced_once_and_again_on_request() -> None:
     """Each product the run stores is announced with CAMERA_IMAGE_CAPTURED within a
     heartbeat (index, UTC time, position in 1e-7 deg and mm, URL), unknown positions as
     INT32_MAX; MAV_CMD_REQUEST_MESSAGE with an index sends it again (how a ground station
-    lists what it missed), an index not stored is unsupported, and CAMERA_CAPTURE_STATUS
-    counts them."""
+    lists what it missed), an index not stored is unsupported, CAMERA_CAPTURE_STATUS counts
+    them and STORAGE_INFORMATION gives the free space (MiB)."""
     products: list[Product] = []
     b = start_bench(CameraConfig(enabled=True), lambda: products)
     try:
@@ -323,6 +323,13 @@ def test_each_stored_product_is_announced_once_and_again_on_request() -> None:
         assert b.recv("CAMERA_IMAGE_CAPTURED").image_index == 0
         ack = b.command(mav.MAV_CMD_REQUEST_MESSAGE, request, 2)
         assert ack.result == mav.MAV_RESULT_UNSUPPORTED
+        ack = b.command(mav.MAV_CMD_REQUEST_CAMERA_IMAGE_CAPTURE, 1)  # the older command
+        assert ack.result == mav.MAV_RESULT_ACCEPTED
+        assert b.recv("CAMERA_IMAGE_CAPTURED").image_index == 1
+        ack = b.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_STORAGE_INFORMATION)
+        assert ack.result == mav.MAV_RESULT_ACCEPTED
+        storage = b.recv("STORAGE_INFORMATION")
+        assert storage.status == mav.STORAGE_STATUS_READY and storage.available_capacity == 1024
         b.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_CAMERA_CAPTURE_STATUS)
         assert b.recv("CAMERA_CAPTURE_STATUS").image_count == 2
     finally:
