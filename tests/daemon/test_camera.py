@@ -330,6 +330,9 @@ def test_each_stored_product_is_announced_once_and_again_on_request() -> None:
         assert ack.result == mav.MAV_RESULT_ACCEPTED
         storage = b.recv("STORAGE_INFORMATION")
         assert storage.status == mav.STORAGE_STATUS_READY and storage.available_capacity == 1024
+        ack = b.command(mav.MAV_CMD_REQUEST_STORAGE_INFORMATION, 0)
+        assert ack.result == mav.MAV_RESULT_ACCEPTED
+        assert b.recv("STORAGE_INFORMATION").storage_count == 1
         b.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_CAMERA_CAPTURE_STATUS)
         assert b.recv("CAMERA_CAPTURE_STATUS").image_count == 2
     finally:
