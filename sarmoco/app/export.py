@@ -4,8 +4,8 @@
 
 The SICD holds the focused image of one reference-track segment (:mod:`sarmoco.products.sicd`),
 the CPHD its recorded echoes as a phase history compensated to the segment's scene centre
-by the INS (:func:`sarmoco.products.cphd.from_store`), the CRSD its raw echoes as received, with
-the waveform and the antenna track (:mod:`sarmoco.products.crsd`).
+by the INS (:func:`sarmoco.products.cphd.from_store`), the CRSD its raw echoes as received,
+with the waveform and the antenna track (:mod:`sarmoco.products.crsd`).
 Every file written is read back and run through sarkit's consistency checker; a file with
 a failure is an error (exit status 2), never a silent product.
 """
