@@ -13,6 +13,13 @@ from the on-disk cache on their first block. With ``--separate`` the cluster is 
 (:mod:`tests.workloads.dask_cluster`), reached by address as ``sarmoco batch --scheduler`` does.
 Each line also gives the seconds the workers spent computing the front end and the
 imaging blocks (dask's task stream): the terms of the wall-time model ``F + I / W``.
+
+Throughput is pixel-pulses per CPU second: the pixel-pulses are those of direct
+backprojection over the imaged beam (:func:`pixel_pulses`: each pixel of each tile times
+the pulses within the beam at its range), the same count for every configuration; the
+CPU seconds are the process CPU time of the single-process replay, or the sum over the
+worker processes of theirs during the batch (``client.run(time.process_time)``: the
+tasks and the worker's own dask work).
 """
 
 from __future__ import annotations
@@ -33,6 +40,7 @@ from distributed import get_task_stream
 
 from sarmoco.app.batch import Recording, cluster_client, run_batch
 from sarmoco.daemon.config import load_config
+from sarmoco.daemon.focuser import imaged_beam_rad
 from sarmoco.daemon.runner import replay_files
 from sarmoco.store.reader import open_store
 from tests.workloads.dask_cluster import separate_cluster
@@ -51,6 +59,28 @@ def task_seconds(stream: list[dict[str, Any]], prefix: str) -> float:
         for span in task["startstops"]
         if span["action"] == "compute"
     )
+
+
+def pixel_pulses(store: Path, beam_rad: float, height_m: float) -> float:
+    """Pixel-pulses of direct backprojection over the imaged beam: for each pixel of each
+    tile, the pulses within ``beam_rad`` at its slant range ``sqrt(y² + height_m²)``
+    (``y``: its ground range), at the run's mean speed and pulse rate."""
+    s = open_store(store)
+    t = s.read("pulses", ["t_ns"])["t_ns"]
+    vel = s.read("motion", ["vel_ned"])["vel_ned"]
+    speed = float(np.nanmean(np.linalg.norm(vel, axis=1)))
+    spacing_m = speed * float(np.median(np.diff(t))) * 1e-9
+    total = 0.0
+    for k in range(s.n_images):
+        image = s.image(k)[0]
+        slant = np.hypot(image.axis1_m, height_m)
+        total += image.axis0_m.size * float(np.sum(slant * beam_rad / spacing_m))
+    return total
+
+
+def cpu_seconds(client: Any) -> float:
+    """Process CPU time of every worker of the cluster, summed, s."""
+    return float(sum(client.run(time.process_time).values()))
 
 
 def worst_difference(single: Path, batch: Path) -> float:
@@ -90,11 +120,16 @@ def main() -> None:
         cfg = load_config(sim / "sarmoco.toml")
         radar, nav = sim / "radar.vrt", sim / "nav.tlog"
         single = work / "single.zarr"
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         summary = replay_files(cfg, radar, nav, single, progress=False)
-        single_s = time.perf_counter() - start
+        single_s, single_cpu_s = time.perf_counter() - start, time.process_time() - cpu
+        work_pp = pixel_pulses(single, imaged_beam_rad(cfg), cfg.geometry.height_m)
         print(json.dumps({"single_process_s": round(single_s, 2), "tiles": summary.tiles,
-                          "pulses": args.pulses, "scale": args.scale}), flush=True)  # fmt: skip
+                          "pulses": args.pulses, "scale": args.scale,
+                          "pixel_pulses": float(f"{work_pp:.4g}"),
+                          "cpu_s": round(single_cpu_s, 2),
+                          "pixel_pulses_per_cpu_s": float(f"{work_pp / single_cpu_s:.3g}")}),
+              flush=True)  # fmt: skip
         for workers in args.workers:
             start = time.perf_counter()
             with ExitStack() as stack:
@@ -109,11 +144,12 @@ def main() -> None:
                 startup_s = time.perf_counter() - start
                 for tiles_per_block in args.tiles_per_block:
                     out = work / f"batch-{workers}-{tiles_per_block}.zarr"
-                    start = time.perf_counter()
+                    start, cpu = time.perf_counter(), cpu_seconds(client)
                     with get_task_stream(client) as stream:
                         run_batch(client, cfg, [Recording(out, radar=radar, nav=nav)],
                                   tiles_per_block, progress=False)  # fmt: skip
                     wall_s = time.perf_counter() - start
+                    batch_cpu_s = cpu_seconds(client) - cpu
                     front_s, imaging_s = (task_seconds(stream.data, p) for p in PREFIXES)
                     print(json.dumps({
                         "workers": workers, "tiles_per_block": tiles_per_block,
@@ -121,6 +157,8 @@ def main() -> None:
                         "speedup_vs_single": round(single_s / wall_s, 2),
                         "front_end_task_s": round(front_s, 2),
                         "imaging_task_s": round(imaging_s, 2),
+                        "cpu_s": round(batch_cpu_s, 2),
+                        "pixel_pulses_per_cpu_s": float(f"{work_pp / batch_cpu_s:.3g}"),
                         "worst_tile_rel_l2": worst_difference(single, out),
                     }), flush=True)  # fmt: skip
                     shutil.rmtree(out)

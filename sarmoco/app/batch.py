@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import shutil
 import sys
 import time
@@ -313,6 +314,40 @@ def cluster_client(scheduler: str | None, workers: int, dashboard: bool = True) 
         yield client
 
 
+def check_batch_memory(cfg: Config, tiles_per_block: int, local_workers: int | None) -> None:
+    """Refuse a batch whose worker processes cannot hold their buffers.
+
+    A worker runs one task at a time: a front end (a replay, with a run's buffers,
+    :func:`~sarmoco.daemon.resources.plan`) or an imaging block (its ``tiles_per_block``
+    tiles, and a neighbour each side with tile PGA). Both are counted, for each of the
+    ``local_workers`` processes of a local cluster within the memory limit
+    (``limits.memory_mib``, or this machine's memory), or for one worker of a cluster
+    started apart (``local_workers`` None; its workers' machines are not known here).
+
+    Raises
+    ------
+    ConfigError
+        Naming the key of the largest buffer, its bytes, the total and the limit.
+    """
+    from sarmoco.daemon.resources import COMPLEX64_BYTES, Buffer, check_memory, memory_limit, plan
+
+    im = cfg.imaging
+    tiles = tiles_per_block + (2 if cfg.autofocus.pga else 0)
+    nx, ny = math.ceil(im.tile_length_m / im.pixel_m), math.ceil(im.swath_m / im.pixel_m)
+    block = Buffer(
+        "imaging block",
+        ("--tiles-per-block", "imaging.pixel_m", "imaging.tile_length_m", "imaging.swath_m"),
+        tiles * nx * ny * COMPLEX64_BYTES,
+        f"{tiles} tiles x {nx} x {ny} complex64 pixels",
+    )
+    limit, where = memory_limit(cfg)
+    copies = local_workers or 1
+    if local_workers:
+        where += f"; shared by --workers {local_workers}"
+    options = {"--tiles-per-block": tiles_per_block}
+    check_memory([*plan(cfg), block], limit, where, copies, cfg=cfg, options=options)
+
+
 def refuse_existing(recordings: Sequence[Recording]) -> None:
     """Refuse output (or scratch) stores that exist (ConfigError naming them)."""
     taken = [p for r in recordings for p in (r.out, r.scratch) if p.exists()]
@@ -407,6 +442,7 @@ def run_command(args: argparse.Namespace) -> int:
     at_least_one("--workers", args.workers)
     refuse_existing(recordings)
     cfg = load_config(args.config)
+    check_batch_memory(cfg, args.tiles_per_block, None if args.scheduler else args.workers)
     start = time.monotonic()
     with cluster_client(args.scheduler, args.workers) as client:
         print(dashboard_text(client), file=sys.stderr)

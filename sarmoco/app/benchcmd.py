@@ -57,9 +57,11 @@ What is measured (one JSON line with ``--json``):
     second) after a warm-up of a third of the stream (30 s at most); VmRSS at the first
     sample after the ready line, at the middle of the stream and at its end.
 
-The simulator holds every echo of the run in memory before it plays (about 90 kB per
-full-size ``thz-spotlight`` pulse while it synthesises): ``--duration`` is bounded by
-the memory of the machine, not by the daemon.
+The simulator renders every pulse's wire samples into a file of the run folder before
+it plays (``sarmoco sim --pregenerate``: 16 kB per full-size ``thz-spotlight`` pulse,
+26 kB per ``ku-vehicle`` pulse), so that playing only sends: synthesising the echoes as
+they are played made it fall behind the radar's clock on a loaded machine, and its INS
+then came late. ``--duration`` is bounded by that file's room on the disk.
 """
 
 from __future__ import annotations
@@ -364,7 +366,8 @@ def live_run(
     n_pulses = max(1, round(duration_s * scn.radar.prf_hz))
     sim = subprocess.Popen(
         [*PY, "sim", "--preset", preset, "--scale", str(scale), "--pulses", str(n_pulses),
-         *SIM_ARGS, "--serve", "--radar", f"udp://127.0.0.1:{free_udp_port()}",
+         *SIM_ARGS, "--serve", "--pregenerate", str(out / "wire.npy"),
+         "--radar", f"udp://127.0.0.1:{free_udp_port()}",
          "--ins", f"mavlink:udpout:127.0.0.1:{free_udp_port()}"],
         stdout=subprocess.PIPE, text=True,
     )  # fmt: skip

@@ -1,10 +1,11 @@
 """``sarmoco export``: a store's products in the NGA standards, each checked by sarkit.
 
-    sarmoco export STORE [--sicd OUT.nitf] [--cphd OUT.cphd] [--segment K]
+    sarmoco export STORE [--sicd OUT.nitf] [--cphd OUT.cphd] [--crsd OUT.crsd] [--segment K]
 
 The SICD holds the focused image of one reference-track segment (:mod:`sarmoco.products.sicd`),
 the CPHD its recorded echoes as a phase history compensated to the segment's scene centre
-by the INS (:func:`sarmoco.products.cphd.from_store`).
+by the INS (:func:`sarmoco.products.cphd.from_store`), the CRSD its raw echoes as received,
+with the waveform and the antenna track (:mod:`sarmoco.products.crsd`).
 Every file written is read back and run through sarkit's consistency checker; a file with
 a failure is an error (exit status 2), never a silent product.
 """
@@ -27,6 +28,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("store", help="a run or replay store")
     parser.add_argument("--sicd", metavar="OUT.nitf", help="SICD of the focused image")
     parser.add_argument("--cphd", metavar="OUT.cphd", help="CPHD of the recorded echoes")
+    parser.add_argument(
+        "--crsd", metavar="OUT.crsd", help="CRSD of the raw echoes as received, with the geometry"
+    )
     parser.add_argument(
         "--segment", type=int, default=0, help="reference-track segment (0: the first)"
     )
@@ -68,8 +72,8 @@ def run_command(args: argparse.Namespace) -> int:
     from sarmoco.products.cphd import from_store, write_cphd
     from sarmoco.products.sicd import sicd_product, write_sicd
 
-    if args.sicd is None and args.cphd is None:
-        raise ConfigError("export: nothing to write (give --sicd and/or --cphd)")
+    if args.sicd is None and args.cphd is None and args.crsd is None:
+        raise ConfigError("export: nothing to write (give --sicd, --cphd and/or --crsd)")
     store = open_store(args.store)
     if args.sicd is not None:
         product = sicd_product(store, args.segment)
@@ -87,4 +91,11 @@ def run_command(args: argparse.Namespace) -> int:
         checked(skver.CphdConsistency.from_file, out)
         vectors, samples = ph.signal.shape
         print(f"{out}: CPHD {vectors} vectors x {samples} samples, CphdConsistency: no failures")
+    if args.crsd is not None:
+        from sarmoco.products.crsd import write_crsd
+
+        out = Path(args.crsd)
+        vectors, samples = write_crsd(store, out, args.segment).signal.shape
+        checked(skver.CrsdConsistency.from_file, out)
+        print(f"{out}: CRSD {vectors} vectors x {samples} samples, CrsdConsistency: no failures")
     return 0

@@ -117,6 +117,12 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--linger", type=float, default=1.0, help="live: keep answering after the end, s"
     )
     p.add_argument("--truth", type=Path, help="live: also write the truth record here")
+    p.add_argument(
+        "--pregenerate", type=Path, metavar="FILE",
+        help="live: render every pulse's wire samples into FILE (.npy, memory-mapped; 16 kB "
+        "per 4096-sample int16 pulse) before listening, so that playback only sends: a "
+        "full-rate radar's echoes cost more to synthesize than to send",
+    )  # fmt: skip
     p.add_argument("--leap-s", type=int, default=GPS_LEAP_SECONDS_DEFAULT, help="GPS - UTC, s")
     add_platform_arguments(p)
     add_array_arguments(p)
@@ -253,11 +259,14 @@ def _serve(args: argparse.Namespace, run: SimRun, faults: Faults) -> int:
     emitters: dict[str, Emitter] = {}
     try:
         if args.radar:
-            emitters["radar"] = RadarEmitter(
+            radar = RadarEmitter(
                 radar_link(args.radar), run.scenario.radar, run.t_ns, run.echo,
                 payload=args.payload, stream_id=args.stream_id, faults=faults.radar,
                 seed=args.seed * 16, rank=0,
             )  # fmt: skip
+            emitters["radar"] = radar
+            if args.pregenerate is not None:
+                radar.pregenerate(args.pregenerate)
         for k, spec in enumerate(args.ins or [], start=1):
             options: dict[str, Any] = {"faults": faults.ins, "seed": args.seed * 16 + k, "rank": k}
             if faults.mavlink_rogue_system:

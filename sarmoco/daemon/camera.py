@@ -27,6 +27,13 @@ component ids (``camera.system_id``, ``camera.component_id``):
 - STATUSTEXT for each fault the operator must act on (:func:`operator_faults`): when it
   appears, again every ``camera.statustext_interval_s`` while it lasts, and once at
   ``MAV_SEVERITY_INFO`` when it clears.
+- CAMERA_IMAGE_CAPTURED for each image product the run stored (a focused tile,
+  :class:`Product`), within a second of its recording and for the last ones when the
+  component stops; again on MAV_CMD_REQUEST_MESSAGE with its index in ``param2`` (how a
+  ground station lists the images it missed; MAV_CMD_REQUEST_CAMERA_IMAGE_CAPTURE with it
+  in ``param1`` likewise). CAMERA_CAPTURE_STATUS counts them (``image_count``).
+- STORAGE_INFORMATION (on MAV_CMD_REQUEST_MESSAGE or MAV_CMD_REQUEST_STORAGE_INFORMATION):
+  one storage, ready, the free space of the store's file system.
 
 Everything runs on one thread of its own (:meth:`CameraComponent.start`); a malformed
 or hostile message is counted (``camera_bad_messages``) and never ends it.
@@ -34,12 +41,14 @@ or hostile message is counted (``camera_bad_messages``) and never ends it.
 
 from __future__ import annotations
 
+import bisect
 import logging
 import math
 import os
 import threading
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import Any, NamedTuple
 
 os.environ.setdefault("MAVLINK20", "1")
@@ -48,8 +57,12 @@ from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from sarmoco.daemon.config import CameraConfig
+from sarmoco.daemon.livefeed import LiveFeed
 from sarmoco.daemon.status import Counters
+from sarmoco.drivers.clock import gps_ns_to_unix_ns
+from sarmoco.drivers.samples import Sample, VelocitySample
 from sarmoco.errors import ConfigError, DriverError
+from sarmoco.store.schema import tile_name
 
 log = logging.getLogger(__name__)
 
@@ -77,6 +90,19 @@ CAPABILITIES = (
     | mav.CAMERA_CAP_FLAGS_HAS_MODES
 )
 """CAMERA_INFORMATION capability flags: a strip is a video, a focused tile an image."""
+
+URL_BYTES = 205
+"""Bytes of CAMERA_IMAGE_CAPTURED's ``file_url`` (longer URLs are cut)."""
+
+UNKNOWN_DEG_E7 = 2**31 - 1
+"""CAMERA_IMAGE_CAPTURED latitude and longitude when no absolute position is known
+(INT32_MAX, the value MAVLink's position messages give to an unknown one)."""
+
+FIX_NEAR_S = 1.0
+"""A product's position is the INS's absolute fix nearest its middle time, if within this, s."""
+
+FIXES_KEPT = 100_000
+"""Absolute fixes :class:`ProductLog` keeps (the older half goes when it has more)."""
 
 START = {mav.MAV_CMD_IMAGE_START_CAPTURE, mav.MAV_CMD_VIDEO_START_CAPTURE}
 STOP = {mav.MAV_CMD_IMAGE_STOP_CAPTURE, mav.MAV_CMD_VIDEO_STOP_CAPTURE}
@@ -144,6 +170,98 @@ def operator_faults(
     return {k: Fault(f.severity, f.text[:STATUSTEXT_CHARS]) for k, f in out.items()}
 
 
+class Product(NamedTuple):
+    """One image product the run stored, as CAMERA_IMAGE_CAPTURED announces it.
+
+    Attributes
+    ----------
+    image_index : int
+        Its index in the store (``images/tile_NNNNNN``).
+    time_utc_us : int
+        The middle of the pulses that formed it, µs since 1970 (UTC).
+    lat_lon_alt : tuple of 3 float or None
+        Where the antenna was then: latitude, longitude (deg, WGS 84) and altitude (m, as
+        the INS gives it); None without an absolute position from the INS.
+    height_m : float
+        The antenna's height above the ground the image is formed on, m
+        (``relative_alt``).
+    url : str
+        Where it is: the store's tile group (``file://...``).
+    """
+
+    image_index: int
+    time_utc_us: int
+    lat_lon_alt: tuple[float, float, float] | None
+    height_m: float
+    url: str
+
+
+class ProductLog:
+    """The image products a run stored, each with where the antenna was: what the camera
+    component announces.
+
+    Parameters
+    ----------
+    feed : LiveFeed
+        The feed the recorder publishes each stored tile to.
+    store : Path
+        The run's store.
+    height_m : float
+        The antenna's height above the imaged ground (``geometry.height_m``), m.
+    gps_minus_utc_s : int
+        GPS - UTC (``ins.gps_minus_utc_s``), s.
+    """
+
+    def __init__(self, feed: LiveFeed, store: Path, height_m: float, gps_minus_utc_s: int) -> None:
+        self._feed = feed
+        self._url = store.resolve().as_uri()
+        self._height_m = height_m
+        self._leap_s = gps_minus_utc_s
+        self._lock = threading.Lock()
+        self._fix_t: list[int] = []
+        self._fix_lla: list[tuple[float, float, float]] = []
+        self._made: list[Product] = []
+
+    def add_fixes(self, samples: Sequence[Sample]) -> None:
+        """Keep the absolute positions among INS samples (from the INS reader's thread)."""
+        fixes = [
+            (s.t_gps_ns, s.lat_lon_alt)
+            for s in samples
+            if isinstance(s, VelocitySample) and s.lat_lon_alt is not None
+        ]
+        if not fixes:
+            return
+        with self._lock:
+            for t, lla in fixes:
+                if self._fix_t and t <= self._fix_t[-1]:
+                    continue  # out of order or repeated: the history stays sorted
+                self._fix_t.append(t)
+                self._fix_lla.append(lla)
+            if len(self._fix_t) > FIXES_KEPT:
+                del self._fix_t[: FIXES_KEPT // 2], self._fix_lla[: FIXES_KEPT // 2]
+
+    def _position(self, t_ns: int) -> tuple[float, float, float] | None:
+        with self._lock:
+            k = bisect.bisect_left(self._fix_t, t_ns)
+            near = [j for j in (k - 1, k) if 0 <= j < len(self._fix_t)]
+            if not near:
+                return None
+            j = min(near, key=lambda j: abs(self._fix_t[j] - t_ns))
+            return self._fix_lla[j] if abs(self._fix_t[j] - t_ns) <= FIX_NEAR_S * 1e9 else None
+
+    def products(self) -> list[Product]:
+        """Every product stored so far, in store order (from the camera's thread)."""
+        for index, t0, t1 in self._feed.stored_tiles(len(self._made)):
+            mid = (t0 + t1) // 2
+            self._made.append(
+                Product(
+                    index, gps_ns_to_unix_ns(mid, self._leap_s) // 1000, self._position(mid),
+                    self._height_m, f"{self._url}/images/{tile_name(index)}",
+                )
+            )  # fmt: skip
+        return self._made
+
+
 class CameraComponent:
     """The MAVLink camera component on ``cfg.link``.
 
@@ -165,6 +283,9 @@ class CameraComponent:
     counters : Counters
         Where ``camera_commands``, ``camera_commands_refused`` and ``camera_bad_messages``
         are counted.
+    products : callable, optional
+        Returns the image products stored so far, in store order (a list that only
+        grows); called once a second on the component's thread. Default: none.
 
     Raises
     ------
@@ -180,12 +301,16 @@ class CameraComponent:
         free_bytes: Callable[[], int | None],
         on_capture: Callable[[bool], None],
         counters: Counters,
+        products: Callable[[], Sequence[Product]] = tuple,
     ) -> None:
         self.cfg = cfg
         self.model = model
         self._faults = faults
         self._free_bytes = free_bytes
         self._on_capture = on_capture
+        self._products = products
+        self._announced = 0
+        """Products announced so far (the first ones of :attr:`_products`)."""
         self.counters = counters
         self.capturing = cfg.capture_at_start
         """Whether the component captures now."""
@@ -226,6 +351,10 @@ class CameraComponent:
         if self._thread is not None:
             self._thread.join(timeout=5.0)
         try:
+            self._announce_products()  # those stored since the last heartbeat
+        except OSError as exc:
+            log.warning("camera link error", extra={"link": self.cfg.link, "error": str(exc)})
+        try:
             self._conn.close()
         except OSError as exc:
             log.debug("camera.link %s: close: %s", self.cfg.link, exc)
@@ -239,6 +368,7 @@ class CameraComponent:
                     next_beat = now + HEARTBEAT_PERIOD_S
                     self._heartbeat()
                     self._announce(now)
+                    self._announce_products()
                 self._receive()
             except OSError as exc:  # the link's socket or port went away: try again
                 log.warning("camera link error", extra={"link": self.cfg.link, "error": str(exc)})
@@ -292,10 +422,38 @@ class CameraComponent:
         log.info("statustext", extra={"severity": fault.severity, "text": fault.text})
         self._conn.mav.statustext_send(fault.severity, fault.text[:STATUSTEXT_CHARS].encode())
 
+    def _announce_products(self) -> None:
+        """CAMERA_IMAGE_CAPTURED for each product stored since the last announcement."""
+        new = self._products()[self._announced :]
+        for product in new:
+            self._image_captured(product)
+        self._announced += len(new)
+
+    def _image_captured(self, p: Product) -> None:
+        if p.lat_lon_alt is None:
+            lat = lon = UNKNOWN_DEG_E7
+            alt_mm = 0
+        else:
+            lat, lon = (round(v * 1e7) for v in p.lat_lon_alt[:2])
+            alt_mm = round(p.lat_lon_alt[2] * 1000)
+        self._conn.mav.camera_image_captured_send(
+            self._boot_ms(), p.time_utc_us, 0, lat, lon, alt_mm, round(p.height_m * 1000),
+            [math.nan] * 4, p.image_index, 1, p.url.encode()[:URL_BYTES],
+        )  # fmt: skip
+
     def _information(self) -> None:
         self._conn.mav.camera_information_send(
             self._boot_ms(), _text32(VENDOR), _text32(self.model), 0, math.nan, math.nan,
             math.nan, 0, 0, 0, CAPABILITIES, 0, b"",
+        )  # fmt: skip
+
+    def _storage(self) -> None:
+        """STORAGE_INFORMATION: one storage, ready, its free space (MiB) that of the store."""
+        free = self._free_bytes()
+        self._conn.mav.storage_information_send(
+            self._boot_ms(), 1, 1, mav.STORAGE_STATUS_READY, math.nan, math.nan,
+            math.nan if free is None else free / 2**20, math.nan, math.nan,
+            mav.STORAGE_TYPE_OTHER, b"sarmoco store",
         )  # fmt: skip
 
     def _capture_status(self) -> None:
@@ -304,7 +462,7 @@ class CameraComponent:
         free = self._free_bytes()
         self._conn.mav.camera_capture_status_send(
             self._boot_ms(), on, on, 0.0, recording_ms & 0xFFFFFFFF,
-            math.nan if free is None else free / 2**20,
+            math.nan if free is None else free / 2**20, len(self._products()),
         )  # fmt: skip
 
     # -- commands -------------------------------------------------------------------------
@@ -329,11 +487,17 @@ class CameraComponent:
             answer = {
                 mav.MAVLINK_MSG_ID_CAMERA_INFORMATION: self._information,
                 mav.MAVLINK_MSG_ID_CAMERA_CAPTURE_STATUS: self._capture_status,
+                mav.MAVLINK_MSG_ID_CAMERA_IMAGE_CAPTURED: self._stored(_whole(msg.param2)),
+                mav.MAVLINK_MSG_ID_STORAGE_INFORMATION: self._storage,
             }.get(_whole(msg.param1))
         elif cmd == mav.MAV_CMD_REQUEST_CAMERA_INFORMATION:
             answer = self._information
         elif cmd == mav.MAV_CMD_REQUEST_CAMERA_CAPTURE_STATUS:
             answer = self._capture_status
+        elif cmd == mav.MAV_CMD_REQUEST_CAMERA_IMAGE_CAPTURE:
+            answer = self._stored(_whole(msg.param1))
+        elif cmd == mav.MAV_CMD_REQUEST_STORAGE_INFORMATION:
+            answer = self._storage
         elif cmd == mav.MAV_CMD_IMAGE_START_CAPTURE and _whole(msg.param3) == 1:
             answer = None  # a single still (a distance trigger): a strip has no snapshot
         elif cmd in START or cmd in STOP:
@@ -343,6 +507,14 @@ class CameraComponent:
         self._ack(cmd, result, sender)
         if answer is not None:
             answer()
+
+    def _stored(self, index: int | None) -> Callable[[], None] | None:
+        """What sends CAMERA_IMAGE_CAPTURED of stored product ``index`` (None: no such one)."""
+        products = self._products()
+        if index is None or not 0 <= index < len(products):
+            return None
+        product = products[index]
+        return lambda: self._image_captured(product)
 
     def _set_capture(self, on: bool, sender: tuple[int, int]) -> None:
         if on != self.capturing:

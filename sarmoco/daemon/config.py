@@ -466,6 +466,15 @@ class RecorderConfig:
         choices=tuple(ECHO_COMPRESSION),
     )
     fsync_interval_s: float = _key(1.0, "Interval between fsyncs of committed data", unit="s", gt=0)
+    flush_interval_s: float = _key(
+        0.25,
+        "Longest time rows of the per-pulse and INS tables wait in memory before they are "
+        "written (each file the store writes costs about a millisecond of CPU, so small "
+        "blocks are gathered); a crash loses at most this much of them. Raw echoes are "
+        "written a whole chunk at a time either way. 0: every block is written as it comes",
+        unit="s",
+        ge=0,
+    )
     writer_queue: int = _key(
         0,
         "Writes (blocks of pulses, tiles, table rows) that may wait for the recorder's writer "

@@ -1,8 +1,10 @@
-"""What the live page shows, handed over in memory by the recorder as it records.
+"""What the live page and the camera component show, handed over in memory by the
+recorder as it records.
 
 The recorder (in the processing thread) publishes each tile it records and each batch
 of autofocus estimates to a :class:`LiveFeed`; the status server's HTTP threads take a
-consistent :class:`LiveSnapshot` of it under one lock. Nothing here opens the store: a
+consistent :class:`LiveSnapshot` of it under one lock, and the MAVLink camera component
+the time span of every tile stored (:meth:`LiveFeed.stored_tiles`). Nothing here opens the store: a
 live run's page never reads the store the run is writing (no zarr metadata read per
 request, no race with a half-written tile).
 """
@@ -71,22 +73,32 @@ class LiveSnapshot:
 
 
 class LiveFeed:
-    """Thread-safe, bounded record of the newest tiles and autofocus estimates of a run."""
+    """Thread-safe, bounded record of the newest tiles and autofocus estimates of a run, and
+    the time span of each tile recorded."""
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._n_tiles = 0
+        self._spans: list[tuple[int, int, int]] = []
         self._tiles: deque[LiveTile] = deque(maxlen=LIVE_TILES)
         self._autofocus: dict[str, deque[float]] = {
             k: deque(maxlen=LIVE_AUTOFOCUS_ROWS) for k in AUTOFOCUS_KEYS
         }
 
-    def add_tile(self, index: int, image: Image) -> None:
-        """A tile was recorded at store index ``index``."""
+    def add_tile(self, index: int, image: Image, t0_ns: int, t1_ns: int) -> None:
+        """A tile was recorded at store index ``index``, formed of the pulses from ``t0_ns``
+        to ``t1_ns`` (GPS ns)."""
         tile = LiveTile(index, float(image.axis0_m[0]), image.data)
         with self._lock:
             self._tiles.append(tile)
             self._n_tiles = max(self._n_tiles, index + 1)
+            self._spans.append((index, t0_ns, t1_ns))
+
+    def stored_tiles(self, start: int = 0) -> list[tuple[int, int, int]]:
+        """Store index and pulse span (GPS ns) of every tile recorded, from the
+        ``start``-th, in the order they were recorded."""
+        with self._lock:
+            return self._spans[start:]
 
     def add_autofocus(self, columns: Mapping[str, npt.ArrayLike]) -> None:
         """Rows of the ``autofocus`` table were recorded (every column of

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 import os
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -156,12 +157,69 @@ _RATE_KEYS = ("radar.prf_hz", "radar.n_samples", "radar.sample_format", "radar.c
 """The keys that set the echo data rate."""
 
 
-def _values(cfg: Config, keys: tuple[str, ...]) -> str:
+def _values(
+    cfg: Config | None, keys: tuple[str, ...], options: Mapping[str, object] | None = None
+) -> str:
+    """``key = value`` of each key: a configuration key, or ``key value`` of one that
+    ``options`` gives (a command-line option, an input file)."""
     parts = []
     for key in keys:
+        if options and key in options:
+            parts.append(f"{key} {options[key]}")
+            continue
+        assert cfg is not None, key
         section, name = key.split(".")
         parts.append(f"{key} = {getattr(getattr(cfg, section), name)!r}")
     return ", ".join(parts)
+
+
+def check_memory(
+    buffers: list[Buffer],
+    limit_bytes: int,
+    where: str,
+    copies: int = 1,
+    cfg: Config | None = None,
+    options: Mapping[str, object] | None = None,
+) -> None:
+    """Refuse a job whose buffers, ``copies`` times over (one set per worker process), do
+    not fit ``limit_bytes``.
+
+    Parameters
+    ----------
+    buffers : list of Buffer
+        What one process of the job allocates.
+    limit_bytes : int
+        Memory limit, bytes.
+    where : str
+        Where the limit comes from, in words.
+    copies : int
+        Processes that each allocate ``buffers`` within the same limit.
+    cfg : Config, optional
+        Configuration the buffers' keys name.
+    options : mapping, optional
+        Values of the buffers' keys that are not configuration keys (command-line
+        options, input files).
+
+    Raises
+    ------
+    ConfigError
+        Naming the key of the largest buffer and its value, its bytes and the product
+        that gives them, the total and the limit.
+    """
+    each = sum(b.nbytes for b in buffers)
+    total = each * copies
+    if total <= limit_bytes:
+        return
+    big = max(buffers, key=lambda b: b.nbytes)
+    values = _values(cfg, big.keys, options)
+    in_all = f"{total} B ({human_bytes(total)}) in all"
+    if copies > 1:
+        in_all += f" ({copies} worker processes x {human_bytes(each)})"
+    raise ConfigError(
+        f"{big.keys[0]}: {values}: the {big.name} takes {big.nbytes} B "
+        f"({human_bytes(big.nbytes)}: {big.how}), the job's buffers {in_all}, more than "
+        f"the memory limit {limit_bytes} B ({human_bytes(limit_bytes)}, {where})"
+    )
 
 
 def check_resources(cfg: Config, limit_bytes: int | None = None) -> list[Buffer]:
@@ -185,15 +243,7 @@ def check_resources(cfg: Config, limit_bytes: int | None = None) -> list[Buffer]
     if limit_bytes is None:
         limit_bytes, where = memory_limit(cfg)
     buffers = plan(cfg)
-    total = sum(b.nbytes for b in buffers)
-    if total > limit_bytes:
-        big = max(buffers, key=lambda b: b.nbytes)
-        raise ConfigError(
-            f"{big.keys[0]}: {_values(cfg, big.keys)}: the {big.name} takes "
-            f"{big.nbytes} B ({human_bytes(big.nbytes)}: {big.how}), the run's buffers "
-            f"{total} B ({human_bytes(total)}) in all, more than the memory limit "
-            f"{limit_bytes} B ({human_bytes(limit_bytes)}, {where})"
-        )
+    check_memory(buffers, limit_bytes, where, cfg=cfg)
     rate_limit = cfg.limits.data_rate_mbps * 1e6 / 8
     rate = data_rate_bytes_s(cfg)
     if rate_limit and rate > rate_limit:

@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from types import FrameType
 
-from sarmoco.daemon.camera import CameraComponent, Fault, operator_faults
+from sarmoco.daemon.camera import CameraComponent, Fault, ProductLog, operator_faults
 from sarmoco.daemon.config import Config, StatusConfig, config_to_dict, live_imaging
 from sarmoco.daemon.focuser import SinkFactory
 from sarmoco.daemon.ingest import ring_format
@@ -33,7 +33,7 @@ from sarmoco.drivers.samples import Sample
 from sarmoco.drivers.source import Source
 from sarmoco.errors import ConfigError, DataFileError, SarmocoError
 from sarmoco.store.reader import StoreNav, StorePulses, open_store
-from sarmoco.store.recorder import Recorder
+from sarmoco.store.recorder import Recorder, meta_chunk_pulses
 
 log = logging.getLogger(__name__)
 
@@ -77,6 +77,8 @@ def open_recorder(cfg: Config, path: Path, live: LiveFeed | None = None) -> Reco
         chunk_pulses=cfg.recorder.chunk_pulses,
         echo_compression=cfg.recorder.echo_compression,
         fsync_interval_s=cfg.recorder.fsync_interval_s,
+        flush_interval_s=cfg.recorder.flush_interval_s,
+        meta_chunk_pulses=meta_chunk_pulses(cfg.recorder.chunk_pulses, cfg.radar.prf_hz),
         live=live,
         writer_queue=cfg.recorder.writer_queue,
     )
@@ -271,6 +273,8 @@ class _LiveRun:
         live = LiveFeed()
         self.status = _start_status(self.counters, self.health, cfg.status, path, live)
         self.recorder = open_recorder(cfg, path, live)
+        self.products = ProductLog(live, path, cfg.geometry.height_m, cfg.ins.gps_minus_utc_s)
+        """The tiles stored and where the antenna was (the camera component announces them)."""
         radar = open_radar(cfg)
         ins = open_ins(cfg, keep_raw=cfg.recorder.raw_ins)
         network = not isinstance(radar, RadarFileSource)
@@ -328,7 +332,7 @@ class _LiveRun:
         carrier_ghz = self.cfg.radar.carrier_hz / 1e9
         return CameraComponent(
             cam, cam.model or f"SAR {carrier_ghz:g} GHz", self._operator_faults,
-            self._free_bytes, self._capture, self.counters,
+            self._free_bytes, self._capture, self.counters, self.products.products,
         ).start()  # fmt: skip
 
     def _disk_usage(self) -> tuple[int, int] | None:
@@ -406,6 +410,7 @@ class _LiveRun:
         self.pipe.add_ins_raw(link.take_raw(), rx_ns)
         if samples:
             self.st.last_nav_mono = time.monotonic()
+            self.products.add_fixes(samples)
             self.pipe.add_nav(samples, rx_ns)
         return len(samples)
 
@@ -435,6 +440,7 @@ class _LiveRun:
             offer.append(backlog.popleft())
         if offer:
             self.st.last_nav_mono = time.monotonic()
+            self.products.add_fixes(offer)
             self.pipe.add_nav(offer, None)
         elif backlog:
             self.st.stop.wait(POLL_S)
@@ -475,6 +481,7 @@ class _LiveRun:
         while not self.st.stop.is_set():
             try:
                 stored = self.pipe.record(self.pipe.now_ns(live=True))
+                self.pipe.recorder.flush_due()
             except SarmocoError as exc:
                 self._recording_failure = exc
                 self._processing_failed(exc)
@@ -663,13 +670,13 @@ class _LiveRun:
         self.st.stop.set()
         for t in [*self.threads, self.recording, self.monitor]:
             t.join(timeout=5.0)
-        if self.camera is not None:
-            self.camera.stop()
         try:
             summary = self.pipe.finish()
             intervals = [asdict(c) for c in self.captures]
             self.recorder.set_attribute("captures", {"intervals": intervals})
         finally:  # a processing error in the last blocks must not leave the store open
+            if self.camera is not None:  # after the last tiles: it announces them
+                self.camera.stop()
             self.recorder.close()
             if self.status is not None:
                 self.status.stop()

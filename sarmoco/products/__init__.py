@@ -1,5 +1,5 @@
 """What is made from a recorded store on the ground: the run report and its quicklooks,
-the array report, georeferencing, GeoTIFF, SICD and CPHD.
+the array report, georeferencing, GeoTIFF, SICD, CPHD and CRSD.
 
 Products read a store (:mod:`sarmoco.store`) and use processing for the physics; the
 daemon never imports them, so the process that flies loads none of this.
@@ -10,6 +10,7 @@ daemon never imports them, so the process that flies loads none of this.
 __all__ = [
     "array_report",
     "cphd",
+    "crsd",
     "georeference",
     "geotiff",
     "report",

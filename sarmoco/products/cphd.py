@@ -22,7 +22,7 @@ from __future__ import annotations
 import datetime
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import lxml.etree
 import numpy as np
@@ -42,6 +42,10 @@ from sarmoco.processing.imaging import (
 )
 from sarmoco.processing.types import C_MPS, FloatArray, Image
 from sarmoco.store.reader import RunStore
+
+if TYPE_CHECKING:
+    from sarmoco.daemon.config import Config
+    from sarmoco.products.georeference import Georeference
 
 CPHD_NS = "http://api.nsgreg.nga.mil/schema/cphd/1.1.0"
 """Namespace of the CPHD version written."""
@@ -167,17 +171,40 @@ FX_OVERSAMPLING = 1.25
 """Ratio of the unambiguous time span ``1 / SCSS`` to the TOA span saved (CPHD asks >= 1.1)."""
 
 
-def from_store(store: RunStore, segment: int = 0) -> FxPhaseHistory:
-    """The recorded echoes of one reference-track segment as a phase history on the Earth.
+@dataclass(frozen=True)
+class SegmentEchoes:
+    """The recorded echoes of one reference-track segment with their geometry.
 
-    Each pulse is range compressed (unweighted) and turned into its range spectrum
-    deramped to the segment's scene centre point (SRP: the centre pixel of its image, on
-    the ground) from the antenna position the INS gave (the trapezoid-integrated INS
-    velocity of the antenna, :func:`~sarmoco.products.georeference.run_track`, the position
-    the INS-only compensation uses). The data are thus compensated to the SRP by the INS;
-    the PVP positions are those antenna positions, in ECEF through the store's
-    georeference. The TOA swath saved is the segment image's slant-range extent about the
-    SRP.
+    Attributes
+    ----------
+    t_ns : ndarray of int64, shape (P,)
+        Pulse (transmit) times, GPS ns.
+    pos_m : ndarray of float64, shape (P, 3)
+        Antenna phase centre in the run frame (NED), m: the trapezoid-integrated INS
+        velocity of the antenna (:func:`~sarmoco.products.georeference.run_track`).
+    echo : ndarray of complex64, shape (P, N)
+        Raw echoes as the receiver delivered them (baseband, sample rate of the radar).
+    corners_m : ndarray of float64, shape (4, 3)
+        Corners of the segment image's ground grid, run frame, m.
+    srp_m : ndarray of float64, shape (3,)
+        Scene centre point: the centre pixel of the segment image, on the ground, run frame, m.
+    georef : Georeference
+        The store's run frame on the Earth.
+    config : Config
+        The configuration the store was made with.
+    """
+
+    t_ns: npt.NDArray[np.int64]
+    pos_m: FloatArray
+    echo: npt.NDArray[np.complex64]
+    corners_m: FloatArray
+    srp_m: FloatArray
+    georef: Georeference
+    config: Config
+
+
+def segment_echoes(store: RunStore, segment: int = 0) -> SegmentEchoes:
+    """The recorded echoes of one reference-track segment and where the antenna was.
 
     Raises
     ------
@@ -186,13 +213,10 @@ def from_store(store: RunStore, segment: int = 0) -> FxPhaseHistory:
     """
     from sarmoco.daemon.config import parse_config
     from sarmoco.drivers.samples import to_complex64
-    from sarmoco.processing import rangecomp
-    from sarmoco.processing.imaging.phase_history import phase_history_from_compressed
     from sarmoco.products.georeference import georeference, grid_points, run_track, segment_images
 
     geo = georeference(store)
     cfg = parse_config(store.attrs["config"])
-    radar = cfg.radar.params()
     segments = segment_images(store)
     if not 0 <= segment < len(segments):
         raise RecorderError(f"{store.path}: segment {segment} (the store has {len(segments)})")
@@ -208,19 +232,49 @@ def from_store(store: RunStore, segment: int = 0) -> FxPhaseHistory:
         raw = store.read("pulses", ["echo"], int(rows[0]), int(rows[-1]) + 1)["echo"]
     except RecorderError as exc:
         raise RecorderError(f"{store.path}: no raw echoes recorded ({exc})") from exc
-    echo = to_complex64(raw)
-    echo = echo[rows - rows[0]]
+    echo = to_complex64(raw)[rows - rows[0]]
     pts = grid_points(seg.image, seg.track, cfg.geometry.height_m)
-    srp = pts[pts.shape[0] // 2, pts.shape[1] // 2]
+    return SegmentEchoes(
+        t_ns=t,
+        pos_m=pos,
+        echo=echo,
+        corners_m=pts[[0, 0, -1, -1], [0, -1, 0, -1]],
+        srp_m=pts[pts.shape[0] // 2, pts.shape[1] // 2],
+        georef=geo,
+        config=cfg,
+    )
+
+
+def from_store(store: RunStore, segment: int = 0) -> FxPhaseHistory:
+    """The recorded echoes of one reference-track segment as a phase history on the Earth.
+
+    Each pulse is range compressed (unweighted) and turned into its range spectrum
+    deramped to the segment's scene centre point (SRP: the centre pixel of its image, on
+    the ground) from the antenna position the INS gave (:func:`segment_echoes`, the
+    position the INS-only compensation uses). The data are thus compensated to the SRP by
+    the INS; the PVP positions are those antenna positions, in ECEF through the store's
+    georeference. The TOA swath saved is the segment image's slant-range extent about the
+    SRP.
+
+    Raises
+    ------
+    RecorderError
+        No absolute position, no raw echoes, or no such segment.
+    """
+    from sarmoco.processing import rangecomp
+    from sarmoco.processing.imaging.phase_history import phase_history_from_compressed
+
+    seg = segment_echoes(store, segment)
+    t, pos, srp, geo = seg.t_ns, seg.pos_m, seg.srp_m, seg.georef
+    radar = seg.config.radar.params()
     ref = np.linalg.norm(pos - srp, axis=1)
-    rc = rangecomp.compress(radar, echo)
+    rc = rangecomp.compress(radar, seg.echo)
     ph, freq = phase_history_from_compressed(
         rc, rangecomp.range_axis_m(radar), radar.carrier_hz, radar.bandwidth_hz, ref
     )
-    corners = pts[[0, 0, -1, -1], [0, -1, 0, -1]]
-    extent = np.linalg.norm(pos[:, None, :] - corners[None], axis=2) - ref[:, None]
+    extent = np.linalg.norm(pos[:, None, :] - seg.corners_m[None], axis=2) - ref[:, None]
     apc = geo.ecef(pos)
-    start = gps_utc(int(t[0]), cfg.ins.gps_minus_utc_s)
+    start = gps_utc(int(t[0]), seg.config.ins.gps_minus_utc_s)
     return FxPhaseHistory(
         signal=np.ascontiguousarray(ph, dtype=np.complex64),
         freq_hz=freq,
@@ -255,18 +309,19 @@ def _pvp_xml() -> dict[str, Any]:
     return out
 
 
-def _scene_xml(ph: FxPhaseHistory) -> dict[str, Any]:
-    """The ``SceneCoordinates`` of a phase history: a square image area of
-    ``2 IMAGE_AREA_HALF_M`` on the plane tangent to the Earth at the IARP (east, north)."""
-    iarp = geodetic_to_ecef(np.asarray(ph.iarp_lla))
-    rot = ned_rotation(ph.iarp_lla[0], ph.iarp_lla[1])
+def scene_xml(iarp_lla: tuple[float, float, float]) -> dict[str, Any]:
+    """The ``SceneCoordinates`` (CPHD's, which CRSD shares) about an image-area reference
+    point (latitude, longitude in deg, height in m): a square image area of
+    ``2 IMAGE_AREA_HALF_M`` on the plane tangent to the Earth there (east, north)."""
+    iarp = geodetic_to_ecef(np.asarray(iarp_lla))
+    rot = ned_rotation(iarp_lla[0], iarp_lla[1])
     half = IMAGE_AREA_HALF_M
     n_grid = round(2 * half / GRID_M) + 1
     square = [(-half, -half), (-half, half), (half, half), (half, -half)]
-    corners = [_scene_to_ecef(np.array([x, y, 0.0]), ph.iarp_lla) for x, y in square]
+    corners = [_scene_to_ecef(np.array([x, y, 0.0]), iarp_lla) for x, y in square]
     return {
         "EarthModel": "WGS_84",
-        "IARP": {"ECF": iarp, "LLH": np.asarray(ph.iarp_lla)},
+        "IARP": {"ECF": iarp, "LLH": np.asarray(iarp_lla)},
         "ReferenceSurface": {"Planar": {"uIAX": rot[1], "uIAY": rot[0]}},
         "ImageArea": {"X1Y1": [-half, -half], "X2Y2": [half, half]},
         "ImageAreaCornerPoints": np.array([ecef_to_geodetic(c)[:2] for c in corners]),
@@ -306,7 +361,7 @@ def _xml(ph: FxPhaseHistory, pvps: npt.NDArray[Any], core_name: str) -> Any:
         "FxBand": {"FxMin": fx1, "FxMax": fx2},
         "TOASwath": {"TOAMin": toa1, "TOAMax": toa2},
     }
-    cphd["SceneCoordinates"] = _scene_xml(ph)
+    cphd["SceneCoordinates"] = scene_xml(ph.iarp_lla)
     cphd["Data"] = {
         "SignalArrayFormat": "CF8",
         "NumBytesPVP": pvps.dtype.itemsize,

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from functools import partial
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -113,6 +114,8 @@ class RadarEmitter(Emitter):
         )
         self.pulses_sent = 0
         self.contexts_sent = 0
+        self._wire: np.ndarray | None = None
+        """Every pulse's wire samples, rendered before playback (:meth:`pregenerate`)."""
 
     def events(self) -> Iterator[Event]:
         """A context packet before the first pulse and then periodically; one packet per pulse."""
@@ -137,8 +140,25 @@ class RadarEmitter(Emitter):
         self.contexts_sent += 1
         self.send(packet, t)
 
+    def pregenerate(self, path: Path) -> None:
+        """Render every pulse's wire samples into ``path`` (a ``.npy`` file, memory-mapped)
+        before playback, so that playing costs a packet's header and a send per pulse: a
+        full-rate radar's echoes (an :class:`~sarmoco.sim.echostream.EchoStream` is
+        synthesized as it is read) cost far more to make than to send, and a simulator
+        that makes them while it plays falls behind the radar's clock."""
+        first = self.wire_samples(0)
+        rows = np.lib.format.open_memmap(
+            path, mode="w+", dtype=first.dtype, shape=(self.t_ns.size, *first.shape)
+        )
+        for k in range(self.t_ns.size):
+            rows[k] = self.wire_samples(k)
+        rows.flush()
+        self._wire = rows
+
     def wire_samples(self, k: int) -> np.ndarray:
         """Pulse ``k`` as it goes on the wire (int16-scaled and rounded, or float32)."""
+        if self._wire is not None:
+            return self._wire[k]
         row = self.echo[k]
         if self.payload == "int16":
             scaled = np.rint(row.view(row.real.dtype) * self.iq_scale)

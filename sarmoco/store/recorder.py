@@ -74,6 +74,11 @@ _VERSION_PACKAGES = ("sarmoco", "numpy", "scipy", "zarr", "xarray", "pymavlink",
 
 DIRECT_MIN_BYTES = 1 << 20
 """Files at least this large (chunks of raw echoes) are written with ``O_DIRECT``, bytes."""
+META_CHUNK_S = 0.2
+"""The columns of a per-pulse table other than the echoes (times, ids, flags, motion) are
+chunked to hold at least this much of pulses at the radar's rate, s
+(:func:`meta_chunk_pulses`): a chunk file costs zarr about a millisecond of CPU to write,
+and at tens of kHz chunks of ``chunk_pulses`` would be hundreds of files a second."""
 _DIRECT_ALIGN = 4096
 """Alignment of the address and length of an ``O_DIRECT`` write, bytes (a page: what every
 Linux block device and file system accepts)."""
@@ -255,6 +260,15 @@ def _fsync_path(path: Path, flags: int) -> None:
         os.close(fd)
 
 
+def meta_chunk_pulses(chunk_pulses: int, prf_hz: float) -> int:
+    """Pulses per chunk of the per-pulse columns other than the echoes: ``chunk_pulses``
+    times the smallest power of two that holds :data:`META_CHUNK_S` at ``prf_hz`` (Hz)."""
+    factor = 1
+    while chunk_pulses * factor < META_CHUNK_S * prf_hz:
+        factor *= 2
+    return chunk_pulses * factor
+
+
 def software_versions() -> dict[str, str]:
     """Versions of Python, the platform and the packages that shape the products."""
     versions = {"python": platform.python_version(), "platform": platform.platform()}
@@ -340,48 +354,88 @@ class Table:
         The table's name, row dimension and columns.
     chunk_rows : int
         Rows per chunk (unless the spec fixes it).
+    meta_rows : int, optional
+        Rows per chunk of the columns of a per-pulse table other than the echoes, a
+        multiple of ``chunk_rows`` (:func:`meta_chunk_pulses`; None: ``chunk_rows``).
+    flush_interval_s : float
+        Longest time rows wait in memory before they are written, s (0: every
+        :meth:`write` writes them); a column of whole-chunk writes (below) aside.
 
     Notes
     -----
+    Every column keeps in memory the rows of its last, partial chunk (``held``), so that
+    no chunk is ever read back to be written again with more rows: a partial chunk is
+    written whole, its rows then the fill value, and written again whole when more rows
+    come. Zarr would otherwise read the chunk (from the disk) for each write that ends
+    inside it, and blocks of pulses rarely end on a chunk boundary.
+
     A column whose chunks hold :data:`DIRECT_MIN_BYTES` or more (raw echoes) is written a
-    whole chunk at a time: the rows of its last, partial chunk wait in memory until the
-    chunk is full (or :meth:`trim` writes them), and ``committed`` stays at the chunk
-    boundary until then. Zarr would otherwise write the partial chunk, then read it back
-    (from the disk: it was written with O_DIRECT) to write it again whole with the next
-    rows; blocks of pulses rarely end on a chunk boundary. A crash loses the rows waiting,
-    fewer than a chunk's.
+    whole chunk at a time: the rows of its partial chunk wait until it is full (or
+    :meth:`trim` writes them), and ``committed`` stays at the chunk boundary until then.
+    The other columns are written when ``flush_interval_s`` has passed since their last
+    write: each file zarr writes costs about a millisecond of CPU, which a table written
+    in small blocks (a recording pass every 10 ms) would pay for every column many times
+    a second. A crash loses the rows waiting: fewer than a chunk's of the echoes, at most
+    ``flush_interval_s`` of the others.
     """
 
-    def __init__(self, root: zarr.Group, spec: TableSpec, chunk_rows: int) -> None:
+    def __init__(
+        self,
+        root: zarr.Group,
+        spec: TableSpec,
+        chunk_rows: int,
+        meta_rows: int | None = None,
+        flush_interval_s: float = 0.0,
+    ) -> None:
         rows = spec.chunk_rows or chunk_rows
+        meta = meta_rows if spec.per_pulse and meta_rows else rows
+        if meta % rows:
+            raise RecorderError(f"table {spec.name!r}: chunks of {meta} rows, not of {rows}")
         self.group = root.create_group(spec.name)
-        self.grow_rows = rows * 16  # a multiple of the chunk keeps metadata writes rare
+        self.grow_rows = meta * 16  # a multiple of every chunk keeps metadata writes rare
+        self.flush_interval_s = flush_interval_s
         self.committed = 0
         """Rows written and counted in the store's ``committed`` attribute."""
         self._handed = 0
-        """Rows handed to :meth:`write` (written, or waiting in a whole-chunk column)."""
+        """Rows handed to :meth:`write` (written, or held)."""
         self.rows = 0
         """Rows handed to :meth:`prepare` (the caller's count: ``committed`` once written)."""
         self.arrays: dict[str, zarr.Array] = {}
+        self._fill: dict[str, float] = {}
+        self._whole: set[str] = set()
+        """Columns written a whole chunk at a time (class notes)."""
         for name, col in spec.columns.items():
+            col_rows = rows if "sample" in col.dims else meta
+            self._fill[name] = np.nan if col.dtype.kind == "f" else 0
             self.arrays[name] = self.group.create_array(
                 name,
                 shape=(0, *col.shape),
-                chunks=(rows, *col.shape),
+                chunks=(col_rows, *col.shape),
                 dtype=col.dtype,
                 dimension_names=(spec.row_dim, *col.dims),
-                fill_value=np.nan if col.dtype.kind == "f" else 0,
+                fill_value=self._fill[name],
                 **schema.chunk_codecs(spec.compressors.get(name, schema.DEFAULT_COMPRESSOR)),
                 attributes=spec.column_attrs(name),
             )
+            if col_rows * col.dtype.itemsize * int(np.prod(col.shape)) >= DIRECT_MIN_BYTES:
+                self._whole.add(name)
         self.group.update_attributes({COMMITTED_ATTR: 0})
-        self._waiting: dict[str, npt.NDArray[Any]] = {
-            name: np.zeros((0, *col.shape), col.dtype)
-            for name, col in spec.columns.items()
-            if rows * col.dtype.itemsize * int(np.prod(col.shape)) >= DIRECT_MIN_BYTES
+        self._held: dict[str, npt.NDArray[Any]] = {
+            name: np.zeros((0, *col.shape), col.dtype) for name, col in spec.columns.items()
         }
-        """Columns written a whole chunk at a time (class notes): their rows waiting for
-        the chunk to fill."""
+        """Each column's rows from :attr:`_held_from` on (class notes)."""
+        self._held_from = dict.fromkeys(spec.columns, 0)
+        """First row held of each column (the start of a chunk)."""
+        self._stored = dict.fromkeys(spec.columns, 0)
+        """Rows of each column in the store."""
+        self._flushed_mono = time.monotonic()
+        self._flushed_rows = 0
+        """Rows handed by the last write that was due (all written then)."""
+        self._dirty = False
+        """Flags were set since the last write that was due (:meth:`or_flags`)."""
+        self._late_flags: list[tuple[str, npt.NDArray[np.int64], npt.NDArray[Any]]] = []
+        """Flags to OR into rows of the store at the next write that is due: (column, rows,
+        value)."""
 
     def append(self, **columns: npt.ArrayLike) -> int:
         """Write rows to every column, then advance ``committed``; returns the new count.
@@ -426,71 +480,124 @@ class Table:
         self.rows += n_rows.pop()
         return rows, start
 
-    def write(self, rows: Mapping[str, npt.NDArray[Any]], start: int) -> int:
-        """Write rows :meth:`prepare` placed at ``start``, then advance ``committed`` to
-        their end (in a table with a whole-chunk column, to its last whole chunk: class
-        notes); returns it. Rows are written in the order they were prepared."""
+    def write(self, rows: Mapping[str, npt.NDArray[Any]], start: int, force: bool = False) -> int:
+        """Hand over rows :meth:`prepare` placed at ``start``: write what is due (class
+        notes; ``force``: every row held), then advance ``committed`` to the rows of every
+        column in the store; returns it. Rows are handed in the order they were prepared.
+        """
         if start != self._handed:
             raise RecorderError(
                 f"table {self.group.path!r}: rows from {start} written after {self._handed}"
             )
         stop = start + next(iter(rows.values())).shape[0]
+        now = time.monotonic()
+        due = force or self._dirty or now - self._flushed_mono >= self.flush_interval_s
         try:
+            if due:
+                self._apply_late_flags()
             for arr in self.arrays.values():
                 if arr.shape[0] < stop:
                     grow = -(-(stop - arr.shape[0]) // self.grow_rows) * self.grow_rows
                     arr.resize((arr.shape[0] + grow, *arr.shape[1:]))
-            regions = {k: (slice(start, stop), v) for k, v in rows.items()}
-            waiting = {}
-            for name in self._waiting:
-                regions[name], waiting[name] = self._whole_chunks(name, rows[name], stop)
-            committed = min([stop, *(region.stop for region, _ in regions.values())])
+            regions, held, held_from, stored = {}, {}, {}, {}
+            for name, arr in self.arrays.items():
+                old = self._held[name]
+                both = np.concatenate([old, rows[name]]) if old.shape[0] else rows[name]
+                first, chunk = self._held_from[name], arr.chunks[0]
+                whole_end = stop // chunk * chunk
+                if force or (due and name not in self._whole):
+                    regions[name] = (slice(first, first + both.shape[0]), both)
+                    stored[name] = stop
+                elif name in self._whole:
+                    regions[name] = (slice(first, whole_end), both[: whole_end - first])
+                    stored[name] = whole_end
+                else:  # not due: all held
+                    held[name] = both if both is not rows[name] else both.copy()
+                    held_from[name] = first
+                    continue
+                held[name] = both[whole_end - first :].copy()
+                held_from[name] = whole_end
+            committed = min({**self._stored, **stored}.values())
             self._write_regions(regions, committed)
         except BaseException:
             # not committed: the next rows take their place (a writer thread runs no
             # write after a failed one, so none was placed after these)
             self.rows = start
             raise
-        self._waiting.update(waiting)
+        self._held.update(held)
+        self._held_from.update(held_from)
+        self._stored.update(stored)
         self._handed = stop
         self.committed = committed
+        if due:
+            self._flushed_mono, self._flushed_rows, self._dirty = now, stop, False
         return committed
 
-    def _whole_chunks(
-        self, name: str, rows: npt.NDArray[Any], stop: int
-    ) -> tuple[tuple[slice, npt.NDArray[Any]], npt.NDArray[Any]]:
-        """Of the rows waiting in column ``name`` and ``rows`` after them (up to row
-        ``stop``): the whole chunks to write (region and rows; maybe none), and the rows
-        left waiting (a copy: the caller may reuse ``rows``)."""
-        waiting = self._waiting[name]
-        both = np.concatenate([waiting, rows]) if waiting.shape[0] else rows
-        first = stop - both.shape[0]
-        whole = stop // self.arrays[name].chunks[0] * self.arrays[name].chunks[0] - first
-        return (slice(first, first + whole), both[:whole]), both[whole:].copy()
+    def flush(self) -> int:
+        """Write every row held (:meth:`write` of none, forced); returns ``committed``."""
+        empty = {k: v[:0] for k, v in self._held.items()}
+        return self.write(empty, self._handed, force=True)
+
+    def flush_due(self) -> None:
+        """Write the rows held when ``flush_interval_s`` has passed since the last write
+        (rows of whole-chunk columns wait for their chunk to fill)."""
+        waiting = self._handed > self._flushed_rows or self._dirty
+        if waiting and time.monotonic() - self._flushed_mono >= self.flush_interval_s:
+            empty = {k: v[:0] for k, v in self._held.items()}
+            self.write(empty, self._handed)
+
+    def or_flags(self, column: str, rows: npt.NDArray[np.int64], flags: int) -> None:
+        """OR ``flags`` into ``column`` at ``rows`` (handed rows): in memory for the rows
+        held; for the rows in the store at the next write that is due (:meth:`write`: each
+        chunk touched read and written once)."""
+        value = np.asarray(flags, dtype=self._held[column].dtype)
+        first = self._held_from[column]
+        held = rows[rows >= first]
+        self._held[column][held - first] |= value
+        self._late_flags.append((column, rows[rows < first], value))
+        self._dirty = True
+        if self.flush_interval_s == 0:
+            self.flush_due()
+
+    def _apply_late_flags(self) -> None:
+        """OR the flags :meth:`or_flags` left for rows in the store into their chunks."""
+        for column, rows, value in self._late_flags:
+            arr = self.arrays[column]
+            chunk = arr.chunks[0]
+            for c in np.unique(rows // chunk).tolist():
+                lo = c * chunk
+                span = np.asarray(arr[lo : lo + chunk])  # a whole chunk: held rows are after
+                span[rows[rows // chunk == c] - lo] |= value
+                arr[lo : lo + chunk] = span
+        self._late_flags = []
 
     def _write_regions(
         self, regions: Mapping[str, tuple[slice, npt.NDArray[Any]]], committed: int
     ) -> None:
-        """Write each column's rows into its region (none when empty), then set
-        ``committed``."""
-        writes = [
-            self.arrays[k].async_array.setitem(region, data)
-            for k, (region, data) in regions.items()
-            if data.shape[0]
-        ]
+        """Write each column's rows into its region (none when empty): a region that ends
+        inside a chunk is padded to the chunk's end with the fill value, so that zarr writes
+        whole chunks only. Then set ``committed`` (when it moved)."""
+        writes = []
+        for name, (region, data) in regions.items():
+            if not data.shape[0]:
+                continue
+            arr, chunk = self.arrays[name], self.arrays[name].chunks[0]
+            end = -(-region.stop // chunk) * chunk
+            if end != region.stop:
+                padded = np.full(
+                    (end - region.start, *data.shape[1:]), self._fill[name], data.dtype
+                )
+                padded[: data.shape[0]] = data
+                region, data = slice(region.start, end), padded
+            writes.append(arr.async_array.setitem(region, data))
         zarr_sync(_gather(writes))  # one trip to zarr's event loop for all columns
-        self.group.update_attributes({COMMITTED_ATTR: committed})
+        if committed != self.committed:
+            self.group.update_attributes({COMMITTED_ATTR: committed})
 
     def trim(self) -> None:
-        """Write the rows still waiting (class notes), then shrink every array to the
+        """Write the rows still held (class notes), then shrink every array to the
         committed rows (at the end of a run)."""
-        if any(w.shape[0] for w in self._waiting.values()):
-            h = self._handed
-            self._write_regions(
-                {k: (slice(h - w.shape[0], h), w) for k, w in self._waiting.items()}, h
-            )
-            self._waiting = {k: w[:0] for k, w in self._waiting.items()}
-            self.committed = self._handed
+        self.flush()
         for arr in self.arrays.values():
             if arr.shape[0] != self.committed:
                 arr.resize((self.committed, *arr.shape[1:]))
@@ -500,8 +607,9 @@ class RecordingListener(Protocol):
     """What a :class:`Recorder` tells, in memory, of what it records (the daemon's live
     page feed is one); called on the thread that records."""
 
-    def add_tile(self, index: int, image: Image) -> None:
-        """A tile was recorded at store index ``index``."""
+    def add_tile(self, index: int, image: Image, t0_ns: int, t1_ns: int) -> None:
+        """A tile was recorded at store index ``index``, formed of the pulses from ``t0_ns``
+        to ``t1_ns`` (GPS ns)."""
 
     def add_autofocus(self, columns: Mapping[str, npt.ArrayLike]) -> None:
         """Rows of the ``autofocus`` table were recorded, by column."""
@@ -526,6 +634,13 @@ class Recorder(Closing):
         Pulses per chunk of the per-pulse arrays.
     fsync_interval_s : float
         Interval between fsyncs of the files written, s (0: after every append).
+    flush_interval_s : float
+        Longest time rows wait in memory before they are written, s (0: each call writes
+        its rows); raw echoes are written a whole chunk at a time either way
+        (:class:`Table`). :meth:`flush_due` writes the rows whose time has come.
+    meta_chunk_pulses : int, optional
+        Pulses per chunk of the per-pulse columns other than the echoes, a multiple of
+        ``chunk_pulses`` (:func:`meta_chunk_pulses`; None: ``chunk_pulses``).
     chunk_rows : int
         Rows per chunk of the other tables.
     echo_compression : str
@@ -552,6 +667,8 @@ class Recorder(Closing):
         raw_echoes: bool = True,
         chunk_pulses: int = 256,
         fsync_interval_s: float = 1.0,
+        flush_interval_s: float = 0.0,
+        meta_chunk_pulses: int | None = None,
         chunk_rows: int = 1024,
         echo_compression: str = "none",
         live: RecordingListener | None = None,
@@ -570,6 +687,8 @@ class Recorder(Closing):
         except OSError as exc:
             raise RecorderError(f"recorder: cannot create {self.path}: {exc}") from exc
         self.fsync_interval_s = fsync_interval_s
+        self.flush_interval_s = flush_interval_s
+        self._meta_rows = meta_chunk_pulses
         self._last_sync = time.monotonic()
         self._chunk = {True: chunk_pulses, False: chunk_rows}
         """Rows per chunk of per-pulse tables and of the others."""
@@ -605,7 +724,9 @@ class Recorder(Closing):
         self.sync()
 
     def _create(self, spec: TableSpec) -> Table:
-        table = Table(self.root, spec, self._chunk[spec.per_pulse])
+        table = Table(
+            self.root, spec, self._chunk[spec.per_pulse], self._meta_rows, self.flush_interval_s
+        )
         self.tables[spec.name] = table
         return table
 
@@ -766,7 +887,7 @@ class Recorder(Closing):
         self._writer.submit(self._write_image, index, image, t0_ns, t1_ns, metrics, reference_track)
         self.n_images = index + 1
         if self.live is not None:
-            self.live.add_tile(index, image)
+            self.live.add_tile(index, image, t0_ns, t1_ns)
         return index
 
     def _write_image(
@@ -794,19 +915,29 @@ class Recorder(Closing):
         flags : int
             Bits OR-ed into their ``flags``.
         """
-        r = np.asarray(rows, dtype=np.int64)
+        r = np.array(rows, dtype=np.int64)  # a copy: the write may wait on the writer thread
         if r.size == 0:
             return
         lo, hi = int(r.min()), int(r.max()) + 1
         if lo < 0 or hi > self.pulses.rows:
             raise RecorderError(f"flag_pulses: rows {lo}..{hi - 1} not all recorded")
-        self._writer.submit(self._write_flags, r - lo, lo, hi, flags)
+        self._writer.submit(self._write_flags, r, flags)
 
-    def _write_flags(self, r: npt.NDArray[np.int64], lo: int, hi: int, flags: int) -> None:
-        column = self.pulses.arrays["flags"]
-        span = np.asarray(column[lo:hi])
-        span[r] |= np.asarray(flags, dtype=span.dtype)
-        column[lo:hi] = span
+    def _write_flags(self, rows: npt.NDArray[np.int64], flags: int) -> None:
+        self.pulses.or_flags("flags", rows, flags)
+        self._maybe_sync()
+
+    @_one_at_a_time
+    def flush_due(self) -> None:
+        """Write the rows that have waited ``flush_interval_s`` in memory (on the writer
+        thread, after the writes handed over so far); a live run's recording thread calls
+        it after each pass, so that rows do not wait for the next call of their table."""
+        if self.flush_interval_s > 0:
+            self._writer.submit(self._flush_due)
+
+    def _flush_due(self) -> None:
+        for table in self.tables.values():
+            table.flush_due()
         self._maybe_sync()
 
     @_one_at_a_time

@@ -22,11 +22,13 @@ import numpy as np
 import psutil
 import pytest
 
-from sarmoco.app.batch import LOOPBACK
+from sarmoco.app.batch import LOOPBACK, check_batch_memory
 from sarmoco.app.cli import main
 from sarmoco.app.imaging_stream import SegmentStream
-from sarmoco.daemon.config import Config, load_config
+from sarmoco.daemon.config import Config, load_config, parse_config
+from sarmoco.daemon.resources import plan
 from sarmoco.daemon.runner import replay_files, replay_store
+from sarmoco.errors import ConfigError
 from sarmoco.processing.geometry import ReferenceTrack
 from sarmoco.processing.imaging.tiles import TileLayout
 from sarmoco.store.reader import RunStore, open_store
@@ -234,6 +236,42 @@ def test_batch_command_refuses_what_it_cannot_run(
         status = main(["batch", "--config", str(cfg), "--out", str(tmp_path / "o.zarr"), *argv])
         err = capsys.readouterr().err
         assert status == 2 and words in err, (argv, err)
+
+
+def test_batch_refuses_workers_whose_buffers_do_not_fit_the_memory_limit(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Each worker process holds a run's buffers (its front end is a replay) and an imaging
+    block's tiles; a local cluster's ``--workers`` share the limit (``limits.memory_mib``),
+    a cluster started apart is held to it per worker. What does not fit is refused before
+    any cluster starts, naming the key of the largest buffer and the limit."""
+    cfg_path = tmp_path / "c.toml"
+    cfg_path.write_text("[limits]\nmemory_mib = 200.0\n")
+    cfg = parse_config({"limits": {"memory_mib": 200.0}})
+    run = sum(b.nbytes for b in plan(cfg))
+    tile = 200 * 600 * 8  # 20 m x 60 m of 0.1 m complex64 pixels
+    each = run + 16 * tile
+    assert each < 200 * 2**20 < 2 * each  # one worker fits, two do not
+    check_batch_memory(cfg, 16, local_workers=1)
+    check_batch_memory(cfg, 16, local_workers=None)
+    base = ["batch", "--config", str(cfg_path), "--radar", "r.vrt", "--nav", "n.tlog",
+            "--out", str(tmp_path / "o.zarr")]  # fmt: skip
+    status = main([*base, "--workers", "2"])
+    err = capsys.readouterr().err
+    assert status == 2 and err.startswith("sarmoco: error: radar.n_samples: "), err
+    assert f"the job's buffers {2 * each} B (" in err and "2 worker processes x" in err
+    assert f"more than the memory limit {200 * 2**20} B (" in err
+    assert "limits.memory_mib; shared by --workers 2)" in err
+    status = main([*base, "--workers", "1", "--tiles-per-block", "1000"])
+    err = capsys.readouterr().err
+    assert status == 2 and err.startswith(
+        "sarmoco: error: --tiles-per-block: --tiles-per-block 1000, imaging.pixel_m = 0.1, "
+        f"imaging.tile_length_m = 20.0, imaging.swath_m = 60.0: the imaging block takes "
+        f"{1000 * tile} B ("
+    ), err
+    with pytest.raises(ConfigError, match=r"\(200 MiB, limits.memory_mib\)$"):
+        check_batch_memory(cfg, 1000, local_workers=None)
+    assert not (tmp_path / "o.zarr").exists()
 
 
 def test_a_block_gets_the_calls_that_reach_it_and_the_one_that_opens_its_tiles() -> None:

@@ -16,16 +16,29 @@ import socket
 import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
-from sarmoco.daemon.camera import CameraComponent, Fault, operator_faults
+from sarmoco.daemon.camera import (
+    UNKNOWN_DEG_E7,
+    CameraComponent,
+    Fault,
+    Product,
+    ProductLog,
+    operator_faults,
+)
 from sarmoco.daemon.config import CameraConfig
+from sarmoco.daemon.livefeed import LiveFeed
 from sarmoco.daemon.status import Counters, Health
+from sarmoco.drivers.clock import gps_ns_to_unix_ns
+from sarmoco.drivers.samples import Validity, VelocitySample
 from sarmoco.errors import ConfigError
+from sarmoco.processing.types import Image
 
 WAIT_S = 5.0
 """Longest wait for one answer of the component, s."""
@@ -66,7 +79,7 @@ class Bench:
         return self.recv("COMMAND_ACK", lambda m: m.command == cmd)
 
 
-def start_bench(cfg: CameraConfig) -> Bench:
+def start_bench(cfg: CameraConfig, products: Callable[[], list[Product]] = list) -> Bench:
     port = free_udp_port()
     gcs = mavutil.mavlink_connection(
         f"udpin:127.0.0.1:{port}", source_system=255, source_component=190,
@@ -77,7 +90,7 @@ def start_bench(cfg: CameraConfig) -> Bench:
     camera = CameraComponent(
         replace(cfg, link=f"udpout:127.0.0.1:{port}"), "SAR 15 GHz",
         lambda: operator_faults(health.components(), gauges, 0.5, cfg.disk_low_fraction),
-        lambda: 2**30, captures.append, counters,
+        lambda: 2**30, captures.append, counters, products,
     ).start()  # fmt: skip
     b = Bench(camera, gcs, health, counters, gauges, captures)
     b.recv("HEARTBEAT")  # a udpin ground station answers the address it heard from
@@ -280,3 +293,72 @@ def test_mavsdk_discovers_the_camera_and_starts_and_stops_video() -> None:
     finally:
         camera.stop()
         sdk.destroy()
+
+
+def test_each_stored_product_is_announced_once_and_again_on_request() -> None:
+    """Each product the run stores is announced with CAMERA_IMAGE_CAPTURED within a
+    heartbeat (index, UTC time, position in 1e-7 deg and mm, URL), unknown positions as
+    INT32_MAX; MAV_CMD_REQUEST_MESSAGE with an index sends it again (how a ground station
+    lists what it missed), an index not stored is unsupported, CAMERA_CAPTURE_STATUS counts
+    them and STORAGE_INFORMATION gives the free space (MiB)."""
+    products: list[Product] = []
+    b = start_bench(CameraConfig(enabled=True), lambda: products)
+    try:
+        products.append(Product(0, 1_700_000_000_123_456, (47.1234567, 8.7654321, 412.5), 100.0,
+                                "file:///data/run.zarr/images/tile_000000"))  # fmt: skip
+        first = b.recv("CAMERA_IMAGE_CAPTURED")
+        assert (first.image_index, first.time_utc, first.capture_result) == (
+            0, 1_700_000_000_123_456, 1)  # fmt: skip
+        assert (first.lat, first.lon, first.alt, first.relative_alt) == (
+            471234567, 87654321, 412500, 100000)  # fmt: skip
+        assert first.file_url == "file:///data/run.zarr/images/tile_000000"
+        products.append(Product(1, 1_700_000_001_000_000, None, 100.0, "file:///x"))
+        second = b.recv("CAMERA_IMAGE_CAPTURED")
+        assert second.image_index == 1 and second.lat == second.lon == UNKNOWN_DEG_E7
+        time.sleep(1.5)  # a heartbeat more: nothing is announced twice
+        assert b.gcs.recv_match(type="CAMERA_IMAGE_CAPTURED", blocking=False) is None
+        request = mav.MAVLINK_MSG_ID_CAMERA_IMAGE_CAPTURED
+        ack = b.command(mav.MAV_CMD_REQUEST_MESSAGE, request, 0)
+        assert ack.result == mav.MAV_RESULT_ACCEPTED
+        assert b.recv("CAMERA_IMAGE_CAPTURED").image_index == 0
+        ack = b.command(mav.MAV_CMD_REQUEST_MESSAGE, request, 2)
+        assert ack.result == mav.MAV_RESULT_UNSUPPORTED
+        ack = b.command(mav.MAV_CMD_REQUEST_CAMERA_IMAGE_CAPTURE, 1)  # the older command
+        assert ack.result == mav.MAV_RESULT_ACCEPTED
+        assert b.recv("CAMERA_IMAGE_CAPTURED").image_index == 1
+        ack = b.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_STORAGE_INFORMATION)
+        assert ack.result == mav.MAV_RESULT_ACCEPTED
+        storage = b.recv("STORAGE_INFORMATION")
+        assert storage.status == mav.STORAGE_STATUS_READY and storage.available_capacity == 1024
+        ack = b.command(mav.MAV_CMD_REQUEST_STORAGE_INFORMATION, 0)
+        assert ack.result == mav.MAV_RESULT_ACCEPTED
+        assert b.recv("STORAGE_INFORMATION").storage_count == 1
+        b.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_CAMERA_CAPTURE_STATUS)
+        assert b.recv("CAMERA_CAPTURE_STATUS").image_count == 2
+    finally:
+        b.camera.stop()
+        b.gcs.close()
+
+
+def test_a_product_is_placed_at_the_absolute_fix_nearest_its_middle() -> None:
+    """:class:`ProductLog`: each tile the recorder publishes becomes a product at the
+    middle of its pulses, placed at the INS fix nearest that time (none beyond 1 s, none
+    without a global position), its URL the store's tile group."""
+    feed = LiveFeed()
+    log_ = ProductLog(feed, Path("/data/run.zarr"), 100.0, 18)
+    t0 = 1_400_000_000_000_000_000
+
+    def fix(t_ns: int, lat: float | None) -> VelocitySample:
+        lla = None if lat is None else (lat, 8.0, 400.0)
+        return VelocitySample(t_ns, (0.0, 0.0, 0.0), Validity(0), "test", 0, lat_lon_alt=lla)
+
+    log_.add_fixes([fix(t0, 47.0), fix(t0 + 10**8, 47.1), fix(t0 + 2 * 10**8, None),
+                    fix(t0 + 3 * 10**9, 47.3)])  # fmt: skip
+    image = Image(np.zeros((2, 2), np.complex64), np.arange(2.0), np.arange(2.0), "ground")
+    feed.add_tile(0, image, t0, t0 + 2 * 10**8)  # middle t0 + 0.1 s: the second fix
+    feed.add_tile(1, image, t0 + 10**9, t0 + 14 * 10**8)  # 1.8 s from the nearest
+    p0, p1 = log_.products()
+    assert p0.lat_lon_alt == (47.1, 8.0, 400.0) and p1.lat_lon_alt is None
+    assert p0.time_utc_us == gps_ns_to_unix_ns(t0 + 10**8, 18) // 1000
+    assert p1.url == "file:///data/run.zarr/images/tile_000001" and p1.image_index == 1
+    assert log_.products() == [p0, p1]

@@ -5,7 +5,9 @@ test sends the simulator's pulses in three thirds and starts capture (VIDEO_STAR
 before the second and stops it (VIDEO_STOP_CAPTURE) after: the store holds exactly the
 pulses of the second third, and its ``captures`` attribute the one interval. Then INS
 frames arrive and stop: the ground station hears the "no INS data" fault cleared, then
-the INS dropout announced at MAV_SEVERITY_CRITICAL.
+the INS dropout announced at MAV_SEVERITY_CRITICAL. A run of the simulator's files
+announces every tile it stores with CAMERA_IMAGE_CAPTURED, once, with its time and the
+INS's position.
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ import numpy as np
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
+from sarmoco.daemon.camera import UNKNOWN_DEG_E7
+from sarmoco.drivers.clock import gps_ns_to_unix_ns
 from sarmoco.store.reader import open_store
 from tests.daemon.test_daemon_process import (
     N_PULSES,
@@ -31,6 +35,8 @@ from tests.daemon.test_daemon_process import (
     http_get,
     mavlink_frames,
     sim,  # noqa: F401 - the module's fixture
+    wait_finished,
+    wait_focused,
     wait_status,
 )
 
@@ -132,3 +138,48 @@ def test_ground_station_captures_a_strip_and_hears_an_ins_dropout(
     (interval,) = store.attrs["captures"]["intervals"]
     start, stop = (datetime.datetime.fromisoformat(interval[k]) for k in ("start_utc", "stop_utc"))
     assert start < stop
+
+
+def test_every_stored_tile_is_announced_once_with_its_time_and_position(
+    sim: SimFiles,  # noqa: F811 - the imported fixture
+    tmp_path: Path,
+) -> None:
+    """The simulator's ``.vrt`` and ``.tlog`` as file links, capturing from the start: the
+    ground station hears one CAMERA_IMAGE_CAPTURED per tile of the store (those closed at
+    the stop included), with the store's index, the UTC middle of the tile's pulses and
+    the position unknown (the simulator's tactical INS gives velocity and attitude only;
+    the position of a fix is checked with a real pymavlink ground station in
+    ``tests/daemon/test_camera.py``)."""
+    gcs_port, http_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_STREAM)
+    gcs = mavutil.mavlink_connection(
+        f"udpin:127.0.0.1:{gcs_port}", source_system=255, source_component=190,
+        dialect="ardupilotmega",
+    )  # fmt: skip
+    config = daemon_config(
+        sim, tmp_path / "files.toml", status={"http_port": http_port},
+        camera={"enabled": True, "link": f"udpout:127.0.0.1:{gcs_port}"},
+    )  # fmt: skip
+    d = Daemon(config, tmp_path / "files.zarr")
+    announced: list[Any] = []
+    try:
+        d.started()
+        wait_finished(http_port)
+        wait_focused(http_port)
+        assert d.stop() == 0, d.log.read_text()
+        while (msg := gcs.recv_match(type="CAMERA_IMAGE_CAPTURED", blocking=True,
+                                     timeout=1.0)) is not None:  # fmt: skip
+            announced.append(msg)
+    finally:
+        d.kill_if_running()
+        gcs.close()
+    store = open_store(d.store)
+    assert store.n_images >= 2
+    assert [m.image_index for m in announced] == list(range(store.n_images))
+    assert not np.isfinite(store.read("nav", ["lla"])["lla"]).any()  # tactical: no fix
+    leap = int(sim.table["ins"].get("gps_minus_utc_s", 18))
+    for msg in announced:
+        _, attrs = store.image(msg.image_index)
+        mid = (int(attrs["t0_ns"]) + int(attrs["t1_ns"])) // 2
+        assert msg.time_utc == gps_ns_to_unix_ns(mid, leap) // 1000
+        assert msg.lat == msg.lon == UNKNOWN_DEG_E7
+        assert msg.file_url.endswith(f"/images/tile_{msg.image_index:06d}")

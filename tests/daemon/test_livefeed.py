@@ -93,7 +93,7 @@ def test_snapshots_taken_while_the_recorder_adds_are_whole() -> None:
     reader.start()
     try:
         for k in range(2000):
-            feed.add_tile(k, tiles[k % len(tiles)])
+            feed.add_tile(k, tiles[k % len(tiles)], k, k + 1)
             feed.add_autofocus(schema.encode_autofocus(_reports(float(k), 3)))
     finally:
         done.set()

@@ -9,6 +9,7 @@ GOTCHA converted to CPHD 1.1.0 passes sarkit's ``CphdConsistency`` with no failu
 from __future__ import annotations
 
 import dataclasses
+import datetime
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +21,7 @@ from sarmoco.app.cli import main
 from sarmoco.app.export import failures
 from sarmoco.drivers.gotcha import GotchaPass, read_gotcha
 from sarmoco.errors import DataFileError
+from sarmoco.geodesy import geodetic_to_ecef, ned_to_ecef
 from sarmoco.processing.imaging import (
     PlaneGrid,
     backproject,
@@ -121,3 +123,48 @@ def test_import_refuses_a_file_that_is_not_cphd(tmp_path: Path) -> None:
     path.write_bytes(b"NITF02.10" + bytes(100))
     with pytest.raises(DataFileError, match="not a readable CPHD"):
         read_cphd(path)
+
+
+def _small_cphd(path: Path, vectors: int = 8, samples: int = 16) -> Path:
+    """A CPHD of ``vectors`` x ``samples`` zeros from a straight pass (no shared files)."""
+    t = np.arange(vectors) * 0.01
+    apc_ned = np.stack([30.0 * t, np.full(vectors, -300.0), np.full(vectors, -300.0)], axis=1)
+    ph = FxPhaseHistory(
+        signal=np.zeros((vectors, samples), dtype=np.complex64),
+        freq_hz=np.linspace(9.5e9, 10.5e9, samples),
+        tx_time_s=t,
+        apc_ecef_m=ned_to_ecef(apc_ned, (45.0, 7.0, 0.0)),
+        srp_ecef_m=np.tile(geodetic_to_ecef(np.array([45.0, 7.0, 0.0])), (vectors, 1)),
+        iarp_lla=(45.0, 7.0, 0.0),
+        collection_start=datetime.datetime(2026, 1, 1, tzinfo=datetime.UTC),
+    )
+    write_cphd(ph, path)
+    return path
+
+
+def test_import_refuses_an_image_or_a_file_that_cannot_fit_before_reading_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``import-cphd`` counts its arrays from the file's header and ``--size`` and refuses
+    what does not fit the memory limit (the machine's, or ``--memory-mib``), naming the
+    option or the file, before it reads the signal or creates the store."""
+    path = _small_cphd(tmp_path / "small.cphd")
+    store = tmp_path / "s.zarr"
+    status = main(["import-cphd", str(path), "--out", str(store), "--size", "1000000"])
+    err = capsys.readouterr().err
+    assert status == 2 and err.startswith("sarmoco: error: --size: --size 1000000: the image takes "
+                                          f"{10**12 * 32} B ("), err  # fmt: skip
+    assert "the machine's memory" in err and not store.exists()
+    status = main(["import-cphd", str(path), "--out", str(store), "--size", "8",
+                   "--memory-mib", "0.004"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert status == 2 and err.startswith(
+        f"sarmoco: error: {path}: {path} 8 vectors x 16 samples: the range compression takes "
+        f"{8 * 16 * 40} B ("
+    ), err
+    assert f"more than the memory limit {round(0.004 * 2**20)} B (" in err and "--memory-mib" in err
+    assert not store.exists()
+    status = main(["import-cphd", str(path), "--out", str(store), "--size", "8",
+                   "--memory-mib", "1"])  # fmt: skip
+    assert status == 0, capsys.readouterr().err
+    assert open_store(store).n_images == 1

@@ -108,14 +108,17 @@ def block_size(round_k: int) -> int:
 
 
 def new_recorder(path: str, seed: int, cls: type[Recorder] = Recorder) -> Recorder:
-    """The writer's recorder (small chunks, an fsync every 50 ms) of class ``cls``."""
+    """The writer's recorder (small chunks, per-pulse metadata in chunks of 128, rows
+    gathered for 20 ms, an fsync every 50 ms) of class ``cls``."""
     return cls(
         path,
         N_SAMPLES,
         "int16",
         config={"seed": seed},
         chunk_pulses=32,
+        meta_chunk_pulses=128,
         fsync_interval_s=0.05,
+        flush_interval_s=0.02,
         chunk_rows=64,
     )
 
