@@ -304,7 +304,7 @@ def spotlight_product(ph: FxPhaseHistory, image: Image, heading_rad: float) -> S
     k_c = 2.0 * f_c / SPEED_OF_LIGHT_MPS
     rate = (t.size - 1) / float(t[-1] - t[0])
     e0_ecef, e1_ecef = ph.ecef(e0) - ph.ecef(np.zeros(3)), ph.ecef(e1) - ph.ecef(np.zeros(3))
-    tx, rcv = ph.polarization
+    tx, rcv = (_sicd_polarization(p) for p in ph.polarization)
     return SicdProduct(
         _sicd_xml(
             _Description(
@@ -330,7 +330,7 @@ def spotlight_product(ph: FxPhaseHistory, image: Image, heading_rad: float) -> S
                 arp_poly=np.asarray(np.polynomial.polynomial.polyfit(t, apc, 5), np.float64),
                 band_hz=(f_lo, f_hi),
                 waveform={"TxRFBandwidth": bandwidth, "TxFreqStart": f_lo},
-                polarization=(tx, f"{tx}:{rcv}"),
+                polarization=(tx, "UNKNOWN" if "UNKNOWN" in (tx, rcv) else f"{tx}:{rcv}"),
                 t_end_proc=float(t[-1]),
                 az_autofocus="NO",
                 processing=[{"Type": "backprojection of the FX phase history", "Applied": True}],
@@ -339,6 +339,12 @@ def spotlight_product(ph: FxPhaseHistory, image: Image, heading_rad: float) -> S
         np.ascontiguousarray(image.data.T[:, ::-1], dtype=np.complex64),
         f"{t.size} vectors",
     )
+
+
+def _sicd_polarization(cphd_pol: str) -> str:
+    """A CPHD channel's TxPol or RcvPol as SICD states one polarization: ``UNKNOWN`` for
+    CPHD's ``UNSPECIFIED`` (SICD has no such value), the others as they are."""
+    return "UNKNOWN" if cphd_pol == "UNSPECIFIED" else cphd_pol
 
 
 def _unit(v: FloatArray) -> FloatArray:

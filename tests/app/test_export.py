@@ -340,6 +340,23 @@ def _crsd_delays_s(
     return offset + (k + 0.5 * (a - c) / (a - 2 * b + c)) / (up * fs)
 
 
+def test_the_cphd_of_a_store_imports_and_its_sicd_passes_the_check(
+    scene: Scene, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """``export --cphd`` then ``import-cphd --sicd``: the store's CPHD states no
+    polarization (``UNSPECIFIED``), which SICD says as ``UNKNOWN``; on a grid that samples
+    the 0.2 m resolution (0.05 m) the spotlight SICD has no failure."""
+    cphd, store, sicd = (scene.out / f"roundtrip.{x}" for x in ("cphd", "zarr", "nitf"))
+    assert main(["export", str(scene.store.path), "--cphd", str(cphd)]) == 0, capsys.readouterr()
+    argv = ["import-cphd", str(cphd), "--out", str(store), "--sicd", str(sicd)]
+    assert main([*argv, "--size", "128", "--pixel-m", "0.05"]) == 0, capsys.readouterr()
+    assert failures(skver.SicdConsistency.from_file, sicd) == []
+    with sicd.open("rb") as f, sksicd.NitfReader(f) as reader:
+        helper = sksicd.XmlHelper(reader.metadata.xmltree)
+    assert helper.load("./{*}RadarCollection/{*}TxPolarization") == "UNKNOWN"
+    assert helper.load("./{*}ImageFormation/{*}TxRcvPolarizationProc") == "UNKNOWN"
+
+
 def test_crsd_of_the_raw_echoes_passes_its_check_and_keeps_times_positions_and_frequencies(
     scene: Scene, capsys: pytest.CaptureFixture[str]
 ) -> None:
