@@ -375,8 +375,8 @@ class Table:
     The other columns are written once their oldest row not written has waited
     ``flush_interval_s``: each file zarr writes costs about a millisecond of CPU, which a
     table written in small blocks (a recording pass every 10 ms) would pay for every
-    column many times a second. A crash loses the rows waiting: fewer than a chunk's of the echoes, at most
-    ``flush_interval_s`` of the others.
+    column many times a second. A crash loses the rows waiting: fewer than a chunk's of
+    the echoes, at most ``flush_interval_s`` of the others.
     """
 
     def __init__(
