@@ -79,6 +79,10 @@ META_CHUNK_S = 0.2
 chunked to hold at least this much of pulses at the radar's rate, s
 (:func:`meta_chunk_pulses`): a chunk file costs zarr about a millisecond of CPU to write,
 and at tens of kHz chunks of ``chunk_pulses`` would be hundreds of files a second."""
+_WRITTEN_AT_ONCE = (schema.INS_BYTES.name, schema.INS_RAW.name)
+"""Tables whose rows are written by each call, whatever ``flush_interval_s``: an ``ins_raw``
+row points into ``ins_bytes``, and must not be committed before its bytes (a live run
+hands them over every quarter of a second already)."""
 _DIRECT_ALIGN = 4096
 """Alignment of the address and length of an ``O_DIRECT`` write, bytes (a page: what every
 Linux block device and file system accepts)."""
@@ -722,9 +726,8 @@ class Recorder(Closing):
         self.sync()
 
     def _create(self, spec: TableSpec) -> Table:
-        table = Table(
-            self.root, spec, self._chunk[spec.per_pulse], self._meta_rows, self.flush_interval_s
-        )
+        flush_s = 0.0 if spec.name in _WRITTEN_AT_ONCE else self.flush_interval_s
+        table = Table(self.root, spec, self._chunk[spec.per_pulse], self._meta_rows, flush_s)
         self.tables[spec.name] = table
         return table
 
