@@ -14,17 +14,21 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(BIN)/sarmoco demo --out demo-out
 
-# Two phases (tests/conftest.py REALTIME says which tests are `realtime` and why): the
-# rest on two pytest-xdist workers, a module's tests on one worker (its fixtures built
-# once; test_install's two in-tree pip builds never overlap), then the realtime tests
-# alone, one after the other. Both phases always run; the target fails when either does
-# (pytest's 5, no test collected, included). The second -m replaces pyproject's, so it
-# names bench and fuzz_long again.
+# Three phases (tests/conftest.py REALTIME and EXCLUSIVE say which tests are `realtime`
+# and `exclusive`, and why): the rest on two pytest-xdist workers, a module's tests on one
+# worker (its fixtures built once; test_install's two in-tree pip builds never overlap);
+# then the realtime tests, a module at a time on two workers (each mostly waits on the
+# clock); then the exclusive ones alone, one after the other. Every phase runs; the
+# target fails when any does (pytest's 5, no test collected, included). The -m options
+# replace pyproject's, so they name bench and fuzz_long again.
+NOT_SLOW := not bench and not fuzz_long
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadscope --durations=15 \
-	  -m "not realtime and not bench and not fuzz_long"; status=$$?; \
-	$(BIN)/python -m pytest -q --durations=15 \
-	  -m "realtime and not bench and not fuzz_long" && exit $$status
+	  -m "not realtime and $(NOT_SLOW)"; s1=$$?; \
+	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadfile --durations=15 \
+	  -m "realtime and not exclusive and $(NOT_SLOW)"; s2=$$?; \
+	$(BIN)/python -m pytest -q -p no:cacheprovider --durations=15 \
+	  -m "exclusive and $(NOT_SLOW)" && exit $$(( s1 || s2 ))
 
 # The documentation site (docs/, mkdocs.yml) into site/: the generated reference pages
 # first, then a strict build (a broken link or anchor fails). The test suite checks both.

@@ -54,15 +54,16 @@ def gotcha_files() -> list[Path]:
     return shared_files("gotcha", "data_3dsar_pass1_az00*_HH.mat", 2)
 
 
-# `make test` runs the suite in two phases: every test but these on two pytest-xdist
-# workers (`-m "not realtime"`), then these alone, one after the other (`-m realtime`).
-# They start `sarmoco run` / `sarmoco sim --serve` processes or play in real time, and
-# judge what happened within wall-clock budgets (UDP pulses taken before the ring fills,
-# TIMESYNC round trips, watchdog pings, /status answering, the page following the tiles):
-# beside a second CPU-bound worker they fail, as the CI runs on a loaded machine did.
-# The key is the file; its value names the test functions concerned (empty: every test
-# of the file). tests/test_realtime_marks.py fails when a module that starts a live run
-# or a daemon is missing here.
+# `make test` runs the suite in three phases: every test but these on two pytest-xdist
+# workers (`-m "not realtime"`); then these, a module at a time on two workers (`-m
+# "realtime and not exclusive"`); then the EXCLUSIVE ones alone, one after the other.
+# Realtime tests start `sarmoco run` / `sarmoco sim --serve` processes or play in real
+# time, and judge what happened within wall-clock budgets (UDP pulses taken before the
+# ring fills, watchdog pings, /status answering): beside a CPU-bound worker they fail, as
+# the CI runs on a loaded machine did, while two of them, each mostly waiting on the
+# clock, share the machine. The key is the file; its value names the test functions
+# concerned (empty: every test of the file). tests/test_realtime_marks.py fails when a
+# module that starts a live run or a daemon is missing here.
 REALTIME: dict[str, tuple[str, ...]] = {
     # a live run (run_loopback) watched in headless Chromium
     "tests/app/test_live_browser.py": (),
@@ -126,10 +127,38 @@ REALTIME: dict[str, tuple[str, ...]] = {
 }
 
 
+EXCLUSIVE: dict[str, tuple[str, ...]] = {
+    # load the machine themselves or measure rates and CPU shares: alone, one at a time
+    "tests/app/test_live_browser.py": (),  # headless Chromium beside a live run
+    "tests/app/test_batch.py": ("test_a_worker_killed_mid_job_costs_only_its_tasks",),
+    "tests/app/test_bench.py": ("test_bench_prints_sane_figures_and_removes_its_folder",),
+    "tests/daemon/test_faults_host.py": (),  # CPU hogs, memory limits, the OOM killer
+    "tests/daemon/test_ingest_keeps_up.py": (),  # a focuser spinning with the GIL held
+    "tests/daemon/test_live_page.py": ("test_live_page_during_a_run",),  # its CPU share
+    "tests/daemon/test_soak_short.py": (),
+    "tests/daemon/test_status.py": (
+        "test_stalled_and_oversized_requests_do_not_stall_the_endpoint",
+    ),
+    "tests/drivers/test_mavlink.py": (
+        "test_udp_round_trip_timesync_rates",
+        "test_timesync_settles_quickly_then_slows_down",
+    ),
+    "tests/sim/test_emit_mavlink.py": ("test_udp_live_timesync_and_rates",),
+}
+"""The realtime tests that run alone (a subset of :data:`REALTIME`)."""
+
+
+def _listed(table: dict[str, tuple[str, ...]], item: pytest.Item) -> bool:
+    names = table.get(item.path.relative_to(REPO).as_posix())
+    return names is not None and (not names or getattr(item, "originalname", "") in names)
+
+
 @pytest.hookimpl(tryfirst=True)  # before `-m` deselects by marker
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Mark the tests of :data:`REALTIME` ``realtime``."""
+    """Mark the tests of :data:`REALTIME` ``realtime``, those of :data:`EXCLUSIVE` also
+    ``exclusive``."""
     for item in items:
-        names = REALTIME.get(item.path.relative_to(REPO).as_posix())
-        if names is not None and (not names or getattr(item, "originalname", "") in names):
+        if _listed(REALTIME, item):
             item.add_marker(pytest.mark.realtime)
+            if _listed(EXCLUSIVE, item):
+                item.add_marker(pytest.mark.exclusive)

@@ -76,6 +76,10 @@ LAYERS = {
 }
 """Each layer and the packages it must not import (docs/design.md)."""
 
+PRODUCTS_FROM_DAEMON = ("sarmoco.daemon.config", "sarmoco.daemon.focuser")
+"""What the products may use of the daemon: the run's configuration as it flew (read back
+from the store's attributes) and the focuser's beam and look angles."""
+
 
 def _layering_violations(package: Path) -> list[str]:
     return [
@@ -202,6 +206,19 @@ def _internal_imports(package: Path) -> list[str]:
 @pytest.mark.parametrize("layer", sorted(LAYERS))
 def test_layering(layer: str) -> None:
     bad = [v for v in _layering_violations(PACKAGE) if v.startswith(f"sarmoco/{layer}/")]
+    assert not bad, bad
+
+
+def test_products_use_only_the_daemons_configuration() -> None:
+    """The ground products stand on the store; of the daemon they read only
+    :data:`PRODUCTS_FROM_DAEMON`."""
+    bad = [
+        f"{p.relative_to(PACKAGE.parent)} imports {name}"
+        for p in sorted((PACKAGE / "products").rglob("*.py"))
+        for name in sorted(_imports(p))
+        if (name == "sarmoco.daemon" or name.startswith("sarmoco.daemon."))
+        and not any(name == f or name.startswith(f + ".") for f in PRODUCTS_FROM_DAEMON)
+    ]
     assert not bad, bad
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from tests.conftest import REALTIME
+from tests.conftest import EXCLUSIVE, REALTIME
 
 LIVE = re.compile(
     r"run_loopback\(|\bDaemon\(|\bPopen\(|pin_to_host=True"
@@ -44,3 +44,10 @@ def test_the_listed_tests_exist(repo_root: Path) -> None:
         source = (repo_root / path).read_text()
         missing = [n for n in names if not re.search(rf"^def {n}\(", source, re.M)]
         assert not missing, f"tests/conftest.py REALTIME names tests not in {path}: {missing}"
+
+
+def test_the_exclusive_tests_are_realtime_ones() -> None:
+    for path, names in EXCLUSIVE.items():
+        assert path in REALTIME, path
+        assert not REALTIME[path] or set(names) <= set(REALTIME[path]), (path, names)
+        assert names or not REALTIME[path], path  # a whole module only if wholly realtime

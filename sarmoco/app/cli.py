@@ -168,6 +168,7 @@ def _cmd_import_cphd(args: argparse.Namespace) -> int:
 
 
 def _cmd_report(args: argparse.Namespace) -> int:
+    from sarmoco.app.truth import read_true_terrain
     from sarmoco.products.array_report import is_array_store, summary_text, write_array_report
     from sarmoco.products.report import write_report
     from sarmoco.store.reader import open_store
@@ -175,7 +176,8 @@ def _cmd_report(args: argparse.Namespace) -> int:
     store = Path(args.store)
     out = Path(args.out) if args.out else store.with_suffix(".report")
     if is_array_store(open_store(store)):
-        summary = write_array_report(open_store(store), out, args.truth and Path(args.truth))
+        truth = None if args.truth is None else read_true_terrain(Path(args.truth))
+        summary = write_array_report(open_store(store), out, truth)
         print(json.dumps(summary) if args.json else summary_text(summary).rstrip("\n"))
         return 0
     if args.truth is not None:

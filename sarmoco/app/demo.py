@@ -23,6 +23,7 @@ import numpy as np
 
 from sarmoco.app.simcommand import platform_arguments, scenario_overrides
 from sarmoco.app.simconfig import loopback_config
+from sarmoco.app.truth import read_true_motion
 from sarmoco.errors import SarmocoError
 from sarmoco.products.report import write_report
 from sarmoco.sim.extended import load_scene
@@ -171,8 +172,8 @@ def run_loopback(
             if proc is not None and proc.poll() is None:
                 proc.kill()
                 proc.wait()
-    truth = out / "truth.json"
+    truth = read_true_motion(out / "truth.json")
     if scn.clutter is None:
-        return write_report(out / "run.zarr", out / "report", truth_path=truth)
+        return write_report(out / "run.zarr", out / "report", truth=truth)
     half = 0.5 * float(np.ptp(scn.clutter.x_m)) + PATCH_MARGIN_M
     return write_report(out / "run.zarr", out / "report", (half, half), truth)

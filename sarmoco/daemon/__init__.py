@@ -8,7 +8,6 @@ __all__ = [
     "array_pipeline",
     "camera",
     "config",
-    "echoring",
     "focuser",
     "logging_setup",
     "pipeline",

@@ -108,6 +108,7 @@ class RadarIngest:
         self._latest_pulse_ns: int | None = None
         self._latest_pulse_mono_ns = 0
         self._first_pulse_ns: int | None = None
+        """Time of the first pulse read, GPS ns."""
         self.time_jumps = 0
         """Pulses refused as stamped too far ahead (:data:`TIME_JUMP_S`)."""
         self._jump_logged_mono = -math.inf
@@ -165,11 +166,9 @@ class RadarIngest:
             elapsed = time.monotonic_ns() - self._latest_pulse_mono_ns if live else 0
             return self._latest_pulse_ns + elapsed
 
-    def read_span_ns(self) -> tuple[int, int] | None:
-        """Times of the first and of the newest pulse read, GPS ns; None before the first."""
+    def first_and_latest_ns(self) -> tuple[int | None, int | None]:
+        """Times of the first and of the newest pulse read, GPS ns (None before the first)."""
         with self._id_lock:
-            if self._first_pulse_ns is None or self._latest_pulse_ns is None:
-                return None
             return self._first_pulse_ns, self._latest_pulse_ns
 
     def _commit(self, block: Block, packets: EchoPackets) -> None:

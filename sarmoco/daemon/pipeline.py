@@ -185,11 +185,11 @@ class Pipeline:
         waiting = self.backlog.oldest_ns()
         if waiting is not None:
             return waiting, False
-        read = self.radar.read_span_ns()
-        recorded = self.tables.recorded_ns
-        if recorded is not None:
-            return recorded, read is not None and recorded == read[1]
-        return None if read is None else read[0], False
+        first, latest = self.radar.first_and_latest_ns()
+        recorded_ns = self.tables.recorded_ns
+        if recorded_ns is not None:
+            return recorded_ns, recorded_ns == latest
+        return first, False
 
     def process(self, now_ns: int | None, on_block: Callable[[], None] | None = None) -> int:
         """:meth:`record` then :meth:`focus` (one thread does both: a replay, tests);

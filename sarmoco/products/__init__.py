@@ -12,7 +12,6 @@ __all__ = [
     "cphd",
     "georeference",
     "geotiff",
-    "quicklook",
     "report",
     "sicd",
 ]

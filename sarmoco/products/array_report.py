@@ -2,7 +2,8 @@
 
 ``sarmoco report RUN.zarr --truth DIR/truth.json --json`` compares each DEM product of the
 store (``compensated``: roll compensated; ``uncompensated``: imaged as if the wing were
-level) with the DEM of a simulated run's ``truth.json``:
+level) with the true terrain (:class:`TrueTerrain`, read by the command from a simulated
+run's ``truth.json``):
 
 - registration: the store's DEMs sit in a frame whose origin is the INS reference point at
   the first imaged pulse, ``geometry.height_m`` above the height datum
@@ -27,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from matplotlib.figure import Figure
 
 from sarmoco.errors import DataFileError, ProcessingError, RecorderError
@@ -40,30 +42,38 @@ DEM_PRODUCTS = {"dem": "compensated", "dem_uncompensated": "uncompensated"}
 PLOT_FILE = "dem.png"
 
 
-def read_truth(path: Path) -> dict[str, Any]:
-    """A simulated array run's ``truth.json``: its ``dem``, ``pulses`` and ``scenario``.
+@dataclass(frozen=True)
+class TrueTerrain:
+    """The true terrain of a scene and the true track of the reference point over it.
 
-    Raises
-    ------
-    DataFileError
-        Naming the file and the key when it cannot be read or lacks the array run's parts.
+    Attributes
+    ----------
+    height_m : ndarray, shape (n_north, n_east)
+        True heights (up) above the terrain's mean, m.
+    spacing_m : float
+        Spacing of the height samples, north and east, m.
+    origin_ne_m : tuple of 2 float
+        North and east of sample ``[0, 0]`` in the scene's local NED frame, m.
+    scene_north_m : tuple of 2 float
+        The imaged strip along track: first and last north, m.
+    scene_half_width_m : float
+        Half width of the imaged swath across track (``|east|``), m.
+    t_ns : ndarray of int64, shape (P,)
+        GPS times of the track's samples on the store's time base, ns, increasing.
+    pos_ned : ndarray, shape (P, 3)
+        True reference point positions at those times, the scene's local NED frame, m.
+    source : str
+        Where the truth was read from, for messages (e.g. ``--truth PATH``).
     """
-    try:
-        truth = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise DataFileError(f"--truth {path}: cannot read as JSON: {exc}") from exc
-    for key, sub in (
-        ("dem", "height_m"),
-        ("dem", "spacing_m"),
-        ("dem", "origin_ne_m"),
-        ("pulses", "t_ns"),
-        ("pulses", "pos_ned"),
-        ("scenario", "scene_north_m"),
-        ("scenario", "scene_half_width_m"),
-    ):
-        if not isinstance(truth, dict) or sub not in truth.get(key, {}):
-            raise DataFileError(f"--truth {path}: no {key}.{sub} (not an array run's truth?)")
-    return dict(truth)
+
+    height_m: FloatArray
+    spacing_m: float
+    origin_ne_m: tuple[float, float]
+    scene_north_m: tuple[float, float]
+    scene_half_width_m: float
+    t_ns: npt.NDArray[np.int64]
+    pos_ned: FloatArray
+    source: str
 
 
 @dataclass(frozen=True)
@@ -84,21 +94,18 @@ class TruthDem:
     east_m: FloatArray
 
 
-def truth_for(dem: DemProduct, truth: dict[str, Any]) -> TruthDem:
+def truth_for(dem: DemProduct, truth: TrueTerrain) -> TruthDem:
     """The truth's scene registered onto ``dem``'s frame by the first imaged pulse."""
-    t = truth["dem"]
-    h = np.asarray(t["height_m"], dtype=np.float64)
-    dx = float(t["spacing_m"])
-    n0, e0 = (float(v) for v in t["origin_ne_m"])
+    h = truth.height_m
+    dx = truth.spacing_m
+    n0, e0 = truth.origin_ne_m
     north = n0 + dx * np.arange(h.shape[0])
     east = e0 + dx * np.arange(h.shape[1])
-    scn = truth["scenario"]
-    lo, hi = (float(v) for v in scn["scene_north_m"])
-    half = float(scn["scene_half_width_m"])
+    lo, hi = truth.scene_north_m
     rows = (north >= lo) & (north <= hi)
-    cols = np.abs(east) <= half
-    pulses_t = np.asarray(truth["pulses"]["t_ns"], dtype=np.int64)
-    pulses_pos = np.asarray(truth["pulses"]["pos_ned"], dtype=np.float64)
+    cols = np.abs(east) <= truth.scene_half_width_m
+    pulses_t = truth.t_ns
+    pulses_pos = truth.pos_ned
     since = (pulses_t - pulses_t[0]).astype(np.float64)
     t0 = float(dem.track.t0_ns - pulses_t[0])
     off = [np.interp(t0, since, pulses_pos[:, i]) - dem.track.origin_ned[i] for i in range(3)]
@@ -106,7 +113,7 @@ def truth_for(dem: DemProduct, truth: dict[str, Any]) -> TruthDem:
     return TruthDem(h[np.ix_(rows, cols)] + off[2], north[rows] - off[0], east[cols] - off[1])
 
 
-def dem_report(store: RunStore, truth_path: Path, out_dir: Path) -> dict[str, Any]:
+def dem_report(store: RunStore, truth: TrueTerrain, out_dir: Path) -> dict[str, Any]:
     """Statistics of every DEM product of ``store`` against the truth, and ``dem.png``.
 
     Returns
@@ -121,9 +128,8 @@ def dem_report(store: RunStore, truth_path: Path, out_dir: Path) -> dict[str, An
     RecorderError
         The store holds no compensated DEM (not an array run).
     DataFileError
-        The truth cannot be read or shares no cell with the DEM.
+        The truth shares no cell with the DEM.
     """
-    truth = read_truth(truth_path)
     out: dict[str, Any] = {}
     panels: list[tuple[str, DemProduct, FloatArray, FloatArray]] = []
     for key, name in DEM_PRODUCTS.items():
@@ -137,7 +143,7 @@ def dem_report(store: RunStore, truth_path: Path, out_dir: Path) -> dict[str, An
         try:
             stats = evaluate_dem(dem, t.height_m, t.north_m, t.east_m, 0.5 * resolution)
         except ProcessingError as exc:
-            raise DataFileError(f"--truth {truth_path}: {name} DEM: {exc}") from exc
+            raise DataFileError(f"{truth.source}: {name} DEM: {exc}") from exc
         out[key] = stats.as_dict() | {"blocks": list(dem.blocks)}
         truth_h = truth_on_product(dem, t.height_m, t.north_m, t.east_m)
         panels.append((name, dem, truth_h, dem.height_m - truth_h))
@@ -180,7 +186,7 @@ def is_array_store(store: RunStore) -> bool:
     return isinstance(radar, dict) and radar.get("mode") == "array"
 
 
-def write_array_report(store: RunStore, out_dir: Path, truth_path: Path | None) -> dict[str, Any]:
+def write_array_report(store: RunStore, out_dir: Path, truth: TrueTerrain | None) -> dict[str, Any]:
     """The summary of an array run (``report.json`` in ``out_dir``); with a truth, the DEM
     statistics and plot of :func:`dem_report`."""
     attrs = store.attrs
@@ -189,8 +195,8 @@ def write_array_report(store: RunStore, out_dir: Path, truth_path: Path | None) 
         "complete": bool(attrs.get("complete", False)),
         "run": attrs.get("metrics", {}),
     }
-    if truth_path is not None:
-        summary |= dem_report(store, truth_path, out_dir)
+    if truth is not None:
+        summary |= dem_report(store, truth, out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     (out_dir / "report.json").write_text(json.dumps(summary, indent=1))
     return summary

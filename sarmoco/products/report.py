@@ -23,6 +23,7 @@ import html
 import json
 import math
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -439,8 +440,25 @@ def _los_acceleration(
     return _smooth(acc, round(window_s / float(np.median(np.diff(t_s)))))
 
 
+@dataclass(frozen=True)
+class TrueMotion:
+    """The antenna phase centre's true motion (a simulated run's), to score the INS's
+    motion solution and the autofocus's residual against.
+
+    Attributes
+    ----------
+    t_ns : ndarray of int64, shape (N,)
+        Times of the samples on the store's GPS time base, ns, increasing.
+    vel_ned : ndarray of float64, shape (N, 3)
+        True APC velocity, NED, m/s.
+    """
+
+    t_ns: npt.NDArray[np.int64]
+    vel_ned: npt.NDArray[np.float64]
+
+
 def motion_comparison(
-    store: RunStore, truth: Mapping[str, Any] | None = None
+    store: RunStore, truth: TrueMotion | None = None
 ) -> tuple[dict[str, dict[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]],
            dict[str, float]]:  # fmt: skip
     """The INS's LOS motion beside the autofocus's residual estimate (and the truth's).
@@ -450,9 +468,8 @@ def motion_comparison(
     methods.md §3; positive toward the scene, as ``d_los``), one per subaperture; its
     double integral (trapezoid over the subaperture centres) is the residual displacement
     it found, shown less its best line (a Doppler rate sees neither offset nor drift).
-    With the simulator's truth (``truth.json``: true APC velocities per pulse, GPS time
-    shifted by ``wire.shift_ns``) the true LOS displacement is integrated as the daemon
-    integrates the INS's, and the residual the autofocus should find is true − INS.
+    With the true motion the true LOS displacement is integrated as the daemon integrates
+    the INS's, and the residual the autofocus should find is true − INS.
     Times: s from the first compensated pulse; the autofocus's time axis starts at the
     first pulse it was given, the same pulse for a run of one segment.
 
@@ -490,9 +507,9 @@ def motion_comparison(
     stats = {"ins_d_los_rms_m": float(np.sqrt(np.mean(ins**2)))}
     true_resid = None
     if truth is not None:
-        tt = np.asarray(truth["pulses"]["t_ns"], dtype=np.int64) + int(truth["wire"]["shift_ns"])
+        tt = truth.t_ns
         track = _track(store.attrs["reference_track"])
-        vel = vector_to_imaging(np.asarray(truth["pulses"]["vel_ned"], dtype=np.float64), track)
+        vel = vector_to_imaging(truth.vel_ned, track)
         keep = tt >= t0
         yz, _ = integrate_los(tt[keep], vel[keep][:, 1:], LosState())
         true_los = np.interp(t, (tt[keep] - t0) * 1e-9,
@@ -535,13 +552,13 @@ def write_report(
     store_path: Path,
     out_dir: Path,
     compare_half_m: tuple[float, float] = (COMPARE_HALF_M, COMPARE_HALF_M),
-    truth_path: Path | None = None,
+    truth: TrueMotion | None = None,
 ) -> dict[str, Any]:
     """Write the quicklooks and the summary of a store; returns the summary.
 
     ``compare_half_m``: half size of the comparison window (:func:`write_comparison`), m.
-    ``truth_path``: the simulator's ``truth.json`` of the run, for the true motion in
-    ``motion_estimates.png`` (:func:`motion_comparison`).
+    ``truth``: the run's true motion, drawn in ``motion_estimates.png`` and scored
+    (:func:`motion_comparison`).
 
     Raises
     ------
@@ -549,7 +566,6 @@ def write_report(
         If the store cannot be opened or holds no pulses.
     """
     store = open_store(store_path, skip_damaged=True)
-    truth = None if truth_path is None else _read_truth(truth_path)
     out_dir.mkdir(parents=True, exist_ok=True)
     attrs = store.attrs
     summary: dict[str, Any] = {
@@ -615,28 +631,6 @@ def write_report(
     (out_dir / "report.txt").write_text(text)
     (out_dir / "index.html").write_text(_html(summary, text, out_dir))
     return summary
-
-
-def _read_truth(path: Path) -> dict[str, Any]:
-    """The simulator's truth record (JSON object with ``pulses`` and ``wire``).
-
-    Raises
-    ------
-    RecorderError
-        Unreadable, not JSON, or without the keys the motion plot reads.
-    """
-    try:
-        truth = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise RecorderError(f"{path}: not a simulator truth record ({exc})") from exc
-    pulses = truth.get("pulses") if isinstance(truth, dict) else None
-    wire = truth.get("wire") if isinstance(truth, dict) else None
-    if not (isinstance(pulses, dict) and {"t_ns", "vel_ned"} <= pulses.keys()
-            and isinstance(wire, dict) and "shift_ns" in wire):  # fmt: skip
-        raise RecorderError(
-            f"{path}: not a simulator truth record (pulses.t_ns, pulses.vel_ned, wire.shift_ns)"
-        )
-    return dict(truth)
 
 
 def _has_echoes(store: RunStore) -> bool:

@@ -15,5 +15,4 @@ __all__ = [
     "recorder",
     "schema",
     "verify",
-    "writer",
 ]

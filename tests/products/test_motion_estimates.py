@@ -4,7 +4,6 @@ and the simulator's truth, on a real store (``sarmoco sim --out`` replayed by
 
 from __future__ import annotations
 
-import json
 import subprocess
 import sys
 from pathlib import Path
@@ -13,6 +12,7 @@ import numpy as np
 import pytest
 from PIL import Image as PilImage
 
+from sarmoco.app.truth import read_true_motion
 from sarmoco.errors import RecorderError
 from sarmoco.products.report import motion_comparison, write_report
 from sarmoco.store.reader import open_store
@@ -45,7 +45,7 @@ def test_truth_ins_and_autofocus_agree_on_the_residual(replayed: Path) -> None:
     """The true LOS displacement, integrated as the daemon integrates the INS's, follows the
     INS's to a drift (no Doppler rate sees it): what is left, and what the autofocus found
     on the point targets, are sub-millimetre against 6 cm of motion."""
-    truth = json.loads((replayed / "sim" / "truth.json").read_text())
+    truth = read_true_motion(replayed / "sim" / "truth.json")
     panels, stats = motion_comparison(open_store(replayed / "replay.zarr"), truth)
     print({k: f"{1e3 * v:.3f} mm" for k, v in stats.items()})
     assert stats["ins_d_los_rms_m"] > 0.03
@@ -60,7 +60,9 @@ def test_truth_ins_and_autofocus_agree_on_the_residual(replayed: Path) -> None:
 
 def test_report_draws_it_with_and_without_the_truth(replayed: Path, tmp_path: Path) -> None:
     summary = write_report(
-        replayed / "replay.zarr", tmp_path / "r", truth_path=replayed / "sim" / "truth.json"
+        replayed / "replay.zarr",
+        tmp_path / "r",
+        truth=read_true_motion(replayed / "sim" / "truth.json"),
     )
     assert "true_residual_rms_m" in summary["motion_estimates"]
     picture = PilImage.open(tmp_path / "r" / "motion_estimates.png")
@@ -72,4 +74,4 @@ def test_report_draws_it_with_and_without_the_truth(replayed: Path, tmp_path: Pa
     bad = tmp_path / "truth.json"
     bad.write_text('{"pulses": {}}')
     with pytest.raises(RecorderError, match=r"wire\.shift_ns"):
-        write_report(replayed / "replay.zarr", tmp_path / "bad", truth_path=bad)
+        read_true_motion(bad)
