@@ -79,6 +79,10 @@ META_CHUNK_S = 0.2
 chunked to hold at least this much of pulses at the radar's rate, s
 (:func:`meta_chunk_pulses`): a chunk file costs zarr about a millisecond of CPU to write,
 and at tens of kHz chunks of ``chunk_pulses`` would be hundreds of files a second."""
+_WRITTEN_AT_ONCE = (schema.INS_BYTES.name, schema.INS_RAW.name)
+"""Tables whose rows are written by each call, whatever ``flush_interval_s``: an ``ins_raw``
+row points into ``ins_bytes``, and must not be committed before its bytes (a live run
+hands them over every quarter of a second already)."""
 _DIRECT_ALIGN = 4096
 """Alignment of the address and length of an ``O_DIRECT`` write, bytes (a page: what every
 Linux block device and file system accepts)."""
@@ -372,11 +376,11 @@ class Table:
     A column whose chunks hold :data:`DIRECT_MIN_BYTES` or more (raw echoes) is written a
     whole chunk at a time: the rows of its partial chunk wait until it is full (or
     :meth:`trim` writes them), and ``committed`` stays at the chunk boundary until then.
-    The other columns are written when ``flush_interval_s`` has passed since their last
-    write: each file zarr writes costs about a millisecond of CPU, which a table written
-    in small blocks (a recording pass every 10 ms) would pay for every column many times
-    a second. A crash loses the rows waiting: fewer than a chunk's of the echoes, at most
-    ``flush_interval_s`` of the others.
+    The other columns are written once their oldest row not written has waited
+    ``flush_interval_s``: each file zarr writes costs about a millisecond of CPU, which a
+    table written in small blocks (a recording pass every 10 ms) would pay for every
+    column many times a second. A crash loses the rows waiting: fewer than a chunk's of
+    the echoes, at most ``flush_interval_s`` of the others.
     """
 
     def __init__(
@@ -428,11 +432,9 @@ class Table:
         """First row held of each column (the start of a chunk)."""
         self._stored = dict.fromkeys(spec.columns, 0)
         """Rows of each column in the store."""
-        self._flushed_mono = time.monotonic()
-        self._flushed_rows = 0
-        """Rows handed by the last write that was due (all written then)."""
-        self._dirty = False
-        """Flags were set since the last write that was due (:meth:`or_flags`)."""
+        self._waiting_since: float | None = None
+        """When the oldest rows or flags not written yet came (host monotonic clock, s;
+        None: none is waiting)."""
         self._late_flags: list[tuple[str, npt.NDArray[np.int64], npt.NDArray[Any]]] = []
         """Flags to OR into rows of the store at the next write that is due: (column, rows,
         value)."""
@@ -491,7 +493,8 @@ class Table:
             )
         stop = start + next(iter(rows.values())).shape[0]
         now = time.monotonic()
-        due = force or self._dirty or now - self._flushed_mono >= self.flush_interval_s
+        self._waiting_since = now if self._waiting_since is None else self._waiting_since
+        due = force or now - self._waiting_since >= self.flush_interval_s
         try:
             if due:
                 self._apply_late_flags()
@@ -530,7 +533,7 @@ class Table:
         self._handed = stop
         self.committed = committed
         if due:
-            self._flushed_mono, self._flushed_rows, self._dirty = now, stop, False
+            self._waiting_since = None
         return committed
 
     def flush(self) -> int:
@@ -539,10 +542,10 @@ class Table:
         return self.write(empty, self._handed, force=True)
 
     def flush_due(self) -> None:
-        """Write the rows held when ``flush_interval_s`` has passed since the last write
-        (rows of whole-chunk columns wait for their chunk to fill)."""
-        waiting = self._handed > self._flushed_rows or self._dirty
-        if waiting and time.monotonic() - self._flushed_mono >= self.flush_interval_s:
+        """Write the rows and flags that have waited ``flush_interval_s`` (rows of
+        whole-chunk columns wait for their chunk to fill)."""
+        since = self._waiting_since
+        if since is not None and time.monotonic() - since >= self.flush_interval_s:
             empty = {k: v[:0] for k, v in self._held.items()}
             self.write(empty, self._handed)
 
@@ -555,7 +558,7 @@ class Table:
         held = rows[rows >= first]
         self._held[column][held - first] |= value
         self._late_flags.append((column, rows[rows < first], value))
-        self._dirty = True
+        self._waiting_since = self._waiting_since or time.monotonic()
         if self.flush_interval_s == 0:
             self.flush_due()
 
@@ -724,9 +727,8 @@ class Recorder(Closing):
         self.sync()
 
     def _create(self, spec: TableSpec) -> Table:
-        table = Table(
-            self.root, spec, self._chunk[spec.per_pulse], self._meta_rows, self.flush_interval_s
-        )
+        flush_s = 0.0 if spec.name in _WRITTEN_AT_ONCE else self.flush_interval_s
+        table = Table(self.root, spec, self._chunk[spec.per_pulse], self._meta_rows, flush_s)
         self.tables[spec.name] = table
         return table
 
