@@ -40,7 +40,6 @@ from distributed import get_task_stream
 
 from sarmoco.app.batch import Recording, cluster_client, run_batch
 from sarmoco.daemon.config import load_config
-from sarmoco.daemon.focuser import imaged_beam_rad
 from sarmoco.daemon.runner import replay_files
 from sarmoco.store.reader import open_store
 from tests.workloads.dask_cluster import separate_cluster
@@ -123,7 +122,7 @@ def main() -> None:
         start, cpu = time.perf_counter(), time.process_time()
         summary = replay_files(cfg, radar, nav, single, progress=False)
         single_s, single_cpu_s = time.perf_counter() - start, time.process_time() - cpu
-        work_pp = pixel_pulses(single, imaged_beam_rad(cfg), cfg.geometry.height_m)
+        work_pp = pixel_pulses(single, cfg.imaging.imaged_beam_rad(), cfg.geometry.height_m)
         print(json.dumps({"single_process_s": round(single_s, 2), "tiles": summary.tiles,
                           "pulses": args.pulses, "scale": args.scale,
                           "pixel_pulses": float(f"{work_pp:.4g}"),
