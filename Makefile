@@ -89,6 +89,8 @@ install:
 	install -d '$(DESTDIR)$(PREFIX)/share/sarmoco'
 	touch '$(DESTDIR)$(PREFIX)/$(INSTALL_MARK)'
 	install -D -m 0644 README.md '$(DESTDIR)$(DOCDIR)/README.md'
+	install -d '$(DESTDIR)$(DOCDIR)/docs'
+	cp -R docs/. '$(DESTDIR)$(DOCDIR)/docs/'
 	install -D -m 0644 systemd/sarmoco.toml '$(DESTDIR)$(DOCDIR)/sarmoco.toml.example'
 	install -d '$(DESTDIR)$(UNITDIR)'
 	sed -e 's|/etc/sarmoco|$(SYSCONFDIR)/sarmoco|g' -e 's|/opt/sarmoco|$(PREFIX)|g' \

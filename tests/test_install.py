@@ -6,7 +6,8 @@ pinned dependencies, whose download would take minutes).
 
 - Staged (``DESTDIR``, ``PREFIX=/opt/sarmoco``): the venv's scripts run from PREFIX
   (no DESTDIR left in them), the unit starts ``/opt/sarmoco/bin/sarmoco`` and documents
-  the README installed under PREFIX, the sysctl drop-in is in place, an existing
+  the README installed under PREFIX (with the documentation pages its links name), the
+  sysctl drop-in is in place, an existing
   ``/etc/sarmoco/sarmoco.toml`` is not overwritten, and uninstall leaves only that
   operator file.
 - In place (``PREFIX`` and ``SYSCONFDIR`` under the temporary directory, no DESTDIR): the
@@ -17,6 +18,7 @@ pinned dependencies, whose download would take minutes).
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -76,7 +78,10 @@ def test_staged_install_and_uninstall(repo_root: Path, tmp_path: Path) -> None:
     )
     doc = _unit_line(unit, "Documentation")
     assert doc == "file:/opt/sarmoco/share/doc/sarmoco/README.md"
-    assert (root / doc.removeprefix("file:/")).read_text() == (repo_root / "README.md").read_text()
+    readme = root / doc.removeprefix("file:/")
+    assert readme.read_text() == (repo_root / "README.md").read_text()
+    pages = re.findall(r"\]\((docs/[^)#]+)", readme.read_text())  # its links into the docs
+    assert pages and [p for p in pages if not (readme.parent / p).is_file()] == [], pages
     assert (root / "etc/sysctl.d/90-sarmoco.conf").read_text() == (
         repo_root / "systemd/sarmoco-sysctl.conf"
     ).read_text()
