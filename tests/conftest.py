@@ -115,6 +115,8 @@ REALTIME: dict[str, tuple[str, ...]] = {
     # a 2.5 s autopilot thread answering TIMESYNC: bounds, request timing, sample counts
     "tests/drivers/test_mavlink.py": (
         "test_udp_round_trip_timesync_rates",
+        "test_the_autopilot_is_chosen_not_the_first_system_heard",
+        "test_a_wall_clock_step_moves_no_sample",
         "test_timesync_settles_quickly_then_slows_down",
         "test_signing_rejects_unsigned_and_bad_keys",
     ),

@@ -15,6 +15,8 @@ from sarmoco.store.recorder import Recorder, _SyncingStore, meta_chunk_pulses
 
 PRF_HZ = 20_000.0
 """The pulse rate of thz-spotlight: a recording pass every 10 ms takes 200 pulses."""
+INTERVAL_S = 1.0
+"""The flush interval of the batching test, s (a margin for a loaded machine)."""
 
 
 def _count_calls(monkeypatch: pytest.MonkeyPatch, method: str) -> list[str]:
@@ -64,12 +66,12 @@ def test_rows_wait_for_the_flush_interval_and_flags_reach_the_rows_held(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """Half a second at 20 kHz in recording passes of 200 pulses with a flush interval of
-    0.25 s: a handful of chunk files instead of a few per pass, none when no row came; rows
-    held are not committed until written, and a flag set on rows held (or already written)
-    is stored."""
+    1 s (a margin for a loaded machine): a handful of chunk files instead of a few per
+    pass, none when no row came; rows held are not committed until written, and a flag set
+    on rows held (or already written) is stored."""
     path = tmp_path / "r.zarr"
     rec = Recorder(
-        path, 4096, raw_echoes=False, flush_interval_s=0.25,
+        path, 4096, raw_echoes=False, flush_interval_s=INTERVAL_S,
         meta_chunk_pulses=meta_chunk_pulses(256, PRF_HZ),
     )  # fmt: skip
     writes = _count_calls(monkeypatch, "set")
@@ -82,14 +84,14 @@ def test_rows_wait_for_the_flush_interval_and_flags_reach_the_rows_held(
         _append(rec, 200 * k, 200)
         rec.flush_due()
     rec.flag_pulses([7, 9_999], 0x80)
-    time.sleep(0.26)
+    time.sleep(INTERVAL_S)
     rec.flush_due()
     assert open_store(path).committed("pulses") == 200 * passes
     chunk_files = [k for k in writes if "/c/" in k]
     assert len(chunk_files) < passes, writes  # written every pass: 4 files a pass
     writes.clear()
     for _ in range(2):
-        time.sleep(0.26)
+        time.sleep(INTERVAL_S / 2)
         rec.flush_due()
     assert writes == []  # nothing new: nothing written again
     rec.close()
