@@ -39,6 +39,9 @@ class DriverCounters:
     bus_error_states : int
         Times the link's adapter reported its bus in a worse error state than before
         (CAN error warning, error passive, bus-off).
+    kernel_drops : int
+        Datagrams the operating system discarded because the socket's receive buffer was
+        full (UDP links, where the kernel tells): lost before the driver saw them.
     """
 
     bytes: int = 0
@@ -50,6 +53,7 @@ class DriverCounters:
     rejected: int = 0
     skipped_bytes: int = 0
     bus_error_states: int = 0
+    kernel_drops: int = 0
 
     def snapshot(self) -> dict[str, int]:
         """A copy of the counters as a plain dict (for status and the recorder)."""

@@ -22,6 +22,7 @@ import numpy.typing as npt
 from sarmoco.closing import Closing
 from sarmoco.drivers.samples import EchoPacket, EchoPackets
 from sarmoco.drivers.udpbatch import DatagramReceiver
+from sarmoco.drivers.udpdrops import socket_drops
 from sarmoco.drivers.vita49 import BATCH_MIN_PACKETS, VitaDecoder, VitaStreamFramer
 from sarmoco.errors import DriverError
 
@@ -37,6 +38,10 @@ UDP_BATCH_PACKETS = 128
 UDP_GATHER_S = 0.002
 """When a caller with room for a batch finds fewer datagrams waiting than make one, the
 pause (once per call) that lets a batch build up: fewer wake-ups, batched decoding."""
+
+
+KERNEL_DROPS_POLL_S = 0.5
+"""How often a UDP radar link reads the kernel's drop count of its socket, s."""
 
 
 class RadarSource(Closing):
@@ -124,8 +129,13 @@ class RadarUdpSource(RadarSource):
         self.stage = np.empty((UDP_BATCH_PACKETS, decoder.max_packet_bytes + 4), np.uint8)
         """Where datagrams land, one per row (:meth:`receive`), before they are decoded."""
         self.receiver = DatagramReceiver(self._sock, self.stage, batch_receive)
+        self._kernel_drops = 0
+        """The kernel's drop count of the socket when last read."""
+        self._kernel_drops_mono = -np.inf
 
     def read_into(self, out: npt.NDArray[np.generic], timeout_s: float = 0.1) -> EchoPackets:
+        if time.monotonic() - self._kernel_drops_mono >= KERNEL_DROPS_POLL_S:
+            self.count_kernel_drops()
         parts: list[EchoPackets] = []
         got, rows = 0, out.shape[0]
         if rows == 0 or not select.select([self], [], [], timeout_s)[0]:
@@ -158,11 +168,30 @@ class RadarUdpSource(RadarSource):
         except OSError as exc:
             raise DriverError(f"radar udp {self.address}: {exc}") from exc
 
+    def count_kernel_drops(self) -> int:
+        """Add the datagrams the kernel dropped since the last look (receive buffer full)
+        to ``decoder.counters.kernel_drops``, logging a warning when there are any; returns
+        how many were added. Called every :data:`KERNEL_DROPS_POLL_S` by
+        :meth:`read_into` and at :meth:`close`."""
+        self._kernel_drops_mono = time.monotonic()
+        total = socket_drops(self._sock)
+        if total is None or total <= self._kernel_drops:
+            return 0
+        new, self._kernel_drops = total - self._kernel_drops, total
+        self.decoder.counters.kernel_drops += new
+        log.warning(
+            "radar udp %s: the kernel dropped %d datagrams (receive buffer of %d bytes full: "
+            "the reader fell behind)", self.address, new, self.rcvbuf_bytes,
+        )  # fmt: skip
+        return new
+
     def fileno(self) -> int:
         """The socket's file descriptor (to wait for datagrams with :func:`select.select`)."""
         return self._sock.fileno()
 
     def close(self) -> None:
+        if self._sock.fileno() >= 0:
+            self.count_kernel_drops()
         self._sock.close()
 
 

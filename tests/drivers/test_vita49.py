@@ -76,6 +76,27 @@ def test_udp_round_trip(fmt: str, base: str) -> None:
     assert dec.counters.frames == 41 and dec.counters.gaps == 0
 
 
+def test_datagrams_the_kernel_drops_are_counted(caplog: pytest.LogCaptureFixture) -> None:
+    """A burst larger than the socket's receive buffer, sent while nobody reads: every
+    datagram not received was dropped by the kernel, and the source counts each one."""
+    n = 400
+    dec = VitaDecoder(N, leap_s=18)
+    with RadarUdpSource("127.0.0.1", 0, dec, rcvbuf_bytes=64 * 1024) as src:
+        tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        for p in packets(pulses(n)):
+            tx.sendto(p, src.address)
+        tx.close()
+        out = np.zeros((n, N), np.complex64)
+        got = 0
+        while batch := src.read_into(out[got:], timeout_s=0.2):
+            got += len(batch)
+        assert 0 < got < n  # the burst overflowed the buffer
+        src.count_kernel_drops()
+        assert dec.counters.kernel_drops == n - got
+    assert dec.counters.kernel_drops == n - got  # nothing more at close
+    assert f"the kernel dropped {n - got} datagrams" in caplog.text
+
+
 def test_int16_ring_keeps_raw_counts() -> None:
     iq = pulses(2)
     dec = VitaDecoder(N, "int16")
