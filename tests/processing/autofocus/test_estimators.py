@@ -7,9 +7,14 @@ import pytest
 
 from sarmoco.processing.autofocus import AutofocusConfig, AutofocusGeometry
 from sarmoco.processing.autofocus import doppler_rate as dr
-from sarmoco.processing.autofocus.lines import fit_accel, los_accel, measure_line_rates, select_bands
-from sarmoco.processing.autofocus.report import LineRates
+from sarmoco.processing.autofocus.lines import (
+    fit_accel,
+    los_accel,
+    measure_line_rates,
+    select_bands,
+)
 from sarmoco.processing.autofocus.pga import pga
+from sarmoco.processing.autofocus.report import LineRates
 from sarmoco.processing.autofocus.separation import fit_accelerations, fit_range_polynomial
 from sarmoco.processing.autofocus.splice import integrate_twice, zero_line_start
 from tests.processing.autofocus import _synth as S
