@@ -61,16 +61,6 @@ every estimate (a stretch of echoes without scatterers: the beam not yet on the 
 past it) it is taken as no rate error."""
 
 
-DISAGREEMENT_CELLS = 1.0
-"""A subaperture whose lines leave a fit residual (weighted RMS) above this many Doppler-rate
-resolution cells, ``1 / T²`` for a subaperture of T seconds, makes no estimate (bridged
-from its neighbours): its lines do not measure one motion. A common rate error leaves
-residuals of a few tenths of a Hz/s; lines whose scatterers enter the beam inside the
-subaperture answer with the edge of their echo (on the independent acceptance scene at
--4° of crab looking left: 24 Hz/s of residual, 1 / T² = 6.25 Hz/s at 0.4 s), and their
-fit put 3 Hz/s of rate error into the spliced series where the targets' apertures begin."""
-
-
 def _seconds(t_ns: IntArray, t0_ns: int) -> FloatArray:
     return np.asarray(t_ns - t0_ns, dtype=float) * 1e-9
 
@@ -142,7 +132,6 @@ class SlidingSubapertureAutofocus:
         self.report = AutofocusReport()
         self._lookahead = math.ceil(config.subaperture_s / (2.0 * config.hop_s) - 1e-9)
         self._bin_m = float(self.range_m[1] - self.range_m[0])
-        self._disagree_hz_per_s = DISAGREEMENT_CELLS / config.subaperture_s**2
         self._t0_ns: int | None = None
         self._t = np.zeros(0)
         self._t_ns = np.zeros(0, dtype=np.int64)
@@ -255,8 +244,6 @@ class SlidingSubapertureAutofocus:
                 self.config,
             )
             (ay, az), res = fit_accel(lines, self.geometry)
-            if res > self._disagree_hz_per_s:
-                (ay, az), res = (float("nan"), float("nan")), float("nan")
             self._env_lines.append(lines)
             self._accel.append((ay, az))
             self._accel_res.append(res)
@@ -351,8 +338,6 @@ class SlidingSubapertureAutofocus:
             lines = dataclasses.replace(lines, bands=lines.bands * rot)
         rates = measure_line_rates(lines, t, self.range_m, self.geometry, self.config)
         step, kres = fit_kappa(rates, self.geometry, self.config.range_order)
-        if kres > self._disagree_hz_per_s:
-            step = np.full(3, np.nan)
         kappa = base + step if p == 0 or np.all(np.isfinite(step)) else base
         self._kappa[p].append(kappa)
         if p == len(self._kappa) - 1:
