@@ -19,9 +19,11 @@ from sarmoco.processing.autofocus.doppler_rate import (
 )
 from sarmoco.processing.autofocus.report import LineRates
 from sarmoco.processing.autofocus.separation import (
+    acceleration_design,
     fit_accelerations,
     fit_range_polynomial,
     look_angle,
+    weighted_lstsq,
 )
 from sarmoco.processing.autofocus.settings import AutofocusConfig, AutofocusGeometry
 from sarmoco.processing.mocomp import shift_range
@@ -204,14 +206,38 @@ NEGLIGIBLE_WEIGHT = 1e-3
 they count neither in the fits nor toward the lines a range model needs)."""
 
 
+SEPARATION_LINES = 4
+"""Usable lines from which the envelope step separates a_y from a_z (two more than the two
+unknowns, as :func:`~sarmoco.processing.autofocus.separation.fit_range_polynomial` asks of
+its model); with fewer, the acceleration is taken along the scene-centre line of sight."""
+
+
 def fit_accel(lines: LineRates, geometry: AutofocusGeometry) -> tuple[tuple[float, float], float]:
     """(a_y, a_z), m/s², and the fit's residual, Hz/s; NaN (no estimate) with fewer than two
-    usable lines."""
+    usable lines.
+
+    The rows ``(2/λ)(sin β_i, cos β_i)`` of lines a few degrees of look angle apart are
+    nearly parallel: solved exactly through two or three lines, the rate differences of
+    noise, or of a target entering the beam, become accelerations of tens of m/s² (on the
+    independent acceptance scene at 4° of crab: two lines gave a_y = 116,
+    a_z = -184 m/s², 7.6 m/s² along the line of sight; the integrated envelope shift then
+    had the never-worse check reject the corrections over the rest of the run, -9.4 dB
+    azimuth PSLR). With fewer than :data:`SEPARATION_LINES` usable lines the lines measure
+    one acceleration along the scene-centre line of sight (β_c), which is all the envelope
+    correction takes of them (:func:`los_accel`).
+    """
     if lines.n_used < 2:
         return (float("nan"), float("nan")), float("nan")
-    return fit_accelerations(
-        lines.range_m, lines.rate_hz_per_s, lines.weight, geometry.depth_m, geometry.wavelength_m
-    )
+    if lines.n_used >= SEPARATION_LINES:
+        return fit_accelerations(
+            lines.range_m, lines.rate_hz_per_s, lines.weight, geometry.depth_m,
+            geometry.wavelength_m,
+        )  # fmt: skip
+    beta_c = float(look_angle(np.array([geometry.ref_range_m]), geometry.depth_m)[0])
+    los_c = np.array([np.sin(beta_c), np.cos(beta_c)])
+    design = acceleration_design(lines.range_m, geometry.depth_m, geometry.wavelength_m) @ los_c
+    (a_los,), res = weighted_lstsq(design[:, None], lines.rate_hz_per_s, lines.weight)
+    return (float(a_los * los_c[0]), float(a_los * los_c[1])), res
 
 
 def fit_kappa(

@@ -7,8 +7,14 @@ import pytest
 
 from sarmoco.processing.autofocus import AutofocusConfig, AutofocusGeometry
 from sarmoco.processing.autofocus import doppler_rate as dr
-from sarmoco.processing.autofocus.lines import measure_line_rates, select_bands
+from sarmoco.processing.autofocus.lines import (
+    fit_accel,
+    los_accel,
+    measure_line_rates,
+    select_bands,
+)
 from sarmoco.processing.autofocus.pga import pga
+from sarmoco.processing.autofocus.report import LineRates
 from sarmoco.processing.autofocus.separation import fit_accelerations, fit_range_polynomial
 from sarmoco.processing.autofocus.splice import integrate_twice, zero_line_start
 from tests.processing.autofocus import _synth as S
@@ -76,6 +82,21 @@ def test_separation_recovers_accelerations(accelerated: S.Synthetic) -> None:
     )
     assert abs(ay - ACC_YZ[0]) < 0.02 and abs(az - ACC_YZ[1]) < 0.1
     assert res < 0.5
+
+
+def test_few_lines_give_a_line_of_sight_acceleration() -> None:
+    """Two or three lines a few metres apart in range cannot separate a_y from a_z: their
+    rates, 0.3 Hz/s apart as noise leaves them, give the line-of-sight acceleration that a
+    common rate error means, not tens of m/s² (the exact 2 x 2 solve)."""
+    geo = AutofocusGeometry(0.02, 17.5, 438.0, 900.0)
+    for r, rates in [([846.0, 851.0], [2.0, 2.3]), ([846.0, 849.0, 851.0], [2.0, 2.2, 2.3])]:
+        n = len(r)
+        lines = LineRates(np.array(r), np.array(rates), np.ones(n), np.ones(n), np.full(n, 30.0))
+        (ay, az), _ = fit_accel(lines, geo)
+        a_los = float(los_accel(np.array([ay, az]), geo))
+        # rate = (2/λ) a_los cos(β - β_c): within 0.1 % of (2/λ) a_los at these ranges
+        assert a_los == pytest.approx(np.mean(rates) * geo.wavelength_m / 2.0, rel=0.05)
+        assert np.hypot(ay, az) == pytest.approx(abs(a_los), rel=1e-9)
 
 
 def test_range_polynomial_and_outlier() -> None:
