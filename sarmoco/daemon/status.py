@@ -23,6 +23,7 @@ own thread, and one that does not finish its request within
 from __future__ import annotations
 
 import json
+import logging
 import math
 import re
 import shutil
@@ -41,6 +42,8 @@ from sarmoco.daemon.livefeed import LIVE_TILES, LiveFeed
 from sarmoco.daemon.livelevel import level_names
 from sarmoco.errors import ConfigError
 from sarmoco.grayscale import gray_of, peak_blocks, png_gray
+
+log = logging.getLogger(__name__)
 
 STATUS_HOSTS = ("127.0.0.1", "::1", "localhost")
 """The only addresses the status server binds to."""
@@ -425,7 +428,15 @@ def _handler_for(server: StatusServer, timeout_s: float) -> type[BaseHTTPRequest
             self.end_headers()
 
         def do_GET(self) -> None:
-            path = self.path.split("?", 1)[0]
+            try:
+                code, ctype, body = self._answer(self.path.split("?", 1)[0])
+            except Exception as exc:  # a request must never reset the connection
+                log.exception("status: %s failed", self.path)
+                code, ctype, body = 500, "text/plain", f"internal error: {exc}\n".encode()
+            self._send(code, ctype, body)
+
+        def _answer(self, path: str) -> tuple[int, str, bytes]:
+            """Status code, content type and body of the answer to GET ``path``."""
             if path == "/status":
                 body, ctype, code = json.dumps(server.status()), "application/json", 200
             elif path == "/metrics":
@@ -444,12 +455,11 @@ def _handler_for(server: StatusServer, timeout_s: float) -> type[BaseHTTPRequest
                 else:
                     png = server.live.png()
                     if png is not None:
-                        self._send(200, "image/png", png)
-                        return
+                        return 200, "image/png", png
                     body, ctype, code = "no tile yet\n", "text/plain", 404
             else:
                 body, ctype, code = "not found\n", "text/plain", 404
-            self._send(code, f"{ctype}; charset=utf-8", body.encode())
+            return code, f"{ctype}; charset=utf-8", body.encode()
 
         def _send(self, code: int, ctype: str, data: bytes) -> None:
             self.send_response(code)

@@ -35,6 +35,8 @@ _BY_NAME = (("radar", "receive"), ("recording", "record"), ("recorder ", "write"
 _seen: dict[int, str] = {}
 """Stage of every Python thread seen alive (by native id): one that has just ended keeps
 its stage while its task is still listed."""
+_seen_lock = threading.Lock()
+"""Held while :data:`_seen` is read or changed (status requests come on many threads)."""
 
 
 def _stage_of(name: str) -> str:
@@ -61,14 +63,15 @@ def stage_cpu_seconds() -> dict[str, float]:
     if not proc.is_dir():
         return out
     main = threading.main_thread().native_id
-    for thread in threading.enumerate():
-        if thread.native_id is not None and thread.native_id != main:
-            _seen[thread.native_id] = _stage_of(thread.name)
-    listed = set()
-    for task in (proc / "task").iterdir():
-        listed.add(int(task.name))
-        out[_seen.get(int(task.name), "focus")] += _cpu_s(task / "stat")
-    for tid in _seen.keys() - listed:
-        _seen.pop(tid, None)
+    with _seen_lock:
+        for thread in threading.enumerate():
+            if thread.native_id is not None and thread.native_id != main:
+                _seen[thread.native_id] = _stage_of(thread.name)
+        listed = set()
+        for task in (proc / "task").iterdir():
+            listed.add(int(task.name))
+            out[_seen.get(int(task.name), "focus")] += _cpu_s(task / "stat")
+        for tid in _seen.keys() - listed:
+            _seen.pop(tid, None)
     out["other"] += max(_cpu_s(proc / "stat") - sum(out.values()), 0.0)  # ended threads
     return out

@@ -83,6 +83,34 @@ def test_http_status_metrics_health_on_loopback() -> None:
         server.stop()
 
 
+def test_a_failing_counter_source_answers_500_not_a_reset(
+    caplog: pytest.LogCaptureFixture,
+) -> None:
+    """A counter source that raises (a thread's state read mid-change) makes /status and
+    /metrics answer 500 with the reason, logged; the endpoint goes on answering."""
+    counters = Counters()
+    failing = {"on": True}
+
+    def source() -> dict[str, float]:
+        if failing["on"]:
+            raise RuntimeError("dictionary changed size during iteration")
+        return {"n": 1.0}
+
+    counters.add_source("flaky", source)
+    server = StatusServer(counters, Health(), "127.0.0.1", 0).start()
+    try:
+        base = f"http://127.0.0.1:{server.port}"
+        for path in ("/status", "/metrics"):
+            code, body = _get(base + path)
+            assert code == 500 and "dictionary changed size" in body, (path, body)
+        assert "status: /status failed" in caplog.text
+        failing["on"] = False
+        code, body = _get(base + "/status")
+        assert code == 200 and json.loads(body)["counters"]["flaky_n"] == 1.0
+    finally:
+        server.stop()
+
+
 def test_only_loopback_is_served() -> None:
     with pytest.raises(ConfigError):
         StatusServer(Counters(), Health(), "0.0.0.0", 0)
