@@ -213,14 +213,11 @@ def segment_echoes(store: RunStore, segment: int = 0) -> SegmentEchoes:
     """
     from sarmoco.daemon.config import parse_config
     from sarmoco.drivers.samples import to_complex64
-    from sarmoco.products.georeference import georeference, grid_points, run_track, segment_images
+    from sarmoco.products.georeference import georeference, grid_points, run_track, segment_image
 
     geo = georeference(store)
     cfg = parse_config(store.attrs["config"])
-    segments = segment_images(store)
-    if not 0 <= segment < len(segments):
-        raise RecorderError(f"{store.path}: segment {segment} (the store has {len(segments)})")
-    seg = segments[segment]
+    seg = segment_image(store, segment)
     t, pos, _ = run_track(store)
     keep = (t >= seg.t0_ns) & (t <= seg.t1_ns)
     t, pos = t[keep], pos[keep]

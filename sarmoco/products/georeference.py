@@ -223,6 +223,20 @@ def segment_images(store: RunStore) -> list[SegmentImage]:
     return out
 
 
+def segment_image(store: RunStore, segment: int) -> SegmentImage:
+    """One reference-track segment's image (:func:`segment_images`), by index.
+
+    Raises
+    ------
+    RecorderError
+        The store has no such segment (or :func:`segment_images` raised).
+    """
+    segments = segment_images(store)
+    if not 0 <= segment < len(segments):
+        raise RecorderError(f"{store.path}: segment {segment} (the store has {len(segments)})")
+    return segments[segment]
+
+
 def grid_points(image: Image, track: ReferenceTrack, ground_depth_m: float) -> FloatArray:
     """Run-frame positions (n0, n1, 3) of a ground-plane image's pixel centres, m.
 

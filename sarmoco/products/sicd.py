@@ -1,7 +1,7 @@
 """SICD (NGA.STND.0024, version 1.4.0) of our focused images, written with sarkit.
 
 A store's SICD (:func:`sicd_product`) holds the tiles of one reference-track segment joined
-along track (:func:`~sarmoco.products.georeference.segment_images`); a phase history's
+along track (:func:`~sarmoco.products.georeference.segment_image`); a phase history's
 (:func:`spotlight_product`, e.g. GOTCHA through CPHD) its backprojection on a ground grid
 about the image-area reference point. The pixels are ours, unchanged: for a store
 SICD rows are our axis 1 (ground range y), columns our axis 0 (along-track x; reversed for
@@ -42,7 +42,6 @@ from scipy.signal import get_window
 
 from sarmoco import __version__
 from sarmoco.daemon.config import Config, parse_config
-from sarmoco.errors import RecorderError
 from sarmoco.geodesy import ecef_to_geodetic
 from sarmoco.processing.types import FloatArray, Image
 from sarmoco.products.cphd import FxPhaseHistory, gps_utc
@@ -51,7 +50,7 @@ from sarmoco.products.georeference import (
     SegmentImage,
     georeference,
     grid_points,
-    segment_images,
+    segment_image,
 )
 from sarmoco.store.reader import RunStore
 
@@ -189,10 +188,7 @@ def sicd_product(store: RunStore, segment: int = 0) -> SicdProduct:
     """
     geo = georeference(store)
     cfg = parse_config(store.attrs["config"])
-    segments = segment_images(store)
-    if not 0 <= segment < len(segments):
-        raise RecorderError(f"{store.path}: segment {segment} (the store has {len(segments)})")
-    seg = segments[segment]
+    seg = segment_image(store, segment)
     pixels = seg.image.data.T
     if cfg.geometry.look_side == "left":
         pixels = pixels[:, ::-1]
