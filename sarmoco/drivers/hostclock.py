@@ -53,6 +53,9 @@ class HostClock:
     ) -> None:
         self._wall = wall
         self._mono = mono
+        self.read_error_ns = 0
+        """Half the span of the two wall clock reads about the last monotonic one: how far
+        the wall clock's instant may be from the monotonic one it is paired with, ns."""
         self._seen = self._read()[1]
         """Wall minus monotonic time at the last read, ns."""
         self.offset_ns = self._seen
@@ -81,6 +84,7 @@ class HostClock:
             after = self._wall()
             if 0 <= after - before <= READ_SPAN_NS:
                 break
+        self.read_error_ns = (abs(after - before) + 1) // 2
         return mono, (before + after) // 2 - mono
 
     def take_step(self) -> int:

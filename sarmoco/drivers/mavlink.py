@@ -136,6 +136,10 @@ class BootClockModel:
         self.use_timesync = use_timesync
         self.timesync = TimesyncEstimator()
         self.systime = LinearClockFit(window=32, outlier_ns=_SYSTIME_OUTLIER_NS)
+        self.host_error_ns = 0
+        """Error of the host clock's own reading of UTC (its wall and monotonic clocks
+        paired, :attr:`~sarmoco.drivers.hostclock.HostClock.read_error_ns`), ns: part of
+        the TIMESYNC bound, whose local times are host UTC."""
 
     @property
     def _by_timesync(self) -> bool:
@@ -148,9 +152,10 @@ class BootClockModel:
 
     @property
     def bound_ns(self) -> int:
-        """Stated error bound of :meth:`map`, ns (TIMESYNC bound, or SYSTEM_TIME jitter)."""
+        """Stated error bound of :meth:`map`, ns (TIMESYNC bound and the host clock's
+        reading error, or SYSTEM_TIME jitter)."""
         if self._by_timesync:
-            return self.timesync.bound_ns
+            return self.timesync.bound_ns + self.host_error_ns
         return _SYSTIME_JITTER_NS + round(3 * self.systime.residual_ns)
 
     def add(self, device_ns: int, reference_ns: int) -> bool:
@@ -544,6 +549,7 @@ class MavlinkSource(Source):
         """Host UTC now, ns (:class:`~sarmoco.drivers.hostclock.HostClock`); a step of the
         wall clock since the last read is judged first (:meth:`_judge_step`)."""
         now = self._host.now_ns()
+        self.decoder.model.host_error_ns = self._host.read_error_ns
         step = self._host.take_step()
         if step and self._judge_step(step):
             now += step
