@@ -108,6 +108,10 @@ class LinearClockFit:
         self.rejected = 0
         self.residual_ns = 0.0
         """RMS residual of the current fit, ns."""
+        self.leverage = 1.0
+        """Sum of the magnitudes of the pairs' weights in the fitted value at the newest
+        pair (1 for an offset; up to about 1.7 for a line through evenly spaced pairs): a
+        bound on each pair's error, times this, bounds the error of the fit there."""
 
     @property
     def ready(self) -> bool:
@@ -152,13 +156,17 @@ class LinearClockFit:
             offsets = sorted(r - d for d, r in zip(self._dev, self._ref, strict=True))
             self._coef = (d0, d0 + offsets[len(offsets) // 2], 0.0)
             self.residual_ns = float(np.std(np.array(offsets) - offsets[0]))
+            self.leverage = 1.0
             return
         x = np.array(self._dev, dtype=np.float64) - d0
         y = np.array(self._ref, dtype=np.float64) - r0 - x
         skew, intercept = np.polyfit(x, y, 1)
+        dx = x - x.mean()
+        self.leverage = float(np.abs(1 / x.size - x.mean() * dx / np.sum(dx**2)).sum())
         if abs(skew) > self._max_skew:
             skew = float(np.clip(skew, -self._max_skew, self._max_skew))
             intercept = float(np.mean(y - skew * x))
+            self.leverage = 1.0
         self._coef = (d0, r0 + round(intercept), float(skew))
         self.residual_ns = float(np.sqrt(np.mean((y - (intercept + skew * x)) ** 2)))
 
@@ -250,7 +258,9 @@ class TimesyncEstimator:
     (:class:`LinearClockFit`, skew clipped at :data:`MAX_SKEW`).
 
     :attr:`bound_ns` is half the slowest admitted round trip (causality: the remote
-    instant lies between send and receive) plus three times the fit's RMS residual.
+    instant lies between send and receive, so no midpoint is further off) times the fit's
+    leverage at the newest exchange (:attr:`LinearClockFit.leverage`: a line through the
+    midpoints can add up their errors), plus three times the fit's RMS residual.
     A remote clock that goes back by more than ``max_rtt_ns`` is a reboot and resets
     the estimate; a smaller step back is a response overtaken by a later one (no
     exchange is slower than ``max_rtt_ns``) and is kept.
@@ -286,7 +296,8 @@ class TimesyncEstimator:
     @property
     def bound_ns(self) -> int:
         """Stated bound on the error of :meth:`to_local`, ns."""
-        return self._fit_rtt_ns // 2 + round(3 * self._fit.residual_ns)
+        fit = self._fit
+        return round(fit.leverage * self._fit_rtt_ns / 2 + 3 * fit.residual_ns)
 
     def reset(self) -> None:
         """Forget every exchange (remote reboot)."""
