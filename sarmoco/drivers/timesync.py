@@ -23,6 +23,9 @@ MAX_SKEW = 2e-4
 oscillators of autopilots and INS are within about ±50 ppm; a larger fitted skew is the
 noise of a few jittered pairs over a short window (a host under load delaying TIMESYNC
 replies gave 2300 ppm over 1.5 s: 3.4 ms of error per 1.5 s in every INS time stamp)."""
+EXTRAPOLATION_NS = 1_000_000_000
+"""How far past its newest pair a clock fit is taken to be used, ns (exchanges come
+several times a second)."""
 
 
 class CounterUnwrapper:
@@ -108,6 +111,10 @@ class LinearClockFit:
         self.rejected = 0
         self.residual_ns = 0.0
         """RMS residual of the current fit, ns."""
+        self.unfitted_skew_ns = 0
+        """While the fit is an offset only (too few pairs, or too short a span), the error
+        a skew of :data:`MAX_SKEW` may cause over the pairs' span and
+        :data:`EXTRAPOLATION_NS` beyond, ns (0 once the skew is fitted)."""
         self.leverage = 1.0
         """Sum of the magnitudes of the pairs' weights in the fitted value at the newest
         pair (1 for an offset; up to about 1.7 for a line through evenly spaced pairs): a
@@ -157,7 +164,9 @@ class LinearClockFit:
             self._coef = (d0, d0 + offsets[len(offsets) // 2], 0.0)
             self.residual_ns = float(np.std(np.array(offsets) - offsets[0]))
             self.leverage = 1.0
+            self.unfitted_skew_ns = round(MAX_SKEW * (d0 - lo + EXTRAPOLATION_NS))
             return
+        self.unfitted_skew_ns = 0
         x = np.array(self._dev, dtype=np.float64) - d0
         y = np.array(self._ref, dtype=np.float64) - r0 - x
         skew, intercept = np.polyfit(x, y, 1)
@@ -260,7 +269,9 @@ class TimesyncEstimator:
     :attr:`bound_ns` is half the slowest admitted round trip (causality: the remote
     instant lies between send and receive, so no midpoint is further off) times the fit's
     leverage at the newest exchange (:attr:`LinearClockFit.leverage`: a line through the
-    midpoints can add up their errors), plus three times the fit's RMS residual.
+    midpoints can add up their errors), plus three times the fit's RMS residual, plus,
+    while the skew is not fitted yet, what a skew of :data:`MAX_SKEW` can do over the
+    exchanges' span and :data:`EXTRAPOLATION_NS` beyond them.
     A remote clock that goes back by more than ``max_rtt_ns`` is a reboot and resets
     the estimate; a smaller step back is a response overtaken by a later one (no
     exchange is slower than ``max_rtt_ns``) and is kept.
@@ -297,7 +308,9 @@ class TimesyncEstimator:
     def bound_ns(self) -> int:
         """Stated bound on the error of :meth:`to_local`, ns."""
         fit = self._fit
-        return round(fit.leverage * self._fit_rtt_ns / 2 + 3 * fit.residual_ns)
+        return round(fit.leverage * self._fit_rtt_ns / 2 + 3 * fit.residual_ns) + (
+            fit.unfitted_skew_ns
+        )
 
     def reset(self) -> None:
         """Forget every exchange (remote reboot)."""
