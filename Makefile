@@ -16,14 +16,16 @@ demo: $(STAMP)
 
 # Three phases (tests/conftest.py REALTIME and EXCLUSIVE say which tests are `realtime`
 # and `exclusive`, and why): the rest on two pytest-xdist workers, a module's tests on one
-# worker (its fixtures built once; test_install's two in-tree pip builds never overlap);
+# worker (its fixtures built once; test_install's two in-tree pip builds never overlap),
+# the longest modules handed out first (tests/conftest.py LONGEST_FIRST);
 # then the realtime tests, a module at a time on two workers (each mostly waits on the
 # clock); then the exclusive ones alone, one after the other. Every phase runs; the
 # target fails when any does (pytest's 5, no test collected, included). The -m options
 # replace pyproject's, so they name bench and fuzz_long again.
 NOT_SLOW := not bench and not fuzz_long
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadscope --durations=15 \
+	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadscope --no-loadscope-reorder \
+	  --durations=15 \
 	  -m "not realtime and $(NOT_SLOW)"; s1=$$?; \
 	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadfile --durations=15 \
 	  -m "realtime and not exclusive and $(NOT_SLOW)"; s2=$$?; \

@@ -157,10 +157,35 @@ def _listed(table: dict[str, tuple[str, ...]], item: pytest.Item) -> bool:
     return names is not None and (not names or getattr(item, "originalname", "") in names)
 
 
+LONGEST_FIRST: tuple[str, ...] = (
+    "tests/test_acceptance_blackbox.py",  # cases of 13-44 s each, a class per scope
+    "tests/daemon/test_platform_geometry.py",
+    "tests/test_codebase.py",  # mypy
+    "tests/test_install.py",  # two virtual environments
+    "tests/app/test_export.py",
+    "tests/app/test_array_mode.py",
+    "tests/processing/array/test_array_dem.py",
+    "tests/processing/imaging/test_rda_tiles.py",
+    "tests/daemon/test_segments.py",
+    "tests/products/test_motion_estimates.py",
+)
+"""The modules whose tests take longest (20 s to 2 min on a quiet core), longest first.
+They are collected first, the rest in pytest's order: `make test`'s first phase hands
+the scopes out in collection order (``--no-loadscope-reorder``), so its two workers end
+together instead of one running a long scope alone at the end."""
+
+
+def _collection_rank(item: pytest.Item) -> int:
+    path = item.path.relative_to(REPO).as_posix()
+    return LONGEST_FIRST.index(path) if path in LONGEST_FIRST else len(LONGEST_FIRST)
+
+
 @pytest.hookimpl(tryfirst=True)  # before `-m` deselects by marker
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
-    """Mark the tests of :data:`REALTIME` ``realtime``, those of :data:`EXCLUSIVE` also
+    """Put the modules of :data:`LONGEST_FIRST` first (a stable sort: the rest keep their
+    order); mark the tests of :data:`REALTIME` ``realtime``, those of :data:`EXCLUSIVE` also
     ``exclusive``."""
+    items.sort(key=_collection_rank)
     for item in items:
         if _listed(REALTIME, item):
             item.add_marker(pytest.mark.realtime)

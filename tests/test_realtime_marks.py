@@ -8,7 +8,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from tests.conftest import EXCLUSIVE, REALTIME
+from tests.conftest import EXCLUSIVE, LONGEST_FIRST, REALTIME
 
 LIVE = re.compile(
     r"run_loopback\(|\bDaemon\(|\bPopen\(|pin_to_host=True"
@@ -51,3 +51,8 @@ def test_the_exclusive_tests_are_realtime_ones() -> None:
         assert path in REALTIME, path
         assert not REALTIME[path] or set(names) <= set(REALTIME[path]), (path, names)
         assert names or not REALTIME[path], path  # a whole module only if wholly realtime
+
+
+def test_the_longest_first_modules_exist(repo_root: Path) -> None:
+    missing = [path for path in LONGEST_FIRST if not (repo_root / path).is_file()]
+    assert not missing, f"tests/conftest.py LONGEST_FIRST names modules that are gone: {missing}"
