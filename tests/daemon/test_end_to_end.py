@@ -15,7 +15,6 @@ import math
 import subprocess
 import sys
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
@@ -23,7 +22,7 @@ import pytest
 from sarmoco.app.demo import run_loopback
 from sarmoco.daemon.config import load_config
 from sarmoco.daemon.runner import replay_store
-from sarmoco.products.report import write_report
+from sarmoco.products.report import bright_points, strip
 from sarmoco.store.reader import open_store
 from tests.daemon.same_images import assert_same_images
 
@@ -51,16 +50,24 @@ def targets_in_image(out: Path) -> list[tuple[float, float, float]]:
     return out_list
 
 
-def assert_focused(out: Path, summary: dict[str, Any]) -> list[dict[str, float]]:
-    """Every truth target is found focused at its place in the report's bright points.
+def store_points(store_path: Path) -> list[dict[str, float]]:
+    """The bright points of a store's image, as the report's ``image.points`` gives them
+    (without the report's pictures and re-focused comparison)."""
+    image = strip(open_store(store_path))
+    assert image is not None, f"{store_path} holds no image"
+    return bright_points(image)
 
-    Returns the report's point of each target (in the truth's order).
+
+def assert_focused(out: Path, points: list[dict[str, float]]) -> list[dict[str, float]]:
+    """Every truth target is found focused at its place among the ``points`` (the report's
+    ``image.points``).
+
+    Returns the point of each target (in the truth's order).
     """
     scn = json.loads((out / "truth.json").read_text())["scenario"]
     cell = 299_792_458.0 / (2 * scn["radar"]["bandwidth_hz"])
     lam = 299_792_458.0 / scn["radar"]["carrier_hz"]
     irw_az = 0.886 * lam / (4 * math.sin(scn["integration_angle_rad"] / 2))
-    points = summary["image"]["points"]
     found = []
     for x, y, r in targets_in_image(out):
         near = [p for p in points if math.hypot(p["x_m"] - x, p["y_m"] - y) < 0.5]
@@ -95,7 +102,7 @@ def test_live_run_focuses_and_records(live_runs: dict[str, Path], ins: str, rada
     assert run["pulses_nav_flagged"] <= 0.05 * n_sent
     assert store.committed("nav") > 0 and store.n_images > 0
     summary = json.loads((out / "report" / "report.json").read_text())
-    found = assert_focused(out, summary)
+    found = assert_focused(out, summary["image"]["points"])
     print(  # the README's figures (pytest -s)
         f"\n{ins}+vita-{radar}: azimuth PSLR "
         + " / ".join(f"{p['pslr_az_db']:.2f}" for p in found)
@@ -131,14 +138,14 @@ def test_replay_of_raw_files_gives_the_same_image(
          "--out", str(tmp_path / "replay.zarr"), "--quiet"],
         check=True, capture_output=True,
     )  # fmt: skip
-    summary = write_report(tmp_path / "replay.zarr", tmp_path / "report")
+    points = store_points(tmp_path / "replay.zarr")
     live = json.loads((live_runs["mavlink"] / "report" / "report.json").read_text())
     for p in live["image"]["points"][:3]:
         same = [
-            q for q in summary["image"]["points"]
+            q for q in points
             if abs(q["y_m"] - p["y_m"]) < 0.05 and abs(q["x_m"] - p["x_m"]) < 0.5
         ]  # fmt: skip
-        assert same, (p, summary["image"]["points"])
+        assert same, (p, points)
         assert abs(same[0]["irw_az_m"] - p["irw_az_m"]) < 0.02
         assert abs(same[0]["irw_rg_m"] - p["irw_rg_m"]) < 0.005
         assert same[0]["pslr_az_db"] <= -12.5 and same[0]["pslr_rg_db"] <= -12.5
