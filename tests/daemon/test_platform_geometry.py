@@ -9,9 +9,9 @@ quadrants, both look sides.
 
 The INS is exact and the autofocus is off, so that what focuses the targets is the geometry
 alone: the arm rotated by the attitude (the aligner's APC velocity) and the along-track
-placement of the pulses. With the arm: azimuth PSLR -13.24 to -13.49 dB; with the arm's
-rate dropped from the aligner: -11.89 to -12.27 dB (measured when this test was last
-changed; `pytest -s` prints them).
+placement of the pulses. With the arm: azimuth PSLR -13.07 to -13.27 dB; with the arm's
+rate dropped from the aligner: -11.66 to -12.01 dB, every case red (measured when this
+test was last changed; `pytest -s` prints them).
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def test_lever_arm_attitude_heading_and_look_side_focus(
 ) -> None:
     tlog = shared_data / "mavlink" / "arduplane_quadplane_sitl.tlog"
     _sarmoco(
-        "sim", "--preset", "ku-vehicle", "--scale", "0.1", "--motion", f"flightlog:{tlog}",
+        "sim", "--preset", "ku-vehicle", "--scale", "0.05", "--motion", f"flightlog:{tlog}",
         "--ins-grade", "ideal", "--heading-deg", str(heading_deg), "--look-side", look_side,
         "--out", str(tmp_path),
     )  # fmt: skip
