@@ -39,7 +39,7 @@ def signatures():
     return {name: sorted(map(str, k.signatures)) for name, k in KERNELS.items()}
 
 scn = load_preset("thz-spotlight", 0.1, prf_hz=20_000.0)
-run = simulate(scn, MotionSpec("turbulence", seed=1), "tactical", n_pulses=6000)
+run = simulate(scn, MotionSpec("turbulence", seed=1), "tactical", n_pulses=3000)
 cfg = scenario_config(run.scenario, imaging=json.loads(sys.argv[1]))
 warm_up_kernels(cfg)
 warm = signatures()
