@@ -177,8 +177,8 @@ def _cmd_report(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else store.with_suffix(".report")
     if is_array_store(open_store(store)):
         truth = None if args.truth is None else read_true_terrain(Path(args.truth))
-        summary = write_array_report(open_store(store), out, truth)
-        print(json.dumps(summary) if args.json else summary_text(summary).rstrip("\n"))
+        dems = write_array_report(open_store(store), out, truth)
+        print(json.dumps(dems.as_dict()) if args.json else summary_text(dems).rstrip("\n"))
         return 0
     if args.truth is not None:
         raise ConfigError("report --truth: only an array run's DEM is compared with a truth")

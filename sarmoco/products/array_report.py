@@ -32,7 +32,7 @@ import numpy.typing as npt
 from matplotlib.figure import Figure
 
 from sarmoco.errors import DataFileError, ProcessingError, RecorderError
-from sarmoco.processing.array.dem import evaluate_dem, truth_on_product
+from sarmoco.processing.array.dem import DemStats, evaluate_dem, truth_on_product
 from sarmoco.processing.array.imaging3d import DemProduct
 from sarmoco.processing.types import FloatArray
 from sarmoco.store.reader import RunStore
@@ -113,15 +113,56 @@ def truth_for(dem: DemProduct, truth: TrueTerrain) -> TruthDem:
     return TruthDem(h[np.ix_(rows, cols)] + off[2], north[rows] - off[0], east[cols] - off[1])
 
 
-def dem_report(store: RunStore, truth: TrueTerrain, out_dir: Path) -> dict[str, Any]:
-    """Statistics of every DEM product of ``store`` against the truth, and ``dem.png``.
+@dataclass(frozen=True)
+class DemSummary:
+    """One DEM product of the store against the truth.
 
-    Returns
-    -------
-    dict
-        ``dem`` and ``dem_uncompensated`` (when recorded): the
-        :class:`~sarmoco.processing.array.dem.DemStats` of the product over the scene plus
-        its ``blocks``; ``plot``: the PNG's path.
+    Attributes
+    ----------
+    stats : DemStats
+        Its statistics over the scene.
+    blocks : (int, int)
+        The product's ΔR2 sub-blocks along k_x and k_y.
+    """
+
+    stats: DemStats
+    blocks: tuple[int, int]
+
+    def as_dict(self) -> dict[str, object]:
+        """JSON-ready: the statistics' fields and ``blocks`` (a two-element list)."""
+        return self.stats.as_dict() | {"blocks": list(self.blocks)}
+
+
+@dataclass(frozen=True)
+class DemReport:
+    """What :func:`dem_report` measured and drew.
+
+    Attributes
+    ----------
+    dem : DemSummary
+        The roll-compensated DEM.
+    dem_uncompensated : DemSummary or None
+        The DEM imaged as if the wing were level, when the store recorded it.
+    plot : Path
+        ``dem.png``.
+    """
+
+    dem: DemSummary
+    dem_uncompensated: DemSummary | None
+    plot: Path
+
+    def products(self) -> dict[str, DemSummary]:
+        """The recorded products by report key (the fields :data:`DEM_PRODUCTS` names)."""
+        return {key: p for key in DEM_PRODUCTS if (p := getattr(self, key)) is not None}
+
+    def as_dict(self) -> dict[str, object]:
+        """JSON-ready: a key per DEM product recorded, then ``plot``."""
+        out: dict[str, object] = {key: p.as_dict() for key, p in self.products().items()}
+        return out | {"plot": str(self.plot)}
+
+
+def dem_report(store: RunStore, truth: TrueTerrain, out_dir: Path) -> DemReport:
+    """Statistics of every DEM product of ``store`` against the truth, and ``dem.png``.
 
     Raises
     ------
@@ -130,7 +171,7 @@ def dem_report(store: RunStore, truth: TrueTerrain, out_dir: Path) -> dict[str, 
     DataFileError
         The truth shares no cell with the DEM.
     """
-    out: dict[str, Any] = {}
+    products: dict[str, DemSummary] = {}
     panels: list[tuple[str, DemProduct, FloatArray, FloatArray]] = []
     for key, name in DEM_PRODUCTS.items():
         try:
@@ -144,12 +185,12 @@ def dem_report(store: RunStore, truth: TrueTerrain, out_dir: Path) -> dict[str, 
             stats = evaluate_dem(dem, t.height_m, t.north_m, t.east_m, 0.5 * resolution)
         except ProcessingError as exc:
             raise DataFileError(f"{truth.source}: {name} DEM: {exc}") from exc
-        out[key] = stats.as_dict() | {"blocks": list(dem.blocks)}
+        products[key] = DemSummary(stats, dem.blocks)
         truth_h = truth_on_product(dem, t.height_m, t.north_m, t.east_m)
         panels.append((name, dem, truth_h, dem.height_m - truth_h))
     out_dir.mkdir(parents=True, exist_ok=True)
-    out["plot"] = str(_plot(panels, out_dir / PLOT_FILE))
-    return out
+    plot = _plot(panels, out_dir / PLOT_FILE)
+    return DemReport(products["dem"], products.get("dem_uncompensated"), plot)
 
 
 def _plot(panels: list[tuple[str, DemProduct, FloatArray, FloatArray]], path: Path) -> Path:
@@ -186,34 +227,60 @@ def is_array_store(store: RunStore) -> bool:
     return isinstance(radar, dict) and radar.get("mode") == "array"
 
 
-def write_array_report(store: RunStore, out_dir: Path, truth: TrueTerrain | None) -> dict[str, Any]:
+@dataclass(frozen=True)
+class ArrayRunSummary:
+    """The summary of an array run (``report.json``).
+
+    Attributes
+    ----------
+    store : str
+        The store's path.
+    complete : bool
+        Whether the run closed its store.
+    run : dict
+        The run's metrics, as the store records them.
+    dems : DemReport or None
+        The DEMs against the truth, when a truth was given.
+    """
+
+    store: str
+    complete: bool
+    run: dict[str, Any]
+    dems: DemReport | None
+
+    def as_dict(self) -> dict[str, object]:
+        """The JSON document: ``store``, ``complete``, ``run``, then :meth:`DemReport.as_dict`'s
+        keys."""
+        out: dict[str, object] = {"store": self.store, "complete": self.complete, "run": self.run}
+        return out if self.dems is None else out | self.dems.as_dict()
+
+
+def write_array_report(
+    store: RunStore, out_dir: Path, truth: TrueTerrain | None
+) -> ArrayRunSummary:
     """The summary of an array run (``report.json`` in ``out_dir``); with a truth, the DEM
     statistics and plot of :func:`dem_report`."""
     attrs = store.attrs
-    summary: dict[str, Any] = {
-        "store": str(store.path),
-        "complete": bool(attrs.get("complete", False)),
-        "run": attrs.get("metrics", {}),
-    }
-    if truth is not None:
-        summary |= dem_report(store, truth, out_dir)
+    summary = ArrayRunSummary(
+        store=str(store.path),
+        complete=bool(attrs.get("complete", False)),
+        run=attrs.get("metrics", {}),
+        dems=None if truth is None else dem_report(store, truth, out_dir),
+    )
     out_dir.mkdir(parents=True, exist_ok=True)
-    (out_dir / "report.json").write_text(json.dumps(summary, indent=1))
+    (out_dir / "report.json").write_text(json.dumps(summary.as_dict(), indent=1))
     return summary
 
 
-def summary_text(summary: dict[str, Any]) -> str:
+def summary_text(summary: ArrayRunSummary) -> str:
     """A few lines for the terminal: per DEM product its statistics against the truth."""
-    lines = [
-        f"{summary['store']}: array run, {summary['run'].get('pulses_imaged', 0)} pulses imaged"
-    ]
-    for key in DEM_PRODUCTS:
-        s = summary.get(key)
-        if s is not None:
-            lines.append(
-                f"{key}: mean {s['mean_m']:+.3f} m, std {s['std_m']:.3f} m, "
-                f"{100 * s['within_half_cell']:.2f} % within {s['half_cell_m']:.2f} m, "
-                f"range [{s['range_m'][0]:.2f}, {s['range_m'][1]:.2f}] m, "
-                f"coverage {100 * s['coverage']:.1f} %"
-            )
+    lines = [f"{summary.store}: array run, {summary.run.get('pulses_imaged', 0)} pulses imaged"]
+    for key, product in ({} if summary.dems is None else summary.dems.products()).items():
+        s = product.stats
+        lines.append(
+            f"{key}: mean {s.mean_m:+.3f} m, std {s.std_m:.3f} m, "
+            f"{100 * s.within_half_cell:.2f} % within {s.half_cell_m:.2f} m, "
+            f"range [{s.range_m[0]:.2f}, {s.range_m[1]:.2f}] m, "
+            f"coverage {100 * s.coverage:.1f} %"
+        )
     return "\n".join(lines) + "\n"
