@@ -169,10 +169,11 @@ LONGEST_FIRST: tuple[str, ...] = (
     "tests/daemon/test_segments.py",
     "tests/products/test_motion_estimates.py",
 )
-"""The modules whose tests take longest (20 s to 2 min on a quiet core), longest first.
-They are collected first, the rest in pytest's order: `make test`'s first phase hands
-the scopes out in collection order (``--no-loadscope-reorder``), so its two workers end
-together instead of one running a long scope alone at the end."""
+"""The modules whose tests take longest, longest first (pytest's ``--durations``, summed
+per module, on a 2-core machine). They are collected first, the rest in pytest's order:
+`make test`'s first phase hands the scopes out in collection order
+(``--no-loadscope-reorder``), so its two workers end together instead of one running a
+long scope alone at the end."""
 
 
 def _collection_rank(item: pytest.Item) -> int:
