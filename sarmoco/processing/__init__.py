@@ -12,6 +12,7 @@ __all__ = [
     "metrics",
     "mocomp",
     "navinterp",
+    "phasor",
     "rangecomp",
     "segments",
     "types",

@@ -42,6 +42,7 @@ from sarmoco.processing.geometry import (
     look_angle,
     vector_to_imaging,
 )
+from sarmoco.processing.phasor import phasor
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray, RadarParams
 
 DEFAULT_ENVELOPE_FRACTION = 0.05
@@ -176,7 +177,7 @@ def apply_delay(spec: ComplexArray, shift_bins: FloatArray) -> None:
     half offset by -n/2) gets the product of a per-row coarse and fine table, so
     the cost is three in-place complex multiplies per element and no temporary,
     instead of a complex exponential per element (several times the cost of the
-    FFT it multiplies). Tables are exact in float64, rounded to complex64.
+    FFT it multiplies). Table phases are reduced in float64 (:func:`phasor`).
 
     Parameters
     ----------
@@ -190,13 +191,13 @@ def apply_delay(spec: ComplexArray, shift_bins: FloatArray) -> None:
     half = n // 2
     block = _separable_block(n)
     if block is None or not spec.flags.c_contiguous:
-        spec *= _phasor(s * np.fft.fftfreq(n))
+        spec *= phasor(-2.0 * np.pi * s * np.fft.fftfreq(n))
         return
     count = half // block
     view = spec.reshape(rows, 2, count, block)
-    view *= _phasor(s * (np.arange(count) * block / n))[:, None, :, None]
-    view *= _phasor(s * (np.arange(block) / n))[:, None, None, :]
-    spec[:, half:] *= _phasor(s * (-half / n))
+    view *= phasor(-2.0 * np.pi * s * (np.arange(count) * block / n))[:, None, :, None]
+    view *= phasor(-2.0 * np.pi * s * (np.arange(block) / n))[:, None, None, :]
+    spec[:, half:] *= phasor(2.0 * np.pi * s * (half / n))
 
 
 def _separable_block(n: int) -> int | None:
@@ -204,15 +205,6 @@ def _separable_block(n: int) -> int | None:
     half = n // 2
     block = 1 << max(0, round(0.5 * np.log2(max(half, 1))))
     return None if n % 2 or half % block else block
-
-
-def _phasor(cycles: FloatArray) -> ComplexArray:
-    """exp(-j 2π c) as complex64 (cos and sin of the float64 angle)."""
-    angle = 2.0 * np.pi * cycles
-    out = np.empty(angle.shape, dtype=np.complex64)
-    out.real = np.cos(angle)
-    out.imag = -np.sin(angle)
-    return out
 
 
 def shift_range(echo: ComplexArray, shift_bins: FloatArray) -> ComplexArray:
@@ -343,7 +335,7 @@ def remove_centre_phase(
     -------
     ndarray of complex64, shape (P, S)
     """
-    rot = np.exp((1j if conjugate else -1j) * phase_rad).astype(np.complex64)
+    rot = phasor(phase_rad if conjugate else -np.asarray(phase_rad, dtype=np.float64))
     return np.asarray(echo, dtype=np.complex64) * rot[:, None]
 
 

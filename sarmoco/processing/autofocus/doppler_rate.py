@@ -159,15 +159,18 @@ def _drift(
     scale_a = float(t_s[half - 1] - t_s[0]) / (half - 1) / dt
     scale_b = float(t_s[2 * half - 1] - t_s[half]) / (half - 1) / dt
     quality = np.zeros(bands.shape[0])
+    n, n_bins = bands.shape[:2]
     for _ in range(n_iter):
         d = _dechirp(bands, tc, rate_ref + delta)
-        a = np.abs(scipy.fft.fft(d[..., :half] * taper, n_fft, axis=-1)).sum(axis=1)
-        a = _rescale(a, scale_a)
-        b = np.abs(scipy.fft.fft(d[..., half : 2 * half] * taper, n_fft, axis=-1)).sum(axis=1)
-        b = _rescale(b, scale_b)
+        # the two looks (first and second half of the pulses) in one transform
+        looks = d[..., : 2 * half].reshape(n, n_bins, 2, half) * taper
+        spectra = np.abs(scipy.fft.fft(looks, n_fft, axis=-1)).sum(axis=1)
+        a = _rescale(spectra[:, 0], scale_a)
+        b = _rescale(spectra[:, 1], scale_b)
         a -= a.mean(axis=-1, keepdims=True)
         b -= b.mean(axis=-1, keepdims=True)
-        spec = scipy.fft.rfft(b, axis=-1) * np.conj(scipy.fft.rfft(a, axis=-1))
+        fa, fb = scipy.fft.rfft(np.stack([a, b]), axis=-1)
+        spec = fb * np.conj(fa)
         xc = np.asarray(scipy.fft.irfft(spec, n_fft, axis=-1), dtype=float)
         k = np.argmax(xc, axis=-1)
         rows = np.arange(xc.shape[0])

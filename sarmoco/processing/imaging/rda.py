@@ -42,6 +42,7 @@ import scipy.fft
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.imaging.interp import sinc_interp
+from sarmoco.processing.phasor import phasor
 from sarmoco.processing.types import C_MPS, ComplexArray, FloatArray, Image
 
 BAND_MARGIN = 1.5
@@ -120,11 +121,10 @@ def rda_filters(
         resid = np.sqrt((fc + fr[None, :]) ** 2 - a2) - fc * d[:, None] - fr[None, :] / d[:, None]
         r_ref = float(range_axis_m[s // 2])
         # shift to the bin-0 origin does not matter: the filter is a pure range-frequency phase
-        src_filter = np.exp(4j * np.pi * r_ref * resid / C_MPS).astype(dtype)
+        src_filter = phasor(4.0 * np.pi * r_ref / C_MPS * resid, dtype)
     rcmc = (range_axis_m[None, :] / d[:, None] - range_axis_m[0]) / dr
-    azimuth = np.where(
-        band, np.exp(4j * np.pi * range_axis_m[None, :] * d[:, None] / wavelength_m), 0.0
-    ).astype(dtype)
+    azimuth = phasor((4.0 * np.pi / wavelength_m) * d[:, None] * range_axis_m[None, :], dtype)
+    azimuth[~band] = 0.0
     return RdaFilters(n_az, src_filter, rcmc, azimuth)
 
 

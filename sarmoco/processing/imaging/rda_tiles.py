@@ -56,6 +56,7 @@ from sarmoco.processing.imaging.grid import PlaneGrid
 from sarmoco.processing.imaging.interp import sinc_interp
 from sarmoco.processing.imaging.rda import RdaFilters, focus_block, rda_filters
 from sarmoco.processing.imaging.tiles import Tile, TileLayout
+from sarmoco.processing.phasor import phasor
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 
 TAPS = 16
@@ -380,15 +381,15 @@ class RdaTileImager:
         part = sinc_interp(image[a0:a1], np.broadcast_to(rg, (a1 - a0, rg.size)), TAPS)
         cols = np.ascontiguousarray(part.T)
         data = sinc_interp(cols, np.broadcast_to(az - a0, (cols.shape[0], az.size)), TAPS).T
+        # remodulation exp(j 2 pi (kx_c x + 2 r / lambda)), one factor per axis
         kx_c = 2.0 * math.sin(self.centroid_squint_rad) / self.wavelength_m
-        carrier = self._gain * np.exp(
-            2j * np.pi * (kx_c * grid.axis0_m[:, None] + 2.0 * r[None, :] / self.wavelength_m)
-        )
-        data = data * carrier
+        data = np.ascontiguousarray(data, dtype=np.complex64)
+        data *= phasor(2.0 * np.pi * kx_c * grid.axis0_m)[:, None]
+        data *= (self._gain * phasor(4.0 * np.pi / self.wavelength_m * r))[None, :]
         return Tile(
             k,
             grid,
-            np.ascontiguousarray(data, dtype=np.complex64),
+            data,
             int(t[used[0]]),
             int(t[used[-1]]),
             int(used.size),

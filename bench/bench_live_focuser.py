@@ -1,0 +1,106 @@
+"""CPU of the live focusing chain per second of data: full-size pulses through ``Focuser``.
+
+Run as ``python -m bench.bench_live_focuser [--preset ku-vehicle] [--pulses 9000]
+[--warm-blocks 12] [--method rda] [--profile]``.
+
+Simulated raw echoes of the full-size preset (turbulent flight, ideal INS, the
+preset's targets) go through :class:`~sarmoco.daemon.focuser.Focuser` in blocks of
+``imaging.block_pulses`` with their attitude, as the daemon's focusing loop gives them,
+with the pre-filter before range compression (``imaging.presum_first``), the autofocus
+on and the live level held at full resolution. Nothing else runs in the process: no
+decode, no recording. Process CPU seconds (all threads: numba's and the FFT's pools)
+are counted, not wall time, so a machine shared with other work does not skew them.
+
+Printed: CPU per data second of the whole run (the first tiles' filters, the end of the
+segment included) and of the steady part (from block ``--warm-blocks`` to the last
+push), and the CPU of the segment's end (:meth:`Focuser.finish`: the pulses the
+pre-filter and autofocus still hold, the last tiles). ``--profile`` adds the functions that took the
+most CPU in the steady part (cProfile timed with the process CPU clock).
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import io
+import os
+import pstats
+import time
+
+from sarmoco.app.simconfig import scenario_config
+from sarmoco.daemon.focuser import Focuser
+from sarmoco.sim.motionspec import MotionSpec
+from sarmoco.sim.run import SimRun, simulate
+from sarmoco.sim.scenario import load_preset
+
+
+def focus_cpu(
+    run: SimRun, method: str, warm_blocks: int, profile: bool
+) -> tuple[float, float, float, float, int, str]:
+    """CPU seconds of the whole run, of its steady part and of the segment's end
+    (:meth:`Focuser.finish`), the steady part's data seconds, the tiles formed, and
+    (``profile``) the steady part's top functions."""
+    cfg = scenario_config(
+        run.scenario,
+        imaging={"method": method, "presum_first": True, "live_degrade": False},
+    )
+    block = cfg.imaging.block_pulses
+    prof = cProfile.Profile(time.process_time) if profile else None
+    c0 = time.process_time()
+    focuser = Focuser(cfg, int(run.t_ns[0]), run.vel_ned[:256].mean(axis=0))
+    tiles, steady0, first = 0, c0, 0
+    for a in range(0, run.t_ns.size, block):
+        if a == warm_blocks * block:
+            steady0, first = time.process_time(), a
+            if prof is not None:
+                prof.enable()
+        b = slice(a, a + block)
+        quat = run.traj.quat[b]
+        tiles += len(focuser.push(run.echo[b], run.t_ns[b], run.vel_ned[b], quat=quat).tiles)
+    if prof is not None:
+        prof.disable()
+    end0 = time.process_time()
+    steady = end0 - steady0
+    tiles += len(focuser.finish().tiles)
+    total = time.process_time() - c0
+    end = total - (end0 - c0)
+    text = ""
+    if prof is not None:
+        buf = io.StringIO()
+        pstats.Stats(prof, stream=buf).sort_stats("tottime").print_stats(15)
+        text = buf.getvalue()
+    return total, steady, end, float(run.t_ns[-1] - run.t_ns[first]) * 1e-9, tiles, text
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--preset", default="ku-vehicle")
+    ap.add_argument("--pulses", type=int, default=9000, help="pulses to simulate and focus")
+    ap.add_argument("--warm-blocks", type=int, default=12, help="blocks before the steady part")
+    ap.add_argument("--method", default="rda", help="imaging.method (rda, pfa, direct, ffbp)")
+    ap.add_argument("--profile", action="store_true", help="top functions of the steady part")
+    args = ap.parse_args(argv)
+    run = simulate(
+        load_preset(args.preset, 1.0),
+        MotionSpec(kind="turbulence", seed=1),
+        "ideal",
+        n_pulses=args.pulses,
+    )
+    data_s = float(run.t_ns[-1] - run.t_ns[0]) * 1e-9
+    load = os.getloadavg()[0]
+    total, steady, end, steady_s, tiles, text = focus_cpu(
+        run, args.method, args.warm_blocks, args.profile
+    )
+    print(f"{args.preset} full size, {run.t_ns.size} pulses ({data_s:.2f} s), {args.method}, "
+          f"presum first, autofocus on; load {load:.1f} on {os.cpu_count()} cores")  # fmt: skip
+    print(f"whole run: {total:.2f} CPU s, {total / data_s:.3f} core-s per data second, "
+          f"{tiles} tiles")  # fmt: skip
+    print(f"steady (from block {args.warm_blocks}, {steady_s:.2f} s of data): {steady:.2f} CPU s, "
+          f"{steady / steady_s:.3f} core-s per data second")  # fmt: skip
+    print(f"end of the segment (finish): {end:.2f} CPU s")
+    if text:
+        print(text)
+
+
+if __name__ == "__main__":
+    main()
