@@ -158,3 +158,28 @@ def test_a_line_lit_for_part_of_the_subaperture_weighs_little() -> None:
     weight = rates.weight[near_first]
     assert rates.quality[near_first][1] > 0.5  # the quality floor would let it through
     assert weight[0] > 0 and weight[1] <= 0.01 * weight[0], weight
+
+
+def test_partly_lit_lines_too_light_together_make_no_estimate() -> None:
+    """Two targets at 10 dB per pulse and no motion, neither lit throughout a 0.4 s
+    subaperture: one entering the beam a quarter in, one leaving it three quarters in. Map
+    drift gives them -3.2 and +3.0 Hz/s (measured); they are ``min_lines`` usable lines, but
+    their illumination balances (under 0.05) leave them together lighter than one line at
+    the peak floor lit throughout: every weight is zero, and the subaperture has no estimate
+    of its own (the splice bridges it from its neighbours)."""
+    syn = S.make(0.4, [], snr_db=10.0)
+    m = syn.t_s.size
+    entering = S.make(0.4, [S.ground_target(0.0, 950.0)]).rc
+    entering[: m // 4] = 0.0
+    leaving = S.make(0.4, [S.ground_target(1.0, 1050.0)]).rc
+    leaving[3 * m // 4 :] = 0.0
+    config = AutofocusConfig()
+    bands = select_bands(syn.rc + entering + leaving, syn.range_m, config)
+    assert bands.bins.size == 2 and np.all(bands.balance < 0.05), bands.balance
+    geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0)
+    rates = measure_line_rates(bands, syn.t_s, syn.range_m, geo, config)
+    assert np.all(rates.peak_db >= config.min_peak_db), rates.peak_db
+    assert np.all(rates.quality >= config.min_quality), rates.quality
+    assert np.all(np.abs(rates.rate_hz_per_s) > 2.0), rates.rate_hz_per_s
+    assert rates.n_used == 0, rates.weight
+    assert np.isnan(fit_accel(rates, geo)[0][0])
