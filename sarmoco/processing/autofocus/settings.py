@@ -108,9 +108,7 @@ class AutofocusConfig:
     min_lines: int = key(
         2,
         "A subaperture with fewer usable lines, none of them lit throughout it, makes no "
-        "estimate of its own (bridged from its neighbours) rather than a fit through noise; "
-        "nor do lines lit for part of it that together weigh less than one line lit "
-        "throughout with its peak at min_peak_db",
+        "estimate of its own (bridged from its neighbours) rather than a fit through noise",
         ge=1,
     )
     rate_span_hz_per_s: float = key(
