@@ -264,7 +264,9 @@ class MocompConfig:
         "turbulence turns the mean velocity off the course (one 1.3 s block of the "
         "acceptance flight: 0.42 deg), and the image grid with it: targets 130 m apart in "
         "range then sit 0.3-0.4 m apart along track from where they are (4 s: 0.014 m). "
-        "With a crab, 4 s loses azimuth PSLR on the acceptance crab cases (-13.0 to -9.4 dB)",
+        "With a crab, 4 s leaves the acceptance case at -4 deg looking left at -12.45 dB "
+        "azimuth PSLR (0 s: -12.76), and the targets of the longer 6-8 deg crab runs "
+        "0.16-0.18 m from where they are",
         unit="s",
         ge=0,
     )

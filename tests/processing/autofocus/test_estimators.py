@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -158,3 +160,38 @@ def test_a_line_lit_for_part_of_the_subaperture_weighs_little() -> None:
     weight = rates.weight[near_first]
     assert rates.quality[near_first][1] > 0.5  # the quality floor would let it through
     assert weight[0] > 0 and weight[1] <= 0.01 * weight[0], weight
+
+
+
+def test_a_line_lit_in_one_look_only_gets_no_weight() -> None:
+    """Two targets at 10 dB per pulse and no motion over a 0.4 s subaperture: one entering
+    the beam a quarter in (in both of map drift's halves), one lit in the last fifth only
+    (in the second half alone, 20 dB stronger: its range sidelobes are lines too). Their
+    illumination balances are both under 0.05; the one-look line's half balance is under
+    0.1 and its weight zero, the other's is kept, and with fewer than ``min_lines`` usable
+    lines, none lit throughout, the subaperture makes no estimate of its own."""
+    syn = S.make(0.4, [], snr_db=10.0)
+    m = syn.t_s.size
+    entering = S.make(0.4, [S.ground_target(0.0, 950.0)]).rc
+    entering[: m // 4] = 0.0
+    late = 10.0 * S.make(0.4, [S.ground_target(1.0, 1050.0)]).rc
+    late[: 4 * m // 5] = 0.0
+    config = AutofocusConfig()
+    bands = select_bands(syn.rc + entering + late, syn.range_m, config)
+    lines = [int(np.argmin(np.abs(syn.range_m[bands.bins] - r))) for r in (950.0, 1050.0)]
+    assert np.all(bands.balance[lines] < 0.05), bands.balance
+    halves = bands.halves[lines]
+    assert halves[0] > 0.4 and halves[1] < 0.05, halves
+    geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0)
+    rates = measure_line_rates(bands, syn.t_s, syn.range_m, geo, AutofocusConfig(min_lines=1))
+    assert np.all(rates.peak_db[lines] >= config.min_peak_db), rates.peak_db
+    assert np.all(rates.quality[lines] >= config.min_quality), rates.quality
+    weight = rates.weight[lines]
+    assert weight[0] > 0 and weight[1] == 0.0, weight
+    # the halves decide, not the balance's square (which leaves such a line a weight that
+    # depends on the noise in its empty quarters): counted as lit throughout, still zero
+    lit = dataclasses.replace(bands, balance=np.ones_like(bands.balance))
+    rates = measure_line_rates(lit, syn.t_s, syn.range_m, geo, config)
+    assert rates.weight[lines[0]] > 0 and rates.weight[lines[1]] == 0.0, rates.weight
+    assert abs(rates.rate_hz_per_s[lines[1]]) > 10.0, rates.rate_hz_per_s
+    assert measure_line_rates(bands, syn.t_s, syn.range_m, geo, config).n_used == 0
