@@ -34,6 +34,7 @@ it; the producer is never held back by it.
 
 from __future__ import annotations
 
+import sys
 import threading
 from dataclasses import dataclass
 
@@ -51,6 +52,9 @@ _FREE, _RESERVED, _COMMITTED, _ABORTED = 0, 1, 2, 3
 REORDER_WINDOW = 64
 """Waiting pulses among which a late pulse is put back in place: a pulse late by more is
 dropped (bounds the rows moved per late pulse)."""
+_HELD_BY_POOL = 3
+"""Reference count of an array of :attr:`EchoRing._handed` that nothing else refers to, as
+:meth:`EchoRing._spare` reads it (the list, its loop variable, ``sys.getrefcount``'s own)."""
 SORT_RUN = 1024
 """Most new slots the consumer's look checks with one set of array operations (pulses in
 time order); a slot out of order is checked on its own, and the next run starts after it."""
@@ -195,6 +199,8 @@ class EchoRing:
         self.committed_total = 0
         self.aborted_total = 0
         self.popped_total = 0
+        self._handed: list[npt.NDArray[np.generic]] = []
+        """Arrays of samples handed out by :meth:`pop`, to be reused once free (:meth:`_spare`)."""
 
     def reserve_block(self, max_n: int) -> Block | None:
         """Reserve up to ``max_n`` contiguous slots; ``None`` when the ring is full.
@@ -353,7 +359,9 @@ class EchoRing:
         """Take the ``n`` oldest ready pulses out of the ring (copied, slots freed).
 
         The pulses are those a look (``len``, :meth:`peek_times`) saw first; new ones
-        are sorted out only when fewer than ``n`` were seen.
+        are sorted out only when fewer than ``n`` were seen. The samples are copied into
+        an array of an earlier pop of ``n`` pulses that nothing refers to any more, when
+        there is one (:meth:`_spare`): pops of one size touch no fresh memory.
 
         Raises
         ------
@@ -367,7 +375,8 @@ class EchoRing:
                 raise ProcessingError(f"EchoRing.pop: {n} pulses asked, {self._ready} ready")
             idx, used = self._indices(n)
         batch = EchoBatch(
-            samples=self._samples[idx],
+            # mode "clip" (the positions are in range): "raise" would copy through a buffer
+            samples=np.take(self._samples, idx, axis=0, out=self._spare(n), mode="clip"),
             t_ns=self._t_ns[idx],
             pulse_id=self._pulse_id[idx],
             channel=self._channel[idx],
@@ -384,6 +393,29 @@ class EchoRing:
                 self._taken_ns = int(batch.t_ns[-1])
             self._advance_ready()
         return batch
+
+    def _spare(self, n: int) -> npt.NDArray[np.generic]:
+        """An array for the samples of ``n`` popped pulses (consumer thread).
+
+        Every array a pop handed out is kept in :attr:`_handed`; one that nothing else
+        refers to any more (CPython's reference count: a view of it counts) is free. The
+        first free one of ``n`` rows is reused (its pages written already: a fresh array
+        costs a page fault per 4 KiB at its first write); free ones of other sizes are let
+        go. None free: a new array.
+        """
+        reuse: npt.NDArray[np.generic] | None = None
+        kept = []
+        for arr in self._handed:
+            free = sys.getrefcount(arr) <= _HELD_BY_POOL
+            if free and arr.shape[0] == n and reuse is None:
+                reuse = arr
+            elif not free or arr.shape[0] == n:
+                kept.append(arr)
+        if reuse is None:
+            reuse = np.empty((n, *self._samples.shape[1:]), self._samples.dtype)
+        kept.append(reuse)
+        self._handed = kept
+        return reuse
 
     def _indices(self, n: int) -> tuple[npt.NDArray[np.intp], int]:
         """Ring positions of the first ``n`` ready pulses, and the slots up to the last

@@ -258,3 +258,30 @@ def test_the_producer_writes_into_memory_the_ring_has_already_mapped() -> None:
     while (block := ring.reserve_block(32)) is not None:
         block.samples[...] = 7
     assert resource.getrusage(resource.RUSAGE_THREAD).ru_minflt - faults < 16
+
+
+def _popped(ring: EchoRing, n: int, t0: int) -> np.ndarray:
+    """Commit ``n`` pulses from time ``t0`` (samples = their time), pop them: their samples."""
+    block = ring.reserve_block(n)
+    assert block is not None and len(block) == n
+    t = np.arange(t0, t0 + n)
+    block.samples[...] = t[:, None, None]
+    ring.commit_block(block, t, t, np.zeros(n, np.int32), np.zeros(n, np.uint32))
+    return ring.pop(n).samples
+
+
+def test_a_pop_reuses_the_array_of_an_earlier_pop_once_nothing_refers_to_it() -> None:
+    ring = EchoRing(64, 8, "int16")
+    first = _popped(ring, 16, 1)
+    address = first.ctypes.data
+    held = _popped(ring, 16, 100)[2:5]  # a view keeps its array in use
+    assert held.ctypes.data != address + 2 * held.strides[0]
+    del first
+    again = _popped(ring, 16, 200)
+    assert again.ctypes.data == address  # reused: no fresh memory
+    assert (again[:, 0, 0] == np.arange(200, 216)).all()
+    more = _popped(ring, 16, 250)
+    assert (held[:, 0, 0] == [102, 103, 104]).all()  # never written while in use
+    assert not np.shares_memory(more, held) and not np.shares_memory(more, again)
+    other = _popped(ring, 8, 300)  # another size: a new array
+    assert not np.shares_memory(other, again) and not np.shares_memory(other, held)
