@@ -54,7 +54,7 @@ REORDER_WINDOW = 64
 dropped (bounds the rows moved per late pulse)."""
 _HELD_BY_POOL = 3
 """Reference count of an array of :attr:`EchoRing._handed` that nothing else refers to, as
-:meth:`EchoRing._spare` reads it (the list, its loop variable, ``sys.getrefcount``'s own)."""
+:meth:`EchoRing._spare` reads it (the list, a local name, ``sys.getrefcount``'s own)."""
 SORT_RUN = 1024
 """Most new slots the consumer's look checks with one set of array operations (pulses in
 time order); a slot out of order is checked on its own, and the next run starts after it."""
@@ -400,22 +400,22 @@ class EchoRing:
         Every array a pop handed out is kept in :attr:`_handed`; one that nothing else
         refers to any more (CPython's reference count: a view of it counts) is free. The
         first free one of ``n`` rows is reused (its pages written already: a fresh array
-        costs a page fault per 4 KiB at its first write); free ones of other sizes are let
-        go. None free: a new array.
+        costs a page fault per 4 KiB at its first write); free ones of other sizes met on
+        the way are let go. None free: a new array. Arrays come back about in the order
+        they were handed out (focusing takes the oldest pulses, skipping drops the oldest
+        not looked at), so the look is short.
         """
-        reuse: npt.NDArray[np.generic] | None = None
-        kept = []
-        for arr in self._handed:
-            free = sys.getrefcount(arr) <= _HELD_BY_POOL
-            if free and arr.shape[0] == n and reuse is None:
-                reuse = arr
-            elif not free or arr.shape[0] == n:
-                kept.append(arr)
-        if reuse is None:
-            reuse = np.empty((n, *self._samples.shape[1:]), self._samples.dtype)
-        kept.append(reuse)
-        self._handed = kept
-        return reuse
+        handed, i = self._handed, 0
+        while i < len(handed):
+            arr = handed[i]
+            if sys.getrefcount(arr) > _HELD_BY_POOL:  # in use
+                i += 1
+            elif handed.pop(i).shape[0] == n:
+                break  # free and of the size: reused
+        else:
+            arr = np.empty((n, *self._samples.shape[1:]), self._samples.dtype)
+        handed.append(arr)
+        return arr
 
     def _indices(self, n: int) -> tuple[npt.NDArray[np.intp], int]:
         """Ring positions of the first ``n`` ready pulses, and the slots up to the last
