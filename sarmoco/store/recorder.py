@@ -626,7 +626,8 @@ class Table:
                 padded[: data.shape[0]] = data
                 region, data = slice(region.start, end), padded
             writes.append(arr.async_array.setitem(region, data))
-        zarr_sync(_gather(writes))  # one trip to zarr's event loop for all columns
+        if writes:  # one trip to zarr's event loop for all columns, none for no rows
+            zarr_sync(_gather(writes))
         if committed != self.committed:
             self.group.update_attributes({COMMITTED_ATTR: committed})
 
