@@ -10,8 +10,8 @@ in one run, on the disk that holds ``--work``:
 2. **lossless compressors on simulated echoes**: ratio and single-thread CPU rate of each
    candidate on blocks of the simulated ``thz-spotlight`` run at mid-aperture, scaled to
    int16 as the simulator's radar sends them;
-3. **the recorder at the radar's rate**: those echoes offered in blocks of 256 pulses at
-   20 kHz (paced) to the daemon's :class:`~sarmoco.store.recorder.Recorder` (fsync every
+3. **the recorder at the radar's rate**: those echoes offered in blocks of :data:`BLOCK`
+   pulses at 20 kHz (paced) to the daemon's :class:`~sarmoco.store.recorder.Recorder` (fsync every
    second) on a writer thread, through a queue that holds the echo ring's seconds of
    pulses; a block that finds the queue full is not stored and is counted (as the daemon's
    ring counts the pulses it drops). For each echo compression: MB/s of echoes stored per
@@ -34,6 +34,7 @@ import numcodecs
 import numpy as np
 
 from sarmoco.daemon.ingest import RING_SECONDS
+from sarmoco.daemon.runner import RECORD_POLL_S
 from sarmoco.sim.echostream import EchoStream
 from sarmoco.sim.emit_radar import int16_scale
 from sarmoco.sim.motionspec import MotionSpec
@@ -44,7 +45,9 @@ from sarmoco.store.schema import ECHO_COMPRESSION
 
 N_SAMPLES = 4096
 PRF_HZ = 20_000.0
-BLOCK = 256
+BLOCK = round(RECORD_POLL_S * PRF_HZ)
+"""Pulses per offer: what one pass of the daemon's recording loop stores at 20 kHz (200,
+so that blocks end inside the recorder's 256-pulse chunks, as the daemon's do)."""
 NEEDED_MB_S = PRF_HZ * N_SAMPLES * 4 / 1e6
 """Rate of the THz paper's radar, MB/s of int16 I/Q."""
 DD_BLOCK = 16 << 20

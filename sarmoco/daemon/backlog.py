@@ -152,19 +152,21 @@ class FocusBacklog:
         return RecordedBatch.join(taken)
 
     def _remove(self, start: int, n: int) -> None:
-        """Remove ``n`` pulses from position ``start`` on (lock held)."""
-        kept: deque[RecordedBatch] = deque()
+        """Remove ``n`` pulses from position ``start`` on (lock held); the parts after them
+        are not looked at."""
+        head: list[RecordedBatch] = []
         pos = 0
-        for part in self._parts:
+        while self._parts and pos < start + n:
+            part = self._parts.popleft()
             a, b = pos, pos + len(part)
             pos = b
             lo, hi = max(a, start), min(b, start + n)
             if lo >= hi:
-                kept.append(part)
+                head.append(part)
                 continue
             if lo > a:
-                kept.append(part.part(0, lo - a))
+                head.append(part.part(0, lo - a))
             if hi < b:
-                kept.append(part.part(hi - a, b - a))
-        self._parts = kept
+                head.append(part.part(hi - a, b - a))
+        self._parts.extendleft(reversed(head))
         self._n -= n

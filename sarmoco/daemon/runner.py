@@ -44,7 +44,10 @@ POLL_S = 0.05
 """Reader poll timeout and idle sleep of the focusing loop, s."""
 
 RECORD_POLL_S = 0.01
-"""Idle sleep of the recording loop, s."""
+"""Pause of the recording loop after each pass, s. A pass stores every pulse due, so the
+next one finds what came meanwhile: about 200 pulses at 20 kHz, where passes back to back
+would each store the few that came during the last one and pay a pass's fixed cost for
+them."""
 
 RECORDING_STALL_S = 0.5
 """WATCHDOG=1 waits while the recording thread has not ended a pass for this long, s."""
@@ -480,7 +483,7 @@ class _LiveRun:
         """
         while not self.st.stop.is_set():
             try:
-                stored = self.pipe.record(self.pipe.now_ns(live=True))
+                self.pipe.record(self.pipe.now_ns(live=True))
                 self.pipe.recorder.flush_due()
             except SarmocoError as exc:
                 self._recording_failure = exc
@@ -489,8 +492,7 @@ class _LiveRun:
                 continue
             self._recording_failure = None
             self.st.recorded_mono = time.monotonic()
-            if not stored:
-                self.st.stop.wait(RECORD_POLL_S)
+            self.st.stop.wait(RECORD_POLL_S)
 
     # -- focusing loop ------------------------------------------------------------------------
 

@@ -35,8 +35,13 @@ from sarmoco.store import schema
 from sarmoco.store.flags import NAV_FLAGS, PulseFlag
 from sarmoco.store.recorder import Recorder
 
-RECORD_BLOCK_PULSES = 1024
-"""Most pulses stored by one write of :meth:`RunTables.store_pulses`."""
+RECORD_UNIT_PULSES = 128
+"""Pulses taken out of the echo ring and stored together by :meth:`RunTables.store_pulses`:
+arrays of one size, which the ring reuses (:meth:`~sarmoco.daemon.echoring.EchoRing.pop`)."""
+RECORD_PART_WAIT_S = 0.1
+"""Pulses due that make less than a unit are taken once the oldest of them has been due
+this long, s (the radar paused or stopped, or a low PRF)."""
+_PART_WAIT_NS = round(RECORD_PART_WAIT_S * 1e9)
 INS_RECORD_S = 0.25
 """Queued INS samples and raw INS bytes go to the store at most this often (host clock):
 each write costs milliseconds, s."""
@@ -137,8 +142,9 @@ class RunTables:
         Parameters
         ----------
         ring : EchoRing
-            The run's echo ring, taken from oldest first, :data:`RECORD_BLOCK_PULSES` at a
-            time.
+            The run's echo ring, taken from oldest first, :data:`RECORD_UNIT_PULSES` at a
+            time (fewer only once they have waited :data:`RECORD_PART_WAIT_S`, or with
+            ``hold_ns`` None).
         backlog : FocusBacklog
             Where the stored pulses wait for focusing.
         hold_ns : int or None
@@ -148,10 +154,12 @@ class RunTables:
             The backlog may skip ahead (live focusing); otherwise no more pulses are taken
             than it has room for.
         """
-        stored = 0
+        stored, unit = 0, RECORD_UNIT_PULSES
         while True:
-            t = ring.peek_times(RECORD_BLOCK_PULSES)
+            t = ring.peek_times(unit)
             k = t.size if hold_ns is None else int(np.searchsorted(t, hold_ns, side="right"))
+            if hold_ns is not None and 0 < k < unit and t[0] > hold_ns - _PART_WAIT_NS:
+                k = 0  # a part of a unit: it waits for the rest
             if not skips:
                 k = min(k, backlog.free)
             if k == 0:
@@ -164,7 +172,7 @@ class RunTables:
             self.summary.pulses_received += k
             self.recorded_ns = int(e.t_ns[-1])
             stored += k
-            if k < RECORD_BLOCK_PULSES:
+            if k < unit:
                 break
         return stored
 

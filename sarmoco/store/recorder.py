@@ -375,7 +375,9 @@ class Table:
 
     A column whose chunks hold :data:`DIRECT_MIN_BYTES` or more (raw echoes) is written a
     whole chunk at a time: the rows of its partial chunk wait until it is full (or
-    :meth:`trim` writes them), and ``committed`` stays at the chunk boundary until then.
+    :meth:`trim` writes them), and ``committed`` stays at the chunk boundary until then;
+    its rows are gathered in a staging buffer made once, so each block is copied into
+    memory already written rather than into a fresh array.
     The other columns are written once their oldest row not written has waited
     ``flush_interval_s``: each file zarr writes costs about a millisecond of CPU, which a
     table written in small blocks (a recording pass every 10 ms) would pay for every
@@ -428,6 +430,9 @@ class Table:
             name: np.zeros((0, *col.shape), col.dtype) for name, col in spec.columns.items()
         }
         """Each column's rows from :attr:`_held_from` on (class notes)."""
+        self._stage: dict[str, npt.NDArray[Any]] = {}
+        """Staging buffer of each whole-chunk column: its rows held, then the rows being
+        written (:meth:`_with_held`)."""
         self._held_from = dict.fromkeys(spec.columns, 0)
         """First row held of each column (the start of a chunk)."""
         self._stored = dict.fromkeys(spec.columns, 0)
@@ -502,10 +507,9 @@ class Table:
                 if arr.shape[0] < stop:
                     grow = -(-(stop - arr.shape[0]) // self.grow_rows) * self.grow_rows
                     arr.resize((arr.shape[0] + grow, *arr.shape[1:]))
-            regions, held, held_from, stored = {}, {}, {}, {}
+            regions, held, held_from, stored, moves = {}, {}, {}, {}, {}
             for name, arr in self.arrays.items():
-                old = self._held[name]
-                both = np.concatenate([old, rows[name]]) if old.shape[0] else rows[name]
+                both = self._with_held(name, rows[name])
                 first, chunk = self._held_from[name], arr.chunks[0]
                 whole_end = stop // chunk * chunk
                 if force or (due and name not in self._whole):
@@ -518,7 +522,10 @@ class Table:
                     held[name] = both if both is not rows[name] else both.copy()
                     held_from[name] = first
                     continue
-                held[name] = both[whole_end - first :].copy()
+                if name in self._whole:  # moved to the front of its buffer once written
+                    moves[name] = (whole_end - first, stop - whole_end)
+                else:
+                    held[name] = both[whole_end - first :].copy()
                 held_from[name] = whole_end
             committed = min({**self._stored, **stored}.values())
             self._write_regions(regions, committed)
@@ -527,6 +534,8 @@ class Table:
             # write after a failed one, so none was placed after these)
             self.rows = start
             raise
+        for name, (offset, n) in moves.items():
+            held[name] = self._restage(name, offset, n)
         self._held.update(held)
         self._held_from.update(held_from)
         self._stored.update(stored)
@@ -535,6 +544,30 @@ class Table:
         if due:
             self._waiting_since = None
         return committed
+
+    def _with_held(self, name: str, new: npt.NDArray[Any]) -> npt.NDArray[Any]:
+        """The rows of column ``name`` held, then ``new``: one array (``new`` itself when
+        none is held). A whole-chunk column's rows are gathered in its staging buffer, made
+        once and grown to the largest write: the rows of every block are copied into memory
+        already written (a fresh array per block is a page fault per 4 KiB of echoes)."""
+        old = self._held[name]
+        if name not in self._whole:
+            return np.concatenate([old, new]) if old.shape[0] else new
+        n = old.shape[0] + new.shape[0]
+        stage = self._stage.get(name)
+        if stage is None or stage.shape[0] < n:
+            stage = self._stage[name] = np.empty((n, *new.shape[1:]), new.dtype)
+            stage[: old.shape[0]] = old
+        stage[old.shape[0] : n] = new
+        return stage[:n]
+
+    def _restage(self, name: str, offset: int, n: int) -> npt.NDArray[Any]:
+        """Hold the ``n`` rows of whole-chunk column ``name`` from ``offset`` of its staging
+        buffer on (those after its last whole chunk written) at the buffer's start."""
+        stage = self._stage[name]
+        if offset:  # a multiple of the chunk, and n is less than one: no overlap
+            stage[:n] = stage[offset : offset + n]
+        return stage[:n]
 
     def flush(self) -> int:
         """Write every row held (:meth:`write` of none, forced); returns ``committed``."""
@@ -593,7 +626,8 @@ class Table:
                 padded[: data.shape[0]] = data
                 region, data = slice(region.start, end), padded
             writes.append(arr.async_array.setitem(region, data))
-        zarr_sync(_gather(writes))  # one trip to zarr's event loop for all columns
+        if writes:  # one trip to zarr's event loop for all columns, none for no rows
+            zarr_sync(_gather(writes))
         if committed != self.committed:
             self.group.update_attributes({COMMITTED_ATTR: committed})
 
