@@ -183,3 +183,75 @@ def test_every_stored_tile_is_announced_once_with_its_time_and_position(
         assert msg.time_utc == gps_ns_to_unix_ns(mid, leap) // 1000
         assert msg.lat == msg.lon == UNKNOWN_DEG_E7
         assert msg.file_url.endswith(f"/images/tile_{msg.image_index:06d}")
+
+
+def test_each_capture_is_a_strip_store_closed_complete_and_announced(
+    sim: SimFiles,  # noqa: F811 - the imported fixture
+    tmp_path: Path,
+) -> None:
+    """``camera.store_per_capture``: two captures give two stores, each closed complete at
+    its stop (every pulse of the capture, its ``captures`` and ``strip`` attributes, the
+    run's metrics) while the daemon runs on, the second named by the mission item the
+    ground station reported current (MISSION_CURRENT) before it, and each announced with
+    CAMERA_IMAGE_CAPTURED (its store's URL) and a STATUSTEXT at MAV_SEVERITY_INFO."""
+    radar_port, gcs_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
+    http_port = free_port(socket.SOCK_STREAM)
+    gcs = mavutil.mavlink_connection(
+        f"udpin:127.0.0.1:{gcs_port}", source_system=255, source_component=190,
+        dialect="ardupilotmega",
+    )  # fmt: skip
+    config = daemon_config(
+        sim, tmp_path / "strips.toml",
+        radar={"link": f"udp://127.0.0.1:{radar_port}"},
+        ins={"link": f"udpin:127.0.0.1:{free_port(socket.SOCK_DGRAM)}"},
+        status={"http_port": http_port},
+        camera={"enabled": True, "link": f"udpout:127.0.0.1:{gcs_port}",
+                "capture_at_start": False, "store_per_capture": True,
+                "statustext_interval_s": 60.0},
+    )  # fmt: skip
+    d = Daemon(config, tmp_path / "leg.zarr")
+    strips: list[Any] = []
+    try:
+        assert d.started()["store"] == f"{tmp_path / 'leg'}-*.zarr"
+        recv(gcs, "HEARTBEAT")
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            for number, (first, last) in enumerate([(0, 300), (600, 1000)], start=1):
+                if number == 2:
+                    gcs.mav.mission_current_send(7)
+                    send(tx, sim.packets[300:600], radar_port)  # between strips: let go
+                    wait_status(http_port, "counters", "radar_frames", 600)
+                assert command(gcs, mav.MAV_CMD_VIDEO_START_CAPTURE) == mav.MAV_RESULT_ACCEPTED
+                send(tx, sim.packets[first:last], radar_port)
+                wait_status(http_port, "counters", "radar_frames", last)
+                assert command(gcs, mav.MAV_CMD_VIDEO_STOP_CAPTURE) == mav.MAV_RESULT_ACCEPTED
+                stored = recv(gcs, "STATUSTEXT", f"SAR: strip {number}")
+                assert stored.severity == mav.MAV_SEVERITY_INFO
+                strips.append(recv(gcs, "CAMERA_IMAGE_CAPTURED"))
+                assert d.proc.poll() is None  # the daemon runs on
+        assert d.stop() == 0
+    finally:
+        d.kill_if_running()
+        gcs.close()
+    paths = sorted(tmp_path.glob("leg-*.zarr"))
+    assert len(paths) == 2 and paths[1].name.endswith("-item7.zarr") and "item" not in paths[0].name
+    assert [m.file_url for m in strips] == [p.resolve().as_uri() for p in paths]
+    assert [m.image_index for m in strips] == [0, 1]
+    for number, (path, msg) in enumerate(zip(paths, strips, strict=True), start=1):
+        store = open_store(path)
+        assert store.attrs["complete"]
+        n = store.committed("pulses")
+        assert n == store.attrs["metrics"]["pulses_received"] > 250
+        t_ns = store.read("pulses")["t_ns"]
+        start = int(np.searchsorted(sim.t_ns, t_ns[0]))
+        np.testing.assert_array_equal(t_ns, sim.t_ns[start : start + n])
+        assert store.attrs["strip"] == {
+            "number": number,
+            "mission_item": 7 if number == 2 else None,
+        }
+        (interval,) = store.attrs["captures"]["intervals"]
+        assert interval["stop_utc"] is not None
+        leap = int(sim.table["ins"].get("gps_minus_utc_s", 18))
+        assert msg.time_utc == gps_ns_to_unix_ns((int(t_ns[0]) + int(t_ns[-1])) // 2, leap) // 1000
+        assert msg.lat == msg.lon == UNKNOWN_DEG_E7  # no INS: no absolute position
+    assert open_store(paths[0]).read("pulses")["t_ns"][-1] < sim.t_ns[300]  # first third only
+
