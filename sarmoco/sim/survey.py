@@ -285,6 +285,16 @@ class SurveyDeviation:
         return pos, vel, acc, euler
 
 
+def leg_times_ns(scn: Scenario, spec: MotionSpec) -> list[tuple[int, int]]:
+    """Start and end of each straight leg of the survey ``spec`` flies for ``scn``, GPS ns
+    (the trajectory's time 0 is the first pulse, ``scn.t0_ns``)."""
+    pat = SurveyPattern.of(scn, spec)
+    return [
+        (scn.t0_ns + round(t * 1e9), scn.t0_ns + round((t + pat.leg_s) * 1e9))
+        for t in (pat.leg_start_s(k) for k in range(pat.legs))
+    ]
+
+
 def survey_scenario(
     base: Scenario, spec: MotionSpec, per_leg: int = 2, margin_s: float | None = None
 ) -> Scenario:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import datetime
 import json
 import socket
+import subprocess
 import time
 from pathlib import Path
 from typing import Any
@@ -23,11 +24,16 @@ import numpy as np
 from pymavlink import mavutil
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
+from sarmoco.app.demo import read_json_line
+from sarmoco.app.simconfig import loopback_config
 from sarmoco.daemon.camera import UNKNOWN_DEG_E7
 from sarmoco.drivers.clock import gps_ns_to_unix_ns
+from sarmoco.sim.scenario import load_preset
+from sarmoco.sim.survey import leg_times_ns, survey_scenario, survey_spec
 from sarmoco.store.reader import open_store
 from tests.daemon.test_daemon_process import (
     N_PULSES,
+    PY,
     Daemon,
     SimFiles,
     daemon_config,
@@ -255,3 +261,59 @@ def test_each_capture_is_a_strip_store_closed_complete_and_announced(
         assert msg.lat == msg.lon == UNKNOWN_DEG_E7  # no INS: no absolute position
     assert open_store(paths[0]).read("pulses")["t_ns"][-1] < sim.t_ns[300]  # first third only
 
+
+def test_a_survey_mission_captures_one_strip_per_leg(tmp_path: Path) -> None:
+    """``sarmoco sim --serve --motion survey:2:2 --mission``: the simulated autopilot flies
+    two 2 s legs joined by a banked turn and sends VIDEO_START_CAPTURE and
+    VIDEO_STOP_CAPTURE (after MISSION_CURRENT) at each leg's ends to the daemon's camera
+    component: the daemon stores one strip per leg, named by the leg's mission item, each
+    holding the pulses of its leg only (none of the turn), and announces each at the INS's
+    absolute position in the middle of its leg."""
+    radar_url = f"udp://127.0.0.1:{free_port(socket.SOCK_DGRAM)}"
+    ins_port, camera_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
+    sim_proc = subprocess.Popen(
+        [*PY, "sim", "--preset", "ku-vehicle", "--scale", "0.1", "--motion", "survey:2:2",
+         "--ins-grade", "ideal", "--serve", "--radar", radar_url,
+         "--ins", f"mavlink:udpout:127.0.0.1:{ins_port}",
+         "--mission", f"udpout:127.0.0.1:{camera_port}", "--truth", str(tmp_path / "truth.json")],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    daemon: Daemon | None = None
+    try:
+        hello = read_json_line(sim_proc, "the simulator", 60.0)
+        config = loopback_config(
+            tmp_path, load_preset("ku-vehicle", 0.1), hello["radar"]["connect"],
+            ("mavlink", hello["ins"][0]["connect"]), 0,
+            {"camera": {"enabled": True, "link": f"udpin:127.0.0.1:{camera_port}",
+                        "capture_at_start": False, "store_per_capture": True}},
+        )  # fmt: skip
+        daemon = Daemon(config, tmp_path / "leg.zarr")
+        daemon.started()
+        assert sim_proc.wait(timeout=60) == 0
+        done = read_json_line(sim_proc, "the simulator", 5.0)
+        assert daemon.stop() == 0, daemon.log.read_text()
+    finally:
+        if daemon is not None:
+            daemon.kill_if_running()
+        sim_proc.kill()
+        sim_proc.wait()
+        assert sim_proc.stdout is not None
+        sim_proc.stdout.close()
+    acks = done["links"]["mission"]["acks"]
+    assert acks == {"MAV_CMD_VIDEO_START_CAPTURE:MAV_RESULT_ACCEPTED": 2,
+                    "MAV_CMD_VIDEO_STOP_CAPTURE:MAV_RESULT_ACCEPTED": 2}  # fmt: skip
+    paths = sorted(tmp_path.glob("leg-*.zarr"))
+    assert [p.name[-11:] for p in paths] == ["-item3.zarr", "-item7.zarr"]
+    truth = json.loads((tmp_path / "truth.json").read_text())
+    t_wire = np.asarray(truth["pulses"]["t_ns"], np.int64) + truth["wire"]["shift_ns"]
+    motion = survey_spec(2, 2.0)
+    scn = survey_scenario(load_preset("ku-vehicle", 0.1), motion, per_leg=1, margin_s=0.5)
+    legs = leg_times_ns(scn, motion)
+    prf = scn.radar.prf_hz
+    for path, (t0, t1) in zip(paths, legs, strict=True):
+        store = open_store(path)
+        assert store.attrs["complete"]
+        t_ns = store.read("pulses")["t_ns"] - truth["wire"]["shift_ns"]
+        assert t0 - 0.1e9 <= t_ns[0] and t_ns[-1] <= t1 + 0.1e9  # its leg, no turn
+        assert store.committed("pulses") >= 0.9 * 2.0 * prf  # nearly all of it
+    assert sum(open_store(p).committed("pulses") for p in paths) < 0.5 * t_wire.size
