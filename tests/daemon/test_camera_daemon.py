@@ -16,6 +16,7 @@ import datetime
 import json
 import socket
 import subprocess
+import sys
 import time
 from pathlib import Path
 from typing import Any
@@ -317,3 +318,57 @@ def test_a_survey_mission_captures_one_strip_per_leg(tmp_path: Path) -> None:
         assert t0 - 0.1e9 <= t_ns[0] and t_ns[-1] <= t1 + 0.1e9  # its leg, no turn
         assert store.committed("pulses") >= 0.9 * 2.0 * prf  # nearly all of it
     assert sum(open_store(p).committed("pulses") for p in paths) < 0.5 * t_wire.size
+
+
+def test_mavproxy_shows_the_ins_dropout(
+    sim: SimFiles,  # noqa: F811 - the imported fixture
+    tmp_path: Path,
+) -> None:
+    """MAVProxy, a real ground station, headless (``--daemon``) on the camera component's
+    link: the INS's frames arrive, then stop, and MAVProxy prints the STATUSTEXT of the
+    dropout (``AP: SAR: INS stale, ...``) on its console."""
+    gcs_port, ins_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
+    console = tmp_path / "mavproxy.out"
+    with console.open("w") as out:
+        mavproxy = subprocess.Popen(
+            [sys.executable, str(Path(sys.executable).parent / "mavproxy.py"),
+             f"--master=udpin:127.0.0.1:{gcs_port}", "--daemon", "--no-state",
+             "--default-modules=link", f"--state-basedir={tmp_path}"],
+            stdout=out, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, cwd=tmp_path,
+        )  # fmt: skip
+    config = daemon_config(
+        sim, tmp_path / "mavproxy.toml",
+        radar={"link": f"udp://127.0.0.1:{free_port(socket.SOCK_DGRAM)}"},
+        ins={"link": f"udpin:127.0.0.1:{ins_port}"},
+        camera={"enabled": True, "link": f"udpout:127.0.0.1:{gcs_port}",
+                "statustext_interval_s": 60.0},
+    )  # fmt: skip
+    d = Daemon(config, tmp_path / "mavproxy.zarr")
+    try:
+        d.started()
+        wait_console(console, "AP: SAR: no INS data")
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            for frame in mavlink_frames(sim.dir / "nav.tlog", 200):
+                tx.sendto(frame, ("127.0.0.1", ins_port))
+                time.sleep(0.002)
+        wait_console(console, "AP: cleared: SAR: no INS data")
+        wait_console(console, "AP: SAR: INS stale, ")
+        assert d.stop() == 0
+    finally:
+        d.kill_if_running()
+        mavproxy.terminate()
+        try:
+            mavproxy.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            mavproxy.kill()
+            mavproxy.wait()
+
+
+def wait_console(console: Path, text: str) -> None:
+    """Wait until a line of MAVProxy's console output starts with ``text``."""
+    deadline = time.monotonic() + 2 * WAIT_S
+    while time.monotonic() < deadline:
+        if any(line.startswith(text) for line in console.read_text().splitlines()):
+            return
+        time.sleep(0.1)
+    raise AssertionError(f"MAVProxy showed no {text!r}:\n{console.read_text()}")
