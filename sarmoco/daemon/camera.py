@@ -513,13 +513,19 @@ class CameraComponent:
         )  # fmt: skip
 
     def _capture_status(self) -> None:
+        """CAMERA_CAPTURE_STATUS, then CAMERA_IMAGE_CAPTURED of the newest product (if any):
+        a ground station that connected after the products were announced (MAVSDK) learns
+        the newest index and asks for those before it by index."""
         on = int(self.capturing)
         recording_ms = round((time.monotonic() - self._capture_since) * 1000) if on else 0
         free = self._free_bytes()
+        products = self._products()
         self._conn.mav.camera_capture_status_send(
             self._boot_ms(), on, on, 0.0, recording_ms & 0xFFFFFFFF,
-            math.nan if free is None else free / 2**20, len(self._products()),
+            math.nan if free is None else free / 2**20, len(products),
         )  # fmt: skip
+        if products:  # a late ground station learns the newest; MAVSDK then asks for the rest
+            self._image_captured(products[-1])
 
     # -- commands -------------------------------------------------------------------------
 

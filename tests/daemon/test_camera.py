@@ -386,3 +386,47 @@ def test_strips_and_their_tiles_are_numbered_in_the_order_stored_each_with_its_s
     assert strip.url == "file:///data/leg-1.zarr" and strip.lat_lon_alt == (47.1, 8.0, 400.0)
     assert strip.time_utc_us == gps_ns_to_unix_ns(t0 + 10**9, 18) // 1000
     assert tile1.url == "file:///data/leg-2.zarr/images/tile_000000"
+
+
+def test_mavsdk_lists_the_products_stored_before_it_connected() -> None:
+    """MAVSDK's camera plugin connects after five products were announced: with the newest
+    one after CAMERA_CAPTURE_STATUS it asks for those before it by index, and
+    ``list_photos`` (all) gives all five, with their URLs and positions."""
+    from mavsdk import Configuration, Mavsdk
+    from mavsdk.component_type import ComponentType
+    from mavsdk.plugins.camera import Camera, CameraError, PhotosRange
+
+    port = free_udp_port()
+    products = [
+        Product(k, 1_700_000_000_000_000 + k, (47.0, 8.0, 400.0), 100.0, f"file:///d/r.zarr/{k}")
+        for k in range(5)
+    ]
+    cfg = CameraConfig(enabled=True, link=f"udpout:127.0.0.1:{port}", capture_at_start=False)
+    camera = CameraComponent(
+        cfg, "SAR 15 GHz", dict, lambda: None, lambda _on, _item: None, Counters(),
+        lambda: products,
+    ).start()  # fmt: skip
+    time.sleep(1.5)  # announced before the ground station is there
+    sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    sdk.add_any_connection(f"udpin://127.0.0.1:{port}")
+    photos: list[Any] = []
+    try:
+        deadline = time.monotonic() + 4 * WAIT_S
+        plugin = None
+        while len(photos) < len(products) and time.monotonic() < deadline:
+            time.sleep(0.25)
+            systems = [s for s in sdk.get_systems() if s.has_camera()]
+            if plugin is None and systems:
+                plugin = Camera(systems[0])
+            if plugin is None or not plugin.camera_list().cameras:
+                continue
+            try:
+                photos = plugin.list_photos(100, PhotosRange.ALL)
+            except CameraError:  # until MAVSDK has the capture status
+                continue
+    finally:
+        camera.stop()
+        sdk.destroy()
+    assert sorted(p.index for p in photos) == list(range(5))
+    assert {p.file_url for p in photos} == {p.url for p in products}
+    assert all(p.position.latitude_deg == 47.0 for p in photos)
