@@ -233,7 +233,9 @@ def test_each_capture_is_a_strip_store_closed_complete_and_announced(
                 assert command(gcs, mav.MAV_CMD_VIDEO_STOP_CAPTURE) == mav.MAV_RESULT_ACCEPTED
                 stored = recv(gcs, "STATUSTEXT", f"SAR: strip {number}")
                 assert stored.severity == mav.MAV_SEVERITY_INFO
-                strips.append(recv(gcs, "CAMERA_IMAGE_CAPTURED"))
+                while (msg := recv(gcs, "CAMERA_IMAGE_CAPTURED")).image_index != number - 1:
+                    pass  # the newest one again, after a capture status
+                strips.append(msg)
                 assert d.proc.poll() is None  # the daemon runs on
         assert d.stop() == 0
     finally:
@@ -242,7 +244,6 @@ def test_each_capture_is_a_strip_store_closed_complete_and_announced(
     paths = sorted(tmp_path.glob("leg-*.zarr"))
     assert len(paths) == 2 and paths[1].name.endswith("-item7.zarr") and "item" not in paths[0].name
     assert [m.file_url for m in strips] == [p.resolve().as_uri() for p in paths]
-    assert [m.image_index for m in strips] == [0, 1]
     for number, (path, msg) in enumerate(zip(paths, strips, strict=True), start=1):
         store = open_store(path)
         assert store.attrs["complete"]
