@@ -493,10 +493,15 @@ class _LiveRun:
 
     def _open_strip(self, mission_item: int | None) -> None:
         """Open the next strip's store and let it take pulses, with the INS samples of the
-        last :data:`STRIP_NAV_LEAD_S`."""
-        self._strips += 1
+        last :data:`STRIP_NAV_LEAD_S`. A store that cannot be created is a processing
+        error (counted, logged, announced): no strip opens, the daemon runs on."""
         path = new_store_path(self.path.parent, self.path.stem, mission_item)
-        pipe = self._new_pipeline(path)
+        try:
+            pipe = self._new_pipeline(path)
+        except SarmocoError as exc:
+            self._processing_failed(exc)
+            return
+        self._strips += 1
         self.products.open_store(path)
         now = datetime.datetime.now(datetime.UTC).isoformat()
         self.strip = _Strip(self._strips, path, Capture(now), mission_item)
@@ -509,7 +514,9 @@ class _LiveRun:
 
     def _close_strip(self) -> None:
         """Close the open strip's store complete (every pulse recorded and focused, its
-        metrics and attributes) and announce it."""
+        metrics and attributes) and announce it. A failure to focus or write its last
+        part is a processing error (counted, logged, announced); the store is closed with
+        what it holds."""
         strip, pipe = self.strip, self.pipe
         assert strip is not None and pipe is not None
         self._taking = False
@@ -517,14 +524,20 @@ class _LiveRun:
             self.pipe, self.strip = None, None
             self._ingest = self._new_ingest()
         strip.capture.stop_utc = datetime.datetime.now(datetime.UTC).isoformat()
+        summary = pipe.current()
         try:
             summary = pipe.finish()
             pipe.recorder.set_attribute("captures", {"intervals": [asdict(strip.capture)]})
             pipe.recorder.set_attribute(
                 "strip", {"number": strip.number, "mission_item": strip.mission_item}
             )
+        except SarmocoError as exc:  # the store keeps what was committed; the daemon runs on
+            self._processing_failed(exc)
         finally:  # a processing error in the last blocks must not leave the store open
-            pipe.recorder.close()
+            try:
+                pipe.recorder.close()
+            except SarmocoError as exc:
+                self._processing_failed(exc)
         self.last_summary = summary
         self._pulses_closed += summary.pulses_received
         log.info("strip closed", extra=summary.as_dict() | {"store": str(strip.path)})

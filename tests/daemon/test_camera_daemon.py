@@ -373,3 +373,41 @@ def wait_console(console: Path, text: str) -> None:
             return
         time.sleep(0.1)
     raise AssertionError(f"MAVProxy showed no {text!r}:\n{console.read_text()}")
+
+
+def test_a_strip_store_that_cannot_be_created_is_announced_and_the_daemon_runs_on(
+    sim: SimFiles,  # noqa: F811 - the imported fixture
+    tmp_path: Path,
+) -> None:
+    """A start capture whose strip's store cannot be created (its folder is a file): the
+    ground station hears the recorder's error at MAV_SEVERITY_ERROR, the daemon keeps
+    answering and stops cleanly."""
+    (tmp_path / "taken").write_text("a file where the strips' folder should be")
+    gcs_port, http_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_STREAM)
+    gcs = mavutil.mavlink_connection(
+        f"udpin:127.0.0.1:{gcs_port}", source_system=255, source_component=190,
+        dialect="ardupilotmega",
+    )  # fmt: skip
+    config = daemon_config(
+        sim, tmp_path / "taken.toml",
+        radar={"link": f"udp://127.0.0.1:{free_port(socket.SOCK_DGRAM)}"},
+        ins={"link": f"udpin:127.0.0.1:{free_port(socket.SOCK_DGRAM)}"},
+        status={"http_port": http_port},
+        camera={"enabled": True, "link": f"udpout:127.0.0.1:{gcs_port}",
+                "capture_at_start": False, "store_per_capture": True,
+                "statustext_interval_s": 60.0},
+    )  # fmt: skip
+    d = Daemon(config, tmp_path / "taken" / "leg.zarr", log=tmp_path / "taken.log")
+    try:
+        d.started()
+        recv(gcs, "HEARTBEAT")
+        assert command(gcs, mav.MAV_CMD_VIDEO_START_CAPTURE) == mav.MAV_RESULT_ACCEPTED
+        error = recv(gcs, "STATUSTEXT", "SAR: recorder: cannot create")
+        assert error.severity == mav.MAV_SEVERITY_ERROR
+        assert command(gcs, mav.MAV_CMD_VIDEO_STOP_CAPTURE) == mav.MAV_RESULT_ACCEPTED
+        counters = json.loads(http_get(http_port, "/status")[1])["counters"]
+        assert counters["processing_errors"] == 1
+        assert d.stop() == 0, d.log.read_text()
+    finally:
+        d.kill_if_running()
+        gcs.close()
