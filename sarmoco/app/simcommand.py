@@ -96,9 +96,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--motion",
         default="ideal",
         metavar="KIND[:LOG]",
-        help="ideal | turbulence | flightlog:PATH.tlog | survey:LEGS:LEG_S (straight legs of "
-        "LEG_S s joined by banked 180-degree turns, one target in the middle half of each "
-        "leg; default ideal)",
+        help="ideal | turbulence | flightlog:PATH.tlog | survey:LEGS:LEG_S[:TURN_DEG_S] "
+        "(straight legs of LEG_S s joined by banked 180-degree turns at TURN_DEG_S deg/s, "
+        "by default the real log's 11.6; one target in the middle half of each leg; "
+        "default ideal)",
     )
     p.add_argument("--motion-seed", type=int, default=0, help="seed of the turbulence")
     p.add_argument("--ins-grade", default="tactical", choices=sorted(GRADES))
@@ -204,11 +205,13 @@ def _motion(text: str, seed: int) -> MotionSpec:
         return MotionSpec("flightlog", seed=seed, log_path=Path(path))
     if kind in ("ideal", "turbulence") and not path:
         return MotionSpec("ideal" if kind == "ideal" else "turbulence", seed=seed)
-    legs, _, leg_s = path.partition(":")
-    if kind == "survey" and legs.isdigit() and _number(leg_s):
-        return survey_spec(int(legs), float(leg_s), seed)
+    legs, _, rest = path.partition(":")
+    leg_s, _, turn = rest.partition(":")
+    if kind == "survey" and legs.isdigit() and _number(leg_s) and (not turn or _number(turn)):
+        return survey_spec(int(legs), float(leg_s), seed, float(turn) if turn else None)
     raise ConfigError(
-        f"--motion {text!r}: want ideal, turbulence, flightlog:PATH.tlog or survey:LEGS:LEG_S"
+        f"--motion {text!r}: want ideal, turbulence, flightlog:PATH.tlog or "
+        "survey:LEGS:LEG_S[:TURN_DEG_S]"
     )
 
 

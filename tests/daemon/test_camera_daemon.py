@@ -265,8 +265,8 @@ def test_each_capture_is_a_strip_store_closed_complete_and_announced(
 
 
 def test_a_survey_mission_captures_one_strip_per_leg(tmp_path: Path) -> None:
-    """``sarmoco sim --serve --motion survey:2:2 --mission``: the simulated autopilot flies
-    two 2 s legs joined by a banked turn and sends VIDEO_START_CAPTURE and
+    """``sarmoco sim --serve --motion survey:2:2:36 --mission``: the simulated autopilot
+    flies two 2 s legs joined by a banked turn (36 deg/s: 5 s) and sends VIDEO_START_CAPTURE and
     VIDEO_STOP_CAPTURE (after MISSION_CURRENT) at each leg's ends to the daemon's camera
     component: the daemon stores one strip per leg, named by the leg's mission item, each
     holding the pulses of its leg only (none of the turn), and announces each at the INS's
@@ -274,7 +274,7 @@ def test_a_survey_mission_captures_one_strip_per_leg(tmp_path: Path) -> None:
     radar_url = f"udp://127.0.0.1:{free_port(socket.SOCK_DGRAM)}"
     ins_port, camera_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
     sim_proc = subprocess.Popen(
-        [*PY, "sim", "--preset", "ku-vehicle", "--scale", "0.1", "--motion", "survey:2:2",
+        [*PY, "sim", "--preset", "ku-vehicle", "--scale", "0.1", "--motion", "survey:2:2:36",
          "--ins-grade", "ideal", "--serve", "--radar", radar_url,
          "--ins", f"mavlink:udpout:127.0.0.1:{ins_port}",
          "--mission", f"udpout:127.0.0.1:{camera_port}", "--truth", str(tmp_path / "truth.json")],
@@ -305,7 +305,7 @@ def test_a_survey_mission_captures_one_strip_per_leg(tmp_path: Path) -> None:
     assert [p.name[-11:] for p in paths] == ["-item3.zarr", "-item7.zarr"]
     truth = json.loads((tmp_path / "truth.json").read_text())
     t_wire = np.asarray(truth["pulses"]["t_ns"], np.int64) + truth["wire"]["shift_ns"]
-    motion = survey_spec(2, 2.0)
+    motion = survey_spec(2, 2.0, turn_rate_dps=36.0)
     scn = survey_scenario(load_preset("ku-vehicle", 0.1), motion, per_leg=1, margin_s=0.5)
     legs = leg_times_ns(scn, motion)
     prf = scn.radar.prf_hz
