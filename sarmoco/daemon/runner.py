@@ -41,7 +41,7 @@ from sarmoco.daemon.warmup import warm_up_kernels
 from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource
 from sarmoco.drivers.samples import Sample
 from sarmoco.drivers.source import Source
-from sarmoco.errors import ConfigError, DataFileError, SarmocoError
+from sarmoco.errors import ConfigError, DataFileError, RecorderError, SarmocoError
 from sarmoco.store.reader import StoreNav, StorePulses, open_store
 from sarmoco.store.recorder import Recorder, meta_chunk_pulses
 
@@ -398,6 +398,19 @@ class _LiveRun:
         port = self.status.port if self.status else 0
         print(json.dumps({"store": named, "status_port": port}), flush=True)
         self.notifier.ready(f"recording to {named}")
+
+    @property
+    def recorder(self) -> Recorder:
+        """The recorder of the open store.
+
+        Raises
+        ------
+        RecorderError
+            Between strips (``camera.store_per_capture``): no store is open.
+        """
+        if self.pipe is None:
+            raise RecorderError("recorder: no store is open between strips")
+        return self.pipe.recorder
 
     def _new_ingest(self) -> RadarIngest:
         """A radar ingest of its own (an echo ring, the reads that fill it)."""
