@@ -47,7 +47,9 @@ def main() -> None:
     )  # fmt: skip
     cfg = CameraConfig(enabled=True, link=f"udpout:127.0.0.1:{port}", capture_at_start=False)
     t0 = time.monotonic()
-    camera = CameraComponent(cfg, "SAR", dict, lambda: None, lambda on: None, Counters()).start()
+    camera = CameraComponent(
+        cfg, "SAR", dict, lambda: None, lambda _on, _item: None, Counters()
+    ).start()
     try:
         gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=5.0)
         print(f"first HEARTBEAT after {1e3 * (time.monotonic() - t0):.1f} ms")

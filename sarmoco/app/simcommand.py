@@ -14,8 +14,12 @@ Live links (the simulator waits for the daemon on every link, then plays)::
 ``mavlink:udpout:127.0.0.1:PORT`` (sent to the daemon's ``udpin:`` port),
 ``mavlink:tcp:127.0.0.1:PORT`` (we listen), ``mavlink:pty``, ``sbg:pty``,
 ``sbg-can:slcan-pty`` (a simulated slcan adapter), ``sbg-can:socketcand:PORT``
-(a socketcand server on 127.0.0.1). With ``--out`` the INS recordings are chosen
-by protocol name (``--ins mavlink --ins sbg``; default all three).
+(a socketcand server on 127.0.0.1). ``--mission udpout:127.0.0.1:PORT`` (with
+``--motion survey:LEGS:LEG_S``): the autopilot's survey mission, sent to the daemon's
+MAVLink camera component (``camera.link = "udpin:127.0.0.1:PORT"``): a video start
+capture at the start of each leg and a stop at its end (:mod:`sarmoco.sim.emit_mission`).
+With ``--out`` the INS recordings are chosen by protocol name (``--ins mavlink --ins
+sbg``; default all three).
 
 With ``--serve`` one JSON line goes to stdout as soon as every link is open::
 
@@ -57,6 +61,7 @@ from sarmoco.drivers.clock import GPS_LEAP_SECONDS_DEFAULT
 from sarmoco.errors import ConfigError
 from sarmoco.sim.array_scenario import ARRAY_PRESET
 from sarmoco.sim.echostream import streams
+from sarmoco.sim.emit_mission import MissionEmitter
 from sarmoco.sim.emit_radar import RadarEmitter
 from sarmoco.sim.emitter import Emitter, WireTime
 from sarmoco.sim.extended import SCENES, load_scene
@@ -69,6 +74,7 @@ from sarmoco.sim.outfiles import NAV_FILES, TRUTH_FILE, TruthWriter, write_run
 from sarmoco.sim.player import Pacing, play_emitters
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import DEFAULT_LEVER_ARM_M, PRESETS, radar_table
+from sarmoco.sim.survey import leg_times_ns, survey_scenario, survey_spec
 from sarmoco.sim.transports import Link, TcpServerLink, UdpOutLink
 
 
@@ -90,7 +96,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         "--motion",
         default="ideal",
         metavar="KIND[:LOG]",
-        help="ideal | turbulence | flightlog:PATH.tlog (default ideal)",
+        help="ideal | turbulence | flightlog:PATH.tlog | survey:LEGS:LEG_S[:TURN_DEG_S] "
+        "(straight legs of LEG_S s joined by banked 180-degree turns at TURN_DEG_S deg/s, "
+        "by default the real log's 11.6; one target in the middle half of each leg; "
+        "default ideal)",
     )
     p.add_argument("--motion-seed", type=int, default=0, help="seed of the turbulence")
     p.add_argument("--ins-grade", default="tactical", choices=sorted(GRADES))
@@ -100,6 +109,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     where.add_argument("--serve", action="store_true", help="serve live links on loopback")
     p.add_argument("--radar", metavar="URL", help="udp://127.0.0.1:PORT | tcp://127.0.0.1:PORT")
     p.add_argument("--ins", action="append", metavar="SPEC", help="INS link (repeatable)")
+    p.add_argument(
+        "--mission", metavar="udpout:HOST:PORT",
+        help="live, with --motion survey: the survey mission's capture commands to the "
+        "daemon's MAVLink camera component",
+    )  # fmt: skip
     pace = p.add_mutually_exclusive_group()
     pace.add_argument("--realtime", action="store_true", help="real time (default with --serve)")
     pace.add_argument("--fast", action="store_true", help="as fast as possible (default --out)")
@@ -191,7 +205,22 @@ def _motion(text: str, seed: int) -> MotionSpec:
         return MotionSpec("flightlog", seed=seed, log_path=Path(path))
     if kind in ("ideal", "turbulence") and not path:
         return MotionSpec("ideal" if kind == "ideal" else "turbulence", seed=seed)
-    raise ConfigError(f"--motion {text!r}: want ideal, turbulence or flightlog:PATH.tlog")
+    legs, _, rest = path.partition(":")
+    leg_s, _, turn = rest.partition(":")
+    if kind == "survey" and legs.isdigit() and _number(leg_s) and (not turn or _number(turn)):
+        return survey_spec(int(legs), float(leg_s), seed, float(turn) if turn else None)
+    raise ConfigError(
+        f"--motion {text!r}: want ideal, turbulence, flightlog:PATH.tlog or "
+        "survey:LEGS:LEG_S[:TURN_DEG_S]"
+    )
+
+
+def _number(text: str) -> bool:
+    """Whether ``text`` is a finite positive number."""
+    try:
+        return math.isfinite(float(text)) and float(text) > 0
+    except ValueError:
+        return False
 
 
 def radar_link(url: str) -> Link:
@@ -208,9 +237,12 @@ def build_run(args: argparse.Namespace, faults: Faults) -> SimRun:
     """Simulate the scenario the arguments describe (a long run's echo is streamed:
     :mod:`sarmoco.sim.echostream`)."""
     scn = load_scene(args.scene, args.preset, scale=args.scale, **scenario_overrides(args))
+    motion = _motion(args.motion, args.motion_seed)
+    if motion.kind == "survey":
+        scn = survey_scenario(scn, motion, per_leg=1, margin_s=motion.leg_s / 4)
     return simulate(
         scn,
-        _motion(args.motion, args.motion_seed),
+        motion,
         args.ins_grade,
         ins_rate_hz=args.ins_rate,
         seed=args.seed,
@@ -272,6 +304,8 @@ def _serve(args: argparse.Namespace, run: SimRun, faults: Faults) -> int:
             if faults.mavlink_rogue_system:
                 options["rogue_system"] = faults.mavlink_rogue_system
             emitters[f"ins{k}"] = live_ins_emitter(spec, feed, options)
+        if args.mission:
+            emitters["mission"] = _mission_emitter(args.mission, run)
         _print_line(
             {
                 "event": "listening",
@@ -280,7 +314,8 @@ def _serve(args: argparse.Namespace, run: SimRun, faults: Faults) -> int:
                 "scale": args.scale,
                 "n_pulses": int(run.t_ns.size),
                 "radar": emitters["radar"].describe() if "radar" in emitters else None,
-                "ins": [e.describe() for name, e in emitters.items() if name != "radar"],
+                "ins": [e.describe() for name, e in emitters.items() if name.startswith("ins")],
+                "mission": emitters["mission"].describe() if "mission" in emitters else None,
                 "radar_params": radar_table(run.scenario.radar),
                 "truth": None if args.truth is None else str(args.truth),
             }
@@ -310,6 +345,23 @@ def _serve(args: argparse.Namespace, run: SimRun, faults: Faults) -> int:
         for e in emitters.values():
             e.close()
     return 0
+
+
+def _mission_emitter(where: str, run: SimRun) -> MissionEmitter:
+    """The survey mission's emitter on ``--mission udpout:HOST:PORT``.
+
+    Raises
+    ------
+    ConfigError
+        If ``where`` is not that form, or the motion is not a survey.
+    """
+    kind, _, address = where.partition(":")
+    if kind != "udpout":
+        raise ConfigError(f"--mission {where!r}: want udpout:127.0.0.1:PORT")
+    if run.motion.kind != "survey":
+        raise ConfigError("--mission: needs --motion survey:LEGS:LEG_S (the legs it captures)")
+    link = UdpOutLink(*host_port(address, "--mission"))
+    return MissionEmitter(link, leg_times_ns(run.scenario, run.motion))
 
 
 def _stop(signum: int, frame: FrameType | None) -> None:

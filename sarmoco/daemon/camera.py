@@ -34,6 +34,11 @@ component ids (``camera.system_id``, ``camera.component_id``):
   in ``param1`` likewise). CAMERA_CAPTURE_STATUS counts them (``image_count``).
 - STORAGE_INFORMATION (on MAV_CMD_REQUEST_MESSAGE or MAV_CMD_REQUEST_STORAGE_INFORMATION):
   one storage, ready, the free space of the store's file system.
+- MISSION_CURRENT from a system whose commands are taken (the autopilot) names the
+  mission item a start capture belongs to (a survey leg's item: the store of a strip is
+  named by it).
+- STATUSTEXT for what the daemon tells the operator besides faults (:meth:`CameraComponent.notify`:
+  a strip stored).
 
 Everything runs on one thread of its own (:meth:`CameraComponent.start`); a malformed
 or hostile message is counted (``camera_bad_messages``) and never ends it.
@@ -47,6 +52,7 @@ import math
 import os
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -103,6 +109,12 @@ FIX_NEAR_S = 1.0
 
 FIXES_KEPT = 100_000
 """Absolute fixes :class:`ProductLog` keeps (the older half goes when it has more)."""
+
+SEVERITY_INFO = mav.MAV_SEVERITY_INFO
+"""STATUSTEXT severity of what the operator is told for information (a strip stored)."""
+
+SEVERITY_WARNING = mav.MAV_SEVERITY_WARNING
+"""STATUSTEXT severity of what the operator should look at (a strip without pulses)."""
 
 START = {mav.MAV_CMD_IMAGE_START_CAPTURE, mav.MAV_CMD_VIDEO_START_CAPTURE}
 STOP = {mav.MAV_CMD_IMAGE_STOP_CAPTURE, mav.MAV_CMD_VIDEO_STOP_CAPTURE}
@@ -171,12 +183,14 @@ def operator_faults(
 
 
 class Product(NamedTuple):
-    """One image product the run stored, as CAMERA_IMAGE_CAPTURED announces it.
+    """One image product the run stored (a focused tile, or a strip's whole store), as
+    CAMERA_IMAGE_CAPTURED announces it.
 
     Attributes
     ----------
     image_index : int
-        Its index in the store (``images/tile_NNNNNN``).
+        Its index among the products of the daemon's life, in the order they were stored
+        (with one store, a tile's is its index in the store, ``images/tile_NNNNNN``).
     time_utc_us : int
         The middle of the pulses that formed it, µs since 1970 (UTC).
     lat_lon_alt : tuple of 3 float or None
@@ -186,7 +200,7 @@ class Product(NamedTuple):
         The antenna's height above the ground the image is formed on, m
         (``relative_alt``).
     url : str
-        Where it is: the store's tile group (``file://...``).
+        Where it is: the store's tile group, or the strip's store (``file://...``).
     """
 
     image_index: int
@@ -197,15 +211,16 @@ class Product(NamedTuple):
 
 
 class ProductLog:
-    """The image products a run stored, each with where the antenna was: what the camera
-    component announces.
+    """The image products the daemon stored, each with where the antenna was: what the
+    camera component announces. The focused tiles of every store, and each strip's store
+    once closed (:meth:`add_strip`), in the order they were stored.
 
     Parameters
     ----------
     feed : LiveFeed
-        The feed the recorder publishes each stored tile to.
+        The feed the recorders publish each stored tile to.
     store : Path
-        The run's store.
+        The store the recorder writes to first (:meth:`open_store` for the next).
     height_m : float
         The antenna's height above the imaged ground (``geometry.height_m``), m.
     gps_minus_utc_s : int
@@ -215,6 +230,10 @@ class ProductLog:
     def __init__(self, feed: LiveFeed, store: Path, height_m: float, gps_minus_utc_s: int) -> None:
         self._feed = feed
         self._url = store.resolve().as_uri()
+        self._tiles_seen = 0
+        """Tiles of the feed made products so far."""
+        self._made_lock = threading.Lock()
+        """Serialises the camera's thread and the run's opening and closing of stores."""
         self._height_m = height_m
         self._leap_s = gps_minus_utc_s
         self._lock = threading.Lock()
@@ -250,16 +269,38 @@ class ProductLog:
             return self._fix_lla[j] if abs(self._fix_t[j] - t_ns) <= FIX_NEAR_S * 1e9 else None
 
     def products(self) -> list[Product]:
-        """Every product stored so far, in store order (from the camera's thread)."""
-        for index, t0, t1 in self._feed.stored_tiles(len(self._made)):
-            mid = (t0 + t1) // 2
-            self._made.append(
-                Product(
-                    index, gps_ns_to_unix_ns(mid, self._leap_s) // 1000, self._position(mid),
-                    self._height_m, f"{self._url}/images/{tile_name(index)}",
-                )
-            )  # fmt: skip
-        return self._made
+        """Every product stored so far, in the order stored (a list that only grows)."""
+        with self._made_lock:
+            self._take_tiles()
+            return self._made
+
+    def open_store(self, store: Path) -> None:
+        """The tiles the feed gives from now on are those of ``store`` (a strip's)."""
+        with self._made_lock:
+            self._take_tiles()
+            self._url = store.resolve().as_uri()
+
+    def add_strip(self, store: Path, t0_ns: int, t1_ns: int) -> Product:
+        """A strip's store was closed, its pulses from ``t0_ns`` to ``t1_ns`` (GPS ns): its
+        product (after the tiles stored before it), placed at the middle of the strip."""
+        with self._made_lock:
+            self._take_tiles()
+            strip = self._product((t0_ns + t1_ns) // 2, store.resolve().as_uri())
+            self._made.append(strip)
+            return strip
+
+    def _take_tiles(self) -> None:
+        """Make products of the tiles the feed has given since the last look (lock held)."""
+        spans = self._feed.stored_tiles(self._tiles_seen)
+        self._tiles_seen += len(spans)
+        for index, t0, t1 in spans:
+            url = f"{self._url}/images/{tile_name(index)}"
+            self._made.append(self._product((t0 + t1) // 2, url))
+
+    def _product(self, mid_ns: int, url: str) -> Product:
+        """The next product: formed around ``mid_ns`` (GPS ns), at ``url``."""
+        utc_us = gps_ns_to_unix_ns(mid_ns, self._leap_s) // 1000
+        return Product(len(self._made), utc_us, self._position(mid_ns), self._height_m, url)
 
 
 class CameraComponent:
@@ -278,8 +319,9 @@ class CameraComponent:
         Free space for the store, bytes (None: unknown): CAMERA_CAPTURE_STATUS
         ``available_capacity``.
     on_capture : callable
-        Called with True when a start capture command is taken, False for a stop (on the
-        component's thread, before the command is acknowledged).
+        Called with True when a start capture command is taken, False for a stop, and the
+        mission item the autopilot last reported current (MISSION_CURRENT ``seq``; None
+        before one), on the component's thread, before the command is acknowledged.
     counters : Counters
         Where ``camera_commands``, ``camera_commands_refused`` and ``camera_bad_messages``
         are counted.
@@ -299,7 +341,7 @@ class CameraComponent:
         model: str,
         faults: Callable[[], Mapping[str, Fault]],
         free_bytes: Callable[[], int | None],
-        on_capture: Callable[[bool], None],
+        on_capture: Callable[[bool, int | None], None],
         counters: Counters,
         products: Callable[[], Sequence[Product]] = tuple,
     ) -> None:
@@ -320,6 +362,10 @@ class CameraComponent:
         self._thread: threading.Thread | None = None
         self._standing: dict[str, Fault] = {}
         self._sent_at: dict[str, float] = {}
+        self._notices: deque[Fault] = deque()
+        """STATUSTEXTs to send besides faults (:meth:`notify`), oldest first."""
+        self.mission_item: int | None = None
+        """The mission item the autopilot last reported current (None: none yet)."""
         for name in ("camera_commands", "camera_commands_refused", "camera_bad_messages"):
             counters.inc(name, 0)
         key = signing_key(cfg.signing_key_hex)  # before a socket is opened
@@ -352,12 +398,18 @@ class CameraComponent:
             self._thread.join(timeout=5.0)
         try:
             self._announce_products()  # those stored since the last heartbeat
+            while self._notices:
+                self._statustext(self._notices.popleft())
         except OSError as exc:
             log.warning("camera link error", extra={"link": self.cfg.link, "error": str(exc)})
         try:
             self._conn.close()
         except OSError as exc:
             log.debug("camera.link %s: close: %s", self.cfg.link, exc)
+
+    def notify(self, severity: int, text: str) -> None:
+        """Send a STATUSTEXT (MAV_SEVERITY ``severity``) within :data:`POLL_S`; any thread."""
+        self._notices.append(Fault(severity, text))
 
     def _run(self) -> None:
         next_beat = 0.0
@@ -369,6 +421,8 @@ class CameraComponent:
                     self._heartbeat()
                     self._announce(now)
                     self._announce_products()
+                while self._notices:
+                    self._statustext(self._notices.popleft())
                 self._receive()
             except OSError as exc:  # the link's socket or port went away: try again
                 log.warning("camera link error", extra={"link": self.cfg.link, "error": str(exc)})
@@ -387,6 +441,8 @@ class CameraComponent:
                 self.counters.inc("camera_bad_messages")
             elif kind in ("COMMAND_LONG", "COMMAND_INT"):
                 self._command(msg)
+            elif kind == "MISSION_CURRENT" and msg.get_srcSystem() in self.cfg.command_system_ids:
+                self.mission_item = int(msg.seq)
             try:
                 msg = self._conn.recv_match(blocking=False)
             except ValueError:
@@ -457,13 +513,19 @@ class CameraComponent:
         )  # fmt: skip
 
     def _capture_status(self) -> None:
+        """CAMERA_CAPTURE_STATUS, then CAMERA_IMAGE_CAPTURED of the newest product (if any):
+        a ground station that connected after the products were announced (MAVSDK) learns
+        the newest index and asks for those before it by index."""
         on = int(self.capturing)
         recording_ms = round((time.monotonic() - self._capture_since) * 1000) if on else 0
         free = self._free_bytes()
+        products = self._products()
         self._conn.mav.camera_capture_status_send(
             self._boot_ms(), on, on, 0.0, recording_ms & 0xFFFFFFFF,
-            math.nan if free is None else free / 2**20, len(self._products()),
+            math.nan if free is None else free / 2**20, len(products),
         )  # fmt: skip
+        if products:  # a late ground station learns the newest; MAVSDK then asks for the rest
+            self._image_captured(products[-1])
 
     # -- commands -------------------------------------------------------------------------
 
@@ -518,11 +580,12 @@ class CameraComponent:
 
     def _set_capture(self, on: bool, sender: tuple[int, int]) -> None:
         if on != self.capturing:
-            self._on_capture(on)
+            self._on_capture(on, self.mission_item)
             self.capturing = on
             self._capture_since = time.monotonic()
         log.info("camera capture", extra={"capturing": on, "sender_system": sender[0],
-                                          "sender_component": sender[1]})  # fmt: skip
+                                          "sender_component": sender[1],
+                                          "mission_item": self.mission_item})  # fmt: skip
 
     def _ack(self, cmd: int, result: int, sender: tuple[int, int]) -> None:
         self._conn.mav.command_ack_send(cmd, result, 0, 0, sender[0], sender[1])

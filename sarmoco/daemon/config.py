@@ -570,6 +570,12 @@ class CameraConfig:
         "ground station); false: pulses are recorded only between start and stop capture "
         "commands",
     )
+    store_per_capture: bool = _key(
+        False,
+        "Open a new store at each start capture command and close it at the stop (a store "
+        "per strip, named by UTC time and mission item); false: one store from the start of "
+        "the daemon to its stop",
+    )
     statustext_interval_s: float = _key(
         10.0, "Interval between repeats of the STATUSTEXT of a fault that lasts", unit="s", gt=0
     )

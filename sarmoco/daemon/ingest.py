@@ -80,7 +80,8 @@ class RadarIngest:
         Daemon configuration (``radar.prf_hz`` and ``radar.n_samples`` size the ring,
         :data:`RING_SECONDS` of pulses, at least 1024).
     nav : NavBuffer
-        The run's navigation: its newest sample is one reference of the time-jump filter.
+        The run's navigation: its newest sample is one reference of the time-jump filter
+        (:attr:`nav`: a pipeline that adopts the ingest sets its own).
     counters : Counters
         Status counters (``pulses_not_captured``).
     refuse_jumps : bool
@@ -96,7 +97,8 @@ class RadarIngest:
         fmt = ring_format(cfg)
         capacity = max(1024, math.ceil(RING_SECONDS * cfg.radar.prf_hz))
         self.ring = EchoRing(capacity, cfg.radar.n_samples, fmt)
-        self._nav = nav
+        self.nav = nav
+        """The navigation the time-jump filter compares pulse times with."""
         self._counters = counters
         self._refuse_jumps = refuse_jumps
         self._scratch = np.empty(
@@ -202,7 +204,7 @@ class RadarIngest:
             if self._latest_pulse_ns is not None:
                 elapsed = time.monotonic_ns() - self._latest_pulse_mono_ns
                 refs.append(self._latest_pulse_ns + elapsed)
-        span = self._nav.span_ns()
+        span = self.nav.span_ns()
         if span is not None:
             refs.append(span[1])
         keep = np.ones(t_ns.shape, dtype=bool)

@@ -95,6 +95,9 @@ class Pipeline:
         link: the radar does not wait). Otherwise :meth:`record` takes no more pulses
         from the ring than the focus backlog has room for (a file or a replay, read at
         the pace of focusing).
+    radar : RadarIngest, optional
+        The echo ring and reads to take over, with the pulses already in its ring (a strip's
+        store opened while its first pulses were read); default: a new one.
     """
 
     def __init__(
@@ -105,6 +108,7 @@ class Pipeline:
         sink: SinkFactory | None = None,
         refuse_jumps: bool = False,
         focus_skips: bool = False,
+        radar: RadarIngest | None = None,
     ) -> None:
         self.cfg = cfg
         self.recorder = recorder
@@ -113,7 +117,10 @@ class Pipeline:
         self.backlog = FocusBacklog(max(math.ceil(FOCUS_BACKLOG_S * cfg.radar.prf_hz), 2 * block))
         self._focus_skips = focus_skips
         self.nav, self.aligner = nav_alignment(cfg, self.backlog, block)
-        self.radar = RadarIngest(cfg, self.nav, counters, refuse_jumps)
+        if radar is None:
+            radar = RadarIngest(cfg, self.nav, counters, refuse_jumps)
+        radar.nav = self.nav
+        self.radar = radar
         self.ins = InsIngest(self.nav)
         self.tables = RunTables(recorder)
         self.blocks = BlockFocusing(cfg, self.tables, sink)

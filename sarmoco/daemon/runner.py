@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import datetime
+import json
 import logging
 import math
+import queue
 import shutil
 import signal
 import sys
@@ -16,12 +18,20 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from types import FrameType
 
-from sarmoco.daemon.camera import CameraComponent, Fault, ProductLog, operator_faults
+from sarmoco.daemon.camera import (
+    SEVERITY_INFO,
+    SEVERITY_WARNING,
+    CameraComponent,
+    Fault,
+    ProductLog,
+    operator_faults,
+)
 from sarmoco.daemon.config import Config, StatusConfig, config_to_dict, live_imaging
 from sarmoco.daemon.focuser import SinkFactory
-from sarmoco.daemon.ingest import ring_format
+from sarmoco.daemon.ingest import RadarIngest, ring_format
 from sarmoco.daemon.links import open_ins, open_radar
 from sarmoco.daemon.livefeed import LiveFeed
+from sarmoco.daemon.navbuffer import NavBuffer
 from sarmoco.daemon.pipeline import Pipeline
 from sarmoco.daemon.sdnotify import Notifier
 from sarmoco.daemon.status import Counters, Health, LiveView, StatusServer
@@ -31,7 +41,7 @@ from sarmoco.daemon.warmup import warm_up_kernels
 from sarmoco.drivers.radar import RadarFileSource, RadarSource, RadarTcpSource
 from sarmoco.drivers.samples import Sample
 from sarmoco.drivers.source import Source
-from sarmoco.errors import ConfigError, DataFileError, SarmocoError
+from sarmoco.errors import ConfigError, DataFileError, RecorderError, SarmocoError
 from sarmoco.store.reader import StoreNav, StorePulses, open_store
 from sarmoco.store.recorder import Recorder, meta_chunk_pulses
 
@@ -61,11 +71,17 @@ INS_STALE_S = 2.0
 HEALTH_PERIOD_S = 0.1
 """Period of the links' and the INS's health checks (:meth:`_LiveRun._watch_links`), s."""
 
+STRIP_NAV_LEAD_S = 2.0
+"""A strip's store opens with the INS samples of this long before it (the first pulses'
+navigation), s of INS time."""
 
-def new_store_path(directory: str | Path, kind: str) -> Path:
-    """A fresh store name ``<directory>/<kind>-<UTC time>.zarr``."""
+
+def new_store_path(directory: str | Path, kind: str, item: int | None = None) -> Path:
+    """A fresh store name ``<directory>/<kind>-<UTC time>.zarr`` (``...-item<item>.zarr``
+    with a mission item)."""
     stamp = datetime.datetime.now(datetime.UTC).strftime("%Y%m%dT%H%M%S.%fZ")
-    return Path(directory) / f"{kind}-{stamp}.zarr"
+    suffix = "" if item is None else f"-item{item}"
+    return Path(directory) / f"{kind}-{stamp}{suffix}.zarr"
 
 
 def open_recorder(cfg: Config, path: Path, live: LiveFeed | None = None) -> Recorder:
@@ -117,6 +133,18 @@ class Capture:
 
     start_utc: str
     stop_utc: str | None = None
+
+
+@dataclass
+class _Strip:
+    """The store of one capture (``camera.store_per_capture``), while it is open."""
+
+    number: int
+    """1 for the daemon's first strip, and so on."""
+    path: Path
+    capture: Capture
+    mission_item: int | None
+    """The mission item current when the capture started (None: none reported)."""
 
 
 @dataclass
@@ -221,12 +249,19 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
     """
     stop = threading.Event()
     _stop_on_signals(stop)
+    if store is None and _per_capture(cfg):
+        store = Path(cfg.recorder.directory) / "strip.zarr"  # strips strip-<UTC time>.zarr
     run = _LiveRun(cfg, store or new_store_path(cfg.recorder.directory, "run"), stop)
     try:
         run.supervise(idle_exit_s)
     finally:
         run.shut_down()
     return 0
+
+
+def _per_capture(cfg: Config) -> bool:
+    """Whether the run opens a store per capture (``camera.store_per_capture``)."""
+    return cfg.camera.enabled and cfg.camera.store_per_capture
 
 
 def _stop_on_signals(stop: threading.Event) -> None:
@@ -255,12 +290,23 @@ class _LiveRun:
     the radar's pulses are read and let go (``pulses_not_captured``). The capture
     intervals go to the store's ``captures`` attribute at the end of the run.
 
+    With ``camera.store_per_capture`` each capture has a store of its own (a strip): a
+    start capture opens ``<path's folder>/<path's stem>-<UTC time>[-item<N>].zarr`` (N the
+    mission item the autopilot reported current), a stop closes it complete (every pulse
+    recorded and focused, the run's metrics, its ``captures`` and ``strip`` attributes),
+    and the camera component announces it (CAMERA_IMAGE_CAPTURED at the strip's middle,
+    and a STATUSTEXT). The focusing loop's thread opens and closes the stores, between
+    passes; the recording thread lets go of a store under :attr:`_record_lock`, the INS
+    reader under :attr:`_nav_lock`. Between strips no pipeline runs (:attr:`pipe` is
+    None): pulses are read and let go, INS samples only kept for the next strip's start
+    (:data:`STRIP_NAV_LEAD_S`).
+
     Parameters
     ----------
     cfg : Config
         The configuration.
     path : Path
-        Store to create.
+        Store to create (with ``camera.store_per_capture``: what the strips are named by).
     stop : threading.Event
         Set to end the run (by a signal).
     """
@@ -273,31 +319,57 @@ class _LiveRun:
         warm_up_kernels(live_imaging(cfg), self.notifier)
         self.counters, self.health = Counters(), Health()
         self.st = _LiveState(stop)
-        live = LiveFeed()
-        self.status = _start_status(self.counters, self.health, cfg.status, path, live)
-        self.recorder = open_recorder(cfg, path, live)
-        self.products = ProductLog(live, path, cfg.geometry.height_m, cfg.ins.gps_minus_utc_s)
+        self.per_capture = _per_capture(cfg)
+        """A store per capture (``camera.store_per_capture``), not one for the run."""
+        self.live = LiveFeed()
+        store_dir = path.parent if self.per_capture else path
+        self.status = _start_status(self.counters, self.health, cfg.status, store_dir, self.live)
+        self.products = ProductLog(self.live, path, cfg.geometry.height_m,
+                                   cfg.ins.gps_minus_utc_s)  # fmt: skip
         """The tiles stored and where the antenna was (the camera component announces them)."""
         radar = open_radar(cfg)
-        ins = open_ins(cfg, keep_raw=cfg.recorder.raw_ins)
-        network = not isinstance(radar, RadarFileSource)
-        self.pipe = Pipeline(
-            live_imaging(cfg), self.recorder, self.counters, refuse_jumps=network,
-            focus_skips=network,
-        )  # fmt: skip
+        self.ins = open_ins(cfg, keep_raw=cfg.recorder.raw_ins)
+        """The INS link as first opened (its raw format names the stores' raw bytes)."""
+        self._network = not isinstance(radar, RadarFileSource)
+        """The radar link is a network link (not a file)."""
+        self._write_failure_reported = False
+        """The recorder's writer thread failed and that was counted and logged."""
+        self._record_lock = threading.Lock()
+        """Held by the recording thread through a pass, and to change :attr:`pipe`."""
+        self._nav_lock = threading.Lock()
+        """Held by the INS reader while it offers samples, and to change :attr:`pipe`."""
+        self._ingest = self._new_ingest()
+        """What reads the radar: the open strip's pipeline's, else one that lets the pulses
+        go (or, while a strip opens, keeps them for its pipeline to take over)."""
+        self.pipe: Pipeline | None = None if self.per_capture else self._new_pipeline(path)
+        """The pipeline of the open store (None between strips)."""
+        self.strip: _Strip | None = None
+        """The open strip (``camera.store_per_capture``; None: none open)."""
+        self._strips = 0
+        """Strips opened so far."""
+        self._strip_requests: queue.SimpleQueue[tuple[bool, int | None]] = queue.SimpleQueue()
+        """Start (True) and stop capture requests with their mission item, oldest first."""
+        self._taking = False
+        """The open strip takes pulses (False from a stop capture until the strip closes)."""
+        self._opening = False
+        """A start capture asks for a strip not open yet: the pulses read meanwhile are kept
+        for it (not let go)."""
+        self._recent_nav: deque[Sample] = deque()
+        """INS samples of the last :data:`STRIP_NAV_LEAD_S` (a new strip starts with them)."""
+        self.last_summary = RunSummary()
+        """The totals of the last store closed (or of the run's one store at its end)."""
+        self._pulses_closed = 0
+        """Pulses received by the strips closed so far."""
         self._ins_file = Path(cfg.ins.link).is_file()
         """The INS link is a log file, read at its own pace (see :meth:`_now_ns`)."""
         self._ins_backlog: deque[Sample] = deque()
         """Samples read from an INS log and not yet offered (:meth:`_read_ins_file`)."""
-        self._write_failure_reported = False
-        """The recorder's writer thread failed and that was counted and logged."""
         self._recording_failure: SarmocoError | None = None
         """The last pass of the recording thread failed (None: it succeeded)."""
-        record_ins_format(self.recorder, ins)
         self.counters.add_source("radar", radar.decoder.counters.snapshot)
         self.decoder = radar.decoder
         """The radar's decoder (the same across reconnections): the streams it skipped."""
-        self.counters.add_source("ins", ins.counters.snapshot)
+        self.counters.add_source("ins", self.ins.counters.snapshot)
         self.counters.add_source("cpu_seconds", stage_cpu_seconds)
         self.counters.inc("processing_busy_seconds", 0.0)
         self.captures: list[Capture] = []
@@ -305,7 +377,9 @@ class _LiveRun:
         self.camera = self._start_camera() if cfg.camera.enabled else None
         """The MAVLink camera component (None: ``camera.enabled`` off)."""
         if self.camera is None or self.camera.capturing:
-            self._capture(True)
+            self._capture(True, None)
+        self._change_strips()  # the first strip, capturing from the start
+        ins = self.ins
         self.threads = [
             self._reader(
                 "radar", lambda: open_radar(cfg, decoder=radar.decoder), radar, self._read_radar
@@ -321,11 +395,40 @@ class _LiveRun:
         """Every link up at the last look of :meth:`_watch_links` (WATCHDOG=1 needs it)."""
         self.monitor = threading.Thread(target=self._watch_links, name="health", daemon=True)
         self.monitor.start()
-        log.info("sarmoco running", extra={"store": str(path), "radar": cfg.radar.link,
+        named = f"{path.parent / path.stem}-*.zarr" if self.per_capture else str(path)
+        log.info("sarmoco running", extra={"store": named, "radar": cfg.radar.link,
                                             "ins": cfg.ins.link})  # fmt: skip
         port = self.status.port if self.status else 0
-        print(f'{{"store": "{path}", "status_port": {port}}}', flush=True)
-        self.notifier.ready(f"recording to {path}")
+        print(json.dumps({"store": named, "status_port": port}), flush=True)
+        self.notifier.ready(f"recording to {named}")
+
+    @property
+    def recorder(self) -> Recorder:
+        """The recorder of the open store.
+
+        Raises
+        ------
+        RecorderError
+            Between strips (``camera.store_per_capture``): no store is open.
+        """
+        if self.pipe is None:
+            raise RecorderError("recorder: no store is open between strips")
+        return self.pipe.recorder
+
+    def _new_ingest(self) -> RadarIngest:
+        """A radar ingest of its own (an echo ring, the reads that fill it)."""
+        return RadarIngest(self.cfg, NavBuffer(), self.counters, refuse_jumps=self._network)
+
+    def _new_pipeline(self, path: Path) -> Pipeline:
+        """A new store at ``path`` and the pipeline that records and focuses into it, taking
+        over :attr:`_ingest` (and the pulses in its ring)."""
+        recorder = open_recorder(self.cfg, path, self.live)
+        record_ins_format(recorder, self.ins)
+        self._write_failure_reported = False
+        return Pipeline(
+            live_imaging(self.cfg), recorder, self.counters, refuse_jumps=self._network,
+            focus_skips=self._network, radar=self._ingest,
+        )  # fmt: skip
 
     # -- the camera component ---------------------------------------------------------------
 
@@ -358,8 +461,20 @@ class _LiveRun:
         low = self.cfg.camera.disk_low_fraction
         return operator_faults(self.health.components(), gauges, free, low)
 
-    def _capture(self, on: bool) -> None:
-        """Open (``on``) or close a capture interval: pulses are recorded only within one."""
+    def _capture(self, on: bool, mission_item: int | None) -> None:
+        """Open (``on``) or close a capture interval: pulses are recorded only within one.
+
+        With a store per capture, ask the focusing loop to open or close a strip
+        (:meth:`_change_strips`; pulses are let go from a stop on); ``mission_item`` names
+        the strip's store (None: no mission item).
+        """
+        if self.per_capture:
+            if on:
+                self._opening = True
+            else:
+                self._taking = False
+            self._strip_requests.put((on, mission_item))
+            return
         now = datetime.datetime.now(datetime.UTC).isoformat()
         if on:
             self.captures.append(Capture(now))
@@ -367,9 +482,97 @@ class _LiveRun:
             self.captures[-1].stop_utc = now
         log.info("capture started" if on else "capture stopped", extra={"store": str(self.path)})
 
-    def _capturing(self) -> bool:
-        """Whether pulses are recorded now (always without the camera component)."""
+    def _capturing(self, ingest: RadarIngest) -> bool:
+        """Whether pulses read into ``ingest`` are kept now (always without the camera
+        component). With a store per capture: while it is the current ingest, and a strip
+        is open and taking pulses, or none is open and one is opening."""
+        if self.per_capture:
+            taking = self._taking if self.strip is not None else self._opening
+            return taking and ingest is self._ingest
         return self.camera is None or self.camera.capturing
+
+    # -- strips (a store per capture) -------------------------------------------------------
+
+    def _change_strips(self) -> None:
+        """Open and close strips as the start and stop capture requests ask (the focusing
+        loop's thread, between passes)."""
+        while True:
+            try:
+                on, item = self._strip_requests.get_nowait()
+            except queue.Empty:
+                return
+            if on and self.strip is None:
+                self._open_strip(item)
+            elif not on and self.strip is not None:
+                self._close_strip()
+            self._opening = False
+
+    def _open_strip(self, mission_item: int | None) -> None:
+        """Open the next strip's store and let it take pulses, with the INS samples of the
+        last :data:`STRIP_NAV_LEAD_S`. A store that cannot be created is a processing
+        error (counted, logged, announced): no strip opens, the daemon runs on."""
+        path = new_store_path(self.path.parent, self.path.stem, mission_item)
+        try:
+            pipe = self._new_pipeline(path)
+        except SarmocoError as exc:
+            self._processing_failed(exc)
+            return
+        self._strips += 1
+        self.products.open_store(path)
+        now = datetime.datetime.now(datetime.UTC).isoformat()
+        self.strip = _Strip(self._strips, path, Capture(now), mission_item)
+        with self._nav_lock, self._record_lock:
+            pipe.add_nav(list(self._recent_nav), None)
+            self.pipe = pipe
+        self._taking = True
+        log.info("strip opened", extra={"store": str(path), "strip": self._strips,
+                                         "mission_item": mission_item})  # fmt: skip
+
+    def _close_strip(self) -> None:
+        """Close the open strip's store complete (every pulse recorded and focused, its
+        metrics and attributes) and announce it. A failure to focus or write its last
+        part is a processing error (counted, logged, announced); the store is closed with
+        what it holds."""
+        strip, pipe = self.strip, self.pipe
+        assert strip is not None and pipe is not None
+        self._taking = False
+        with self._nav_lock, self._record_lock:
+            self.pipe, self.strip = None, None
+            self._ingest = self._new_ingest()
+        strip.capture.stop_utc = datetime.datetime.now(datetime.UTC).isoformat()
+        summary = pipe.current()
+        try:
+            summary = pipe.finish()
+            pipe.recorder.set_attribute("captures", {"intervals": [asdict(strip.capture)]})
+            pipe.recorder.set_attribute(
+                "strip", {"number": strip.number, "mission_item": strip.mission_item}
+            )
+        except SarmocoError as exc:  # the store keeps what was committed; the daemon runs on
+            self._processing_failed(exc)
+        finally:  # a processing error in the last blocks must not leave the store open
+            try:
+                pipe.recorder.close()
+            except SarmocoError as exc:
+                self._processing_failed(exc)
+        self.last_summary = summary
+        self._pulses_closed += summary.pulses_received
+        log.info("strip closed", extra=summary.as_dict() | {"store": str(strip.path)})
+        self._announce_strip(strip, pipe, summary.pulses_received)
+
+    def _announce_strip(self, strip: _Strip, pipe: Pipeline, pulses: int) -> None:
+        """CAMERA_IMAGE_CAPTURED (placed at the middle of its pulses) and a STATUSTEXT for a
+        closed strip; a strip without pulses only the STATUSTEXT, at warning."""
+        camera = self.camera
+        item = "" if strip.mission_item is None else f" item {strip.mission_item}"
+        first, last = pipe.radar.first_and_latest_ns()
+        if first is None or last is None:
+            if camera is not None:
+                camera.notify(SEVERITY_WARNING, f"SAR: strip {strip.number}{item} empty")
+            return
+        self.products.add_strip(strip.path, first, last)
+        if camera is not None:
+            text = f"SAR: strip {strip.number}{item} stored, {pulses} pulses"
+            camera.notify(SEVERITY_INFO, text)
 
     # -- reader threads ---------------------------------------------------------------------
 
@@ -388,15 +591,18 @@ class _LiveRun:
         return thread
 
     def _read_radar(self, link: _Link) -> int:
-        """Read pulses into the ring (a file waits for room instead of dropping)."""
+        """Read pulses into the ring (a file waits for room instead of dropping); with a
+        store per capture, into the open strip's, let go between strips, and kept for the
+        strip while it opens)."""
         assert isinstance(link, RadarSource)
+        ingest = self._ingest
         limit = self.cfg.imaging.block_pulses
         if isinstance(link, RadarFileSource):
-            limit = min(limit, self.pipe.ring.free)
+            limit = min(limit, ingest.ring.free)
             if not limit:
                 self.st.stop.wait(POLL_S)
                 return 0
-        n = self.pipe.read_radar(link, POLL_S, limit, capturing=self._capturing)
+        n = ingest.read(link, POLL_S, limit, capturing=lambda: self._capturing(ingest))
         if n:
             self.st.last_pulse_mono = time.monotonic()
             self.st.first_pulse_mono = self.st.first_pulse_mono or self.st.last_pulse_mono
@@ -410,12 +616,26 @@ class _LiveRun:
         samples = link.poll(POLL_S)
         rx_ns = time.monotonic_ns()
         self.st.ins_bus_fault = link.bus_fault
-        self.pipe.add_ins_raw(link.take_raw(), rx_ns)
-        if samples:
-            self.st.last_nav_mono = time.monotonic()
-            self.products.add_fixes(samples)
-            self.pipe.add_nav(samples, rx_ns)
+        raw = link.take_raw()
+        with self._nav_lock:
+            if self.pipe is not None:
+                self.pipe.add_ins_raw(raw, rx_ns)
+            if samples:
+                self._offer_nav(samples, rx_ns)
         return len(samples)
+
+    def _offer_nav(self, samples: list[Sample], rx_ns: int | None) -> None:
+        """Offer INS samples to the open store's pipeline and keep their fixes and (with a
+        store per capture) the last :data:`STRIP_NAV_LEAD_S` of them; :attr:`_nav_lock` held."""
+        self.st.last_nav_mono = time.monotonic()
+        self.products.add_fixes(samples)
+        if self.per_capture:
+            recent = self._recent_nav
+            recent.extend(samples)
+            while recent[-1].t_gps_ns - recent[0].t_gps_ns > STRIP_NAV_LEAD_S * 1e9:
+                recent.popleft()
+        if self.pipe is not None:
+            self.pipe.add_nav(samples, rx_ns)
 
     def _read_ins_file(self, link: Source) -> int:
         """Offer an INS log's samples no further ahead of the radar than the nav history.
@@ -436,15 +656,17 @@ class _LiveRun:
         backlog = self._ins_backlog
         if not backlog:
             backlog.extend(link.poll(POLL_S))
-            self.pipe.add_ins_raw(link.take_raw(), time.monotonic_ns())  # when it was read
+            raw = link.take_raw()
+            with self._nav_lock:
+                if self.pipe is not None:
+                    self.pipe.add_ins_raw(raw, time.monotonic_ns())  # when it was read
         horizon = self._ins_horizon_ns()
         offer = []
         while backlog and (horizon is None or backlog[0].t_gps_ns <= horizon):
             offer.append(backlog.popleft())
         if offer:
-            self.st.last_nav_mono = time.monotonic()
-            self.products.add_fixes(offer)
-            self.pipe.add_nav(offer, None)
+            with self._nav_lock:
+                self._offer_nav(offer, None)
         elif backlog:
             self.st.stop.wait(POLL_S)
         return len(offer) + len(backlog)
@@ -456,20 +678,24 @@ class _LiveRun:
         navigation, wherever it waits (echo ring or focus backlog: the samples it needs
         then stay within the history however far the file is read ahead), else (before
         the first pulse) past the oldest sample held or waiting. No limit once the radar
-        link has finished and every pulse has been taken by the aligner.
+        link has finished and every pulse has been taken by the aligner, nor while no
+        store is open.
         """
-        oldest, all_aligned = self.pipe.oldest_unaligned_ns()
+        pipe = self.pipe
+        if pipe is None:
+            return None
+        oldest, all_aligned = pipe.oldest_unaligned_ns()
         if all_aligned and "radar" in self.st.finished:
             return None
         if oldest is not None:
             reference = oldest
-        elif (span := self.pipe.nav.span_ns()) is not None:
+        elif (span := pipe.nav.span_ns()) is not None:
             reference = span[0]
         elif self._ins_backlog:
             reference = self._ins_backlog[0].t_gps_ns
         else:
             return None
-        return reference + self.pipe.nav.kinematics.history_ns // 2
+        return reference + pipe.nav.kinematics.history_ns // 2
 
     # -- recording thread ---------------------------------------------------------------------
 
@@ -483,8 +709,11 @@ class _LiveRun:
         """
         while not self.st.stop.is_set():
             try:
-                self.pipe.record(self.pipe.now_ns(live=True))
-                self.pipe.recorder.flush_due()
+                with self._record_lock:
+                    pipe = self.pipe
+                    if pipe is not None:
+                        pipe.record(pipe.now_ns(live=True))
+                        pipe.recorder.flush_due()
             except SarmocoError as exc:
                 self._recording_failure = exc
                 self._processing_failed(exc)
@@ -507,6 +736,7 @@ class _LiveRun:
         pulse can gain navigation by waiting: "now" is then :data:`INS_ENDED_NOW_NS` (a pulse
         time-stamped an hour ahead by a hostile sender would otherwise wait for ever).
         """
+        assert self.pipe is not None
         now = self.pipe.now_ns(live=True)
         if now is None or not self._ins_file:
             return now
@@ -523,6 +753,7 @@ class _LiveRun:
         faster than real time focusing could run (``sarmoco bench``'s ``realtime_ratio``).
         """
         while not self.st.stop.is_set():
+            self._change_strips()
             start = time.monotonic()
             released = self._process()
             now = time.monotonic()
@@ -544,14 +775,17 @@ class _LiveRun:
         it). A write that failed on the recorder's writer thread
         (``recorder.writer_queue``) is raised by the next call to the recorder; if no
         call was made after it, it is counted and reported here, once, and processing
-        stays unhealthy (the thread writes nothing after it).
+        stays unhealthy (the thread writes nothing after it). Nothing while no store is
+        open.
         """
+        if self.pipe is None:
+            return 0
         try:
             released = self.pipe.focus(self._now_ns(), on_block=self._block_done)
         except SarmocoError as exc:
             self._processing_failed(exc)
             return 0
-        failure = self.recorder.write_failure
+        failure = self.pipe.recorder.write_failure
         if failure is None:
             if self._recording_failure is None:
                 self.health.set("processing", True)
@@ -564,7 +798,8 @@ class _LiveRun:
         self.counters.inc("processing_errors")
         self.health.set("processing", False, str(exc))
         log.error("processing error, block skipped", extra={"error": str(exc)})
-        self._write_failure_reported = self.recorder.write_failure is not None
+        pipe = self.pipe
+        self._write_failure_reported = pipe is not None and pipe.recorder.write_failure is not None
 
     def _block_done(self) -> None:
         """A block was focused within a pass: :meth:`_keepalive`. A pass through a backlog
@@ -633,7 +868,7 @@ class _LiveRun:
             return
         sid = self.decoder.stream_id
         arrived = ", ".join(f"{s} (0x{s:08x})" for s in skipped)
-        if self.pipe.summary.pulses_received == 0:
+        if self._pulses_received() == 0:
             self.health.set(
                 "radar",
                 False,
@@ -645,25 +880,32 @@ class _LiveRun:
                 "radar", True, f"decoding VITA stream {sid} (radar.stream_id); skipping {arrived}"
             )
 
+    def _pulses_received(self) -> int:
+        """Pulses received into the run's stores so far."""
+        pipe = self.pipe
+        return self._pulses_closed + (0 if pipe is None else pipe.summary.pulses_received)
+
     def _publish_status(self, now: float) -> None:
         """The systemd ``STATUS=`` line."""
         nav_age = self._nav_age(now)
         ended = sorted(self.st.finished)
+        pipe = self.pipe
+        backlog = f"backlog {len(pipe.ring)}" if pipe is not None else "no capture"
         self.notifier.status(
-            f"{self.pipe.summary.pulses_received} pulses, INS age {nav_age:.2f} s, "
-            f"backlog {len(self.pipe.ring)}{'; ' if ended else ''}{_finished_text(ended)}"
+            f"{self._pulses_received()} pulses, INS age {nav_age:.2f} s, "
+            f"{backlog}{'; ' if ended else ''}{_finished_text(ended)}"
         )
 
     def _idle(self, now: float, idle_exit_s: float | None) -> bool:
         """Whether no pulse came for ``idle_exit_s`` since pulses began (None: never) and,
         with an INS log, every pulse has been aligned (its samples are offered only as
         the pulses need them)."""
-        st = self.st
+        st, pipe = self.st, self.pipe
         return (
             idle_exit_s is not None
             and bool(st.first_pulse_mono)
             and (now - st.last_pulse_mono > idle_exit_s)
-            and (not self._ins_file or self.pipe.oldest_unaligned_ns()[1])
+            and (not self._ins_file or pipe is None or pipe.oldest_unaligned_ns()[1])
         )
 
     def shut_down(self) -> None:
@@ -672,18 +914,23 @@ class _LiveRun:
         self.st.stop.set()
         for t in [*self.threads, self.recording, self.monitor]:
             t.join(timeout=5.0)
+        pipe = self.pipe
         try:
-            summary = self.pipe.finish()
-            intervals = [asdict(c) for c in self.captures]
-            self.recorder.set_attribute("captures", {"intervals": intervals})
+            if self.strip is not None:
+                self._close_strip()
+            elif pipe is not None:  # the run's one store
+                self.last_summary = pipe.finish()
+                intervals = [asdict(c) for c in self.captures]
+                pipe.recorder.set_attribute("captures", {"intervals": intervals})
         finally:  # a processing error in the last blocks must not leave the store open
             if self.camera is not None:  # after the last tiles: it announces them
                 self.camera.stop()
-            self.recorder.close()
+            if pipe is not None and not self.per_capture:
+                pipe.recorder.close()
             if self.status is not None:
                 self.status.stop()
             self.notifier.close()
-        log.info("sarmoco stopped", extra=summary.as_dict() | {"store": str(self.path)})
+        log.info("sarmoco stopped", extra=self.last_summary.as_dict() | {"store": str(self.path)})
 
 
 def replay_files(

@@ -100,8 +100,12 @@ class Counters:
             ``lambda: driver.counters.snapshot()``; called from the server thread.
         counters : bool
             True when the numbers only grow (counters), False for gauges.
+
+        A source added under a prefix already in use replaces the earlier one (a new
+        store's pipeline takes over from the last one's).
         """
         with self._lock:
+            self._sources = [s for s in self._sources if s[0] != prefix]
             self._sources.append((prefix, read, counters))
 
     def snapshot(self) -> dict[str, dict[str, float]]:

@@ -7,6 +7,7 @@ __all__ = [
     "array_run",
     "array_scenario",
     "echostream",
+    "emit_mission",
     "emit_radar",
     "emitter",
     "extended",
@@ -20,5 +21,6 @@ __all__ = [
     "player",
     "run",
     "scenario",
+    "survey",
     "transports",
 ]

@@ -109,10 +109,10 @@ def _yawed_90(q: FloatArray) -> FloatArray:
     return np.array([c * w - s * z, c * x - s * y, c * y + s * x, c * z + s * w])
 
 
-class _PacketSink:
+class PacketSink:
     """The file pymavlink writes to: each write is one packet, handed to the emitter."""
 
-    def __init__(self, emitter: MavlinkEmitter) -> None:
+    def __init__(self, emitter: Emitter) -> None:
         self._emitter = emitter
 
     def write(self, buf: bytes) -> None:
@@ -172,7 +172,7 @@ class MavlinkEmitter(Emitter):
         )
         """Latitude, longitude (deg) and altitude (m) of each sample (grades with a position)."""
         self._tx = mavlink2.MAVLink(
-            _PacketSink(self), srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID
+            PacketSink(self), srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID
         )
         if signing_key is not None:
             if len(signing_key) != 32:
@@ -182,7 +182,7 @@ class MavlinkEmitter(Emitter):
             self._tx.signing.timestamp = 1
         self._rx = mavlink2.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
         self._rogue = (
-            mavlink2.MAVLink(_PacketSink(self), srcSystem=rogue_system, srcComponent=COMPONENT_ID)
+            mavlink2.MAVLink(PacketSink(self), srcSystem=rogue_system, srcComponent=COMPONENT_ID)
             if rogue_system
             else None
         )

@@ -41,6 +41,9 @@ class MotionSpec:
         Straight legs of the survey pattern (survey).
     leg_s : float
         Duration of each leg, s (survey).
+    turn_rate_dps : float or None
+        Turn rate between legs, deg/s (survey); None: the real log's
+        (:data:`sarmoco.sim.survey.LOG_TURN_RATE_DPS`).
     """
 
     kind: Literal["ideal", "turbulence", "flightlog", "survey"] = "ideal"
@@ -55,3 +58,4 @@ class MotionSpec:
     log_window_s: float = 20.0
     legs: int = 2
     leg_s: float = 20.0
+    turn_rate_dps: float | None = None

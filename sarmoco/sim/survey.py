@@ -62,7 +62,9 @@ resolve its roll-ins. An instantaneous bank would move the lever-armed antenna b
 centimetres in no time."""
 
 
-def survey_spec(legs: int = 2, leg_s: float = 20.0, seed: int = 0) -> MotionSpec:
+def survey_spec(
+    legs: int = 2, leg_s: float = 20.0, seed: int = 0, turn_rate_dps: float | None = None
+) -> MotionSpec:
     """A ``survey`` motion with the turbulence measured from the real log.
 
     Parameters
@@ -73,6 +75,8 @@ def survey_spec(legs: int = 2, leg_s: float = 20.0, seed: int = 0) -> MotionSpec
         Duration of each straight leg, s.
     seed : int
         Seed of the turbulence.
+    turn_rate_dps : float or None
+        Turn rate between legs, deg/s (None: the real log's, :data:`LOG_TURN_RATE_DPS`).
     """
     return MotionSpec(
         kind="survey",
@@ -82,6 +86,7 @@ def survey_spec(legs: int = 2, leg_s: float = 20.0, seed: int = 0) -> MotionSpec
         seed=seed,
         legs=legs,
         leg_s=leg_s,
+        turn_rate_dps=turn_rate_dps,
     )
 
 
@@ -112,15 +117,17 @@ class SurveyPattern:
     @classmethod
     def of(cls, scn: Scenario, spec: MotionSpec) -> SurveyPattern:
         """The pattern a ``survey`` spec flies for a scenario (turn away from its look side)."""
-        if spec.legs < 1 or not spec.leg_s > 0.0:
+        rate_dps = LOG_TURN_RATE_DPS if spec.turn_rate_dps is None else spec.turn_rate_dps
+        if spec.legs < 1 or not spec.leg_s > 0.0 or not 0.0 < rate_dps < 90.0:
             raise ConfigError(
-                f"motion: survey needs legs >= 1 and leg_s > 0 (got {spec.legs}, {spec.leg_s})"
+                f"motion: survey needs legs >= 1, leg_s > 0 and a turn rate in (0, 90) deg/s "
+                f"(got {spec.legs}, {spec.leg_s}, {rate_dps})"
             )
         return cls(
             speed_mps=scn.speed_mps,
             legs=spec.legs,
             leg_s=spec.leg_s,
-            turn_rate_rps=math.radians(LOG_TURN_RATE_DPS),
+            turn_rate_rps=math.radians(rate_dps),
             first_turn=-1 if scn.look_side == "right" else 1,
         )
 
@@ -283,6 +290,16 @@ class SurveyDeviation:
         vel[:, 0] -= pat.speed_mps
         euler = euler + np.stack([pat.bank(t), np.zeros_like(t), psi], axis=1)
         return pos, vel, acc, euler
+
+
+def leg_times_ns(scn: Scenario, spec: MotionSpec) -> list[tuple[int, int]]:
+    """Start and end of each straight leg of the survey ``spec`` flies for ``scn``, GPS ns
+    (the trajectory's time 0 is the first pulse, ``scn.t0_ns``)."""
+    pat = SurveyPattern.of(scn, spec)
+    return [
+        (scn.t0_ns + round(t * 1e9), scn.t0_ns + round((t + pat.leg_s) * 1e9))
+        for t in (pat.leg_start_s(k) for k in range(pat.legs))
+    ]
 
 
 def survey_scenario(

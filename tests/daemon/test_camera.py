@@ -90,7 +90,7 @@ def start_bench(cfg: CameraConfig, products: Callable[[], list[Product]] = list)
     camera = CameraComponent(
         replace(cfg, link=f"udpout:127.0.0.1:{port}"), "SAR 15 GHz",
         lambda: operator_faults(health.components(), gauges, 0.5, cfg.disk_low_fraction),
-        lambda: 2**30, captures.append, counters, products,
+        lambda: 2**30, lambda on, _item: captures.append(on), counters, products,
     ).start()  # fmt: skip
     b = Bench(camera, gcs, health, counters, gauges, captures)
     b.recv("HEARTBEAT")  # a udpin ground station answers the address it heard from
@@ -269,7 +269,7 @@ def test_mavsdk_discovers_the_camera_and_starts_and_stops_video() -> None:
     captures: list[bool] = []
     cfg = CameraConfig(enabled=True, link=f"udpout:127.0.0.1:{port}", capture_at_start=False)
     camera = CameraComponent(
-        cfg, "SAR 15 GHz", dict, lambda: None, captures.append, Counters()
+        cfg, "SAR 15 GHz", dict, lambda: None, lambda on, _item: captures.append(on), Counters()
     ).start()
     try:
         deadline = time.monotonic() + WAIT_S
@@ -362,3 +362,71 @@ def test_a_product_is_placed_at_the_absolute_fix_nearest_its_middle() -> None:
     assert p0.time_utc_us == gps_ns_to_unix_ns(t0 + 10**8, 18) // 1000
     assert p1.url == "file:///data/run.zarr/images/tile_000001" and p1.image_index == 1
     assert log_.products() == [p0, p1]
+
+
+def test_strips_and_their_tiles_are_numbered_in_the_order_stored_each_with_its_store() -> None:
+    """:class:`ProductLog` across stores: the tiles of the first strip's store, that strip
+    (its store's URL, placed at the fix nearest the middle of its pulses: the strip's
+    centre), then the tiles of the next store, numbered one after the other."""
+    feed = LiveFeed()
+    first, second = Path("/data/leg-1.zarr"), Path("/data/leg-2.zarr")
+    log_ = ProductLog(feed, first, 100.0, 18)
+    t0 = 1_400_000_000_000_000_000
+    fixes = [(t0 + k * 10**8, 47.0 + k / 100) for k in range(40)]
+    log_.add_fixes([VelocitySample(t, (0.0, 0.0, 0.0), Validity(0), "test", 0,
+                                   lat_lon_alt=(lat, 8.0, 400.0)) for t, lat in fixes])  # fmt: skip
+    image = Image(np.zeros((2, 2), np.complex64), np.arange(2.0), np.arange(2.0), "ground")
+    feed.add_tile(0, image, t0, t0 + 10**8)
+    strip = log_.add_strip(first, t0, t0 + 2 * 10**9)  # the tile is taken before it
+    log_.open_store(second)
+    feed.add_tile(0, image, t0 + 3 * 10**9, t0 + 31 * 10**8)
+    tile0, strip_, tile1 = log_.products()
+    assert strip_ == strip and [p.image_index for p in (tile0, strip, tile1)] == [0, 1, 2]
+    assert tile0.url == "file:///data/leg-1.zarr/images/tile_000000"
+    assert strip.url == "file:///data/leg-1.zarr" and strip.lat_lon_alt == (47.1, 8.0, 400.0)
+    assert strip.time_utc_us == gps_ns_to_unix_ns(t0 + 10**9, 18) // 1000
+    assert tile1.url == "file:///data/leg-2.zarr/images/tile_000000"
+
+
+def test_mavsdk_lists_the_products_stored_before_it_connected() -> None:
+    """MAVSDK's camera plugin connects after five products were announced: with the newest
+    one after CAMERA_CAPTURE_STATUS it asks for those before it by index, and
+    ``list_photos`` (all) gives all five, with their URLs and positions."""
+    from mavsdk import Configuration, Mavsdk
+    from mavsdk.component_type import ComponentType
+    from mavsdk.plugins.camera import Camera, CameraError, PhotosRange
+
+    port = free_udp_port()
+    products = [
+        Product(k, 1_700_000_000_000_000 + k, (47.0, 8.0, 400.0), 100.0, f"file:///d/r.zarr/{k}")
+        for k in range(5)
+    ]
+    cfg = CameraConfig(enabled=True, link=f"udpout:127.0.0.1:{port}", capture_at_start=False)
+    camera = CameraComponent(
+        cfg, "SAR 15 GHz", dict, lambda: None, lambda _on, _item: None, Counters(),
+        lambda: products,
+    ).start()  # fmt: skip
+    time.sleep(1.5)  # announced before the ground station is there
+    sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+    sdk.add_any_connection(f"udpin://127.0.0.1:{port}")
+    photos: list[Any] = []
+    try:
+        deadline = time.monotonic() + 4 * WAIT_S
+        plugin = None
+        while len(photos) < len(products) and time.monotonic() < deadline:
+            time.sleep(0.25)
+            systems = [s for s in sdk.get_systems() if s.has_camera()]
+            if plugin is None and systems:
+                plugin = Camera(systems[0])
+            if plugin is None or not plugin.camera_list().cameras:
+                continue
+            try:
+                photos = plugin.list_photos(100, PhotosRange.ALL)
+            except CameraError:  # until MAVSDK has the capture status
+                continue
+    finally:
+        camera.stop()
+        sdk.destroy()
+    assert sorted(p.index for p in photos) == list(range(5))
+    assert {p.file_url for p in photos} == {p.url for p in products}
+    assert all(p.position.latitude_deg == 47.0 for p in photos)
