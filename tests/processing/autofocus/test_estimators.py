@@ -162,7 +162,6 @@ def test_a_line_lit_for_part_of_the_subaperture_weighs_little() -> None:
     assert weight[0] > 0 and weight[1] <= 0.01 * weight[0], weight
 
 
-
 def test_a_line_lit_in_one_look_only_gets_no_weight() -> None:
     """Two targets at 10 dB per pulse and no motion over a 0.4 s subaperture: one entering
     the beam a quarter in (in both of map drift's halves), one lit in the last fifth only
