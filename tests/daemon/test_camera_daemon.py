@@ -51,6 +51,36 @@ WAIT_S = 10.0
 """Longest wait for one message of the component, s."""
 
 
+def ground_station(port: int) -> Any:
+    """A pymavlink ground station (system 255, component 190) listening on 127.0.0.1:``port``."""
+    return mavutil.mavlink_connection(
+        f"udpin:127.0.0.1:{port}", source_system=255, source_component=190,
+        dialect="ardupilotmega",
+    )  # fmt: skip
+
+
+def live_camera_config(
+    sim: SimFiles,  # noqa: F811 - the imported fixture's type
+    path: Path,
+    radar_port: int,
+    ins_port: int,
+    http_port: int,
+    gcs_port: int,
+    store_per_capture: bool = False,
+) -> Path:
+    """A daemon configuration on live UDP links with the camera component on
+    ``gcs_port``, idle until a start capture, faults announced at most once a minute."""
+    return daemon_config(
+        sim, path,
+        radar={"link": f"udp://127.0.0.1:{radar_port}"},
+        ins={"link": f"udpin:127.0.0.1:{ins_port}"},
+        status={"http_port": http_port},
+        camera={"enabled": True, "link": f"udpout:127.0.0.1:{gcs_port}",
+                "capture_at_start": False, "store_per_capture": store_per_capture,
+                "statustext_interval_s": 60.0},
+    )  # fmt: skip
+
+
 def recv(gcs: Any, kind: str, text: str = "") -> Any:
     """The next ``kind`` message from the camera component (a STATUSTEXT starting ``text``)."""
     deadline = time.monotonic() + WAIT_S
@@ -98,18 +128,10 @@ def test_ground_station_captures_a_strip_and_hears_an_ins_dropout(
 ) -> None:
     radar_port, ins_port, gcs_port = (free_port(socket.SOCK_DGRAM) for _ in range(3))
     http_port = free_port(socket.SOCK_STREAM)
-    gcs = mavutil.mavlink_connection(
-        f"udpin:127.0.0.1:{gcs_port}", source_system=255, source_component=190,
-        dialect="ardupilotmega",
-    )  # fmt: skip
-    config = daemon_config(
-        sim, tmp_path / "camera.toml",
-        radar={"link": f"udp://127.0.0.1:{radar_port}"},
-        ins={"link": f"udpin:127.0.0.1:{ins_port}"},
-        status={"http_port": http_port},
-        camera={"enabled": True, "link": f"udpout:127.0.0.1:{gcs_port}",
-                "capture_at_start": False, "statustext_interval_s": 60.0},
-    )  # fmt: skip
+    gcs = ground_station(gcs_port)
+    config = live_camera_config(
+        sim, tmp_path / "camera.toml", radar_port, ins_port, http_port, gcs_port
+    )
     d = Daemon(config, tmp_path / "camera.zarr")
     thirds = [sim.packets[:300], sim.packets[300:700], sim.packets[700:]]
     try:
@@ -158,10 +180,7 @@ def test_every_stored_tile_is_announced_once_with_its_time_and_position(
     the position of a fix is checked with a real pymavlink ground station in
     ``tests/daemon/test_camera.py``)."""
     gcs_port, http_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_STREAM)
-    gcs = mavutil.mavlink_connection(
-        f"udpin:127.0.0.1:{gcs_port}", source_system=255, source_component=190,
-        dialect="ardupilotmega",
-    )  # fmt: skip
+    gcs = ground_station(gcs_port)
     config = daemon_config(
         sim, tmp_path / "files.toml", status={"http_port": http_port},
         camera={"enabled": True, "link": f"udpout:127.0.0.1:{gcs_port}"},
@@ -203,19 +222,16 @@ def test_each_capture_is_a_strip_store_closed_complete_and_announced(
     CAMERA_IMAGE_CAPTURED (its store's URL) and a STATUSTEXT at MAV_SEVERITY_INFO."""
     radar_port, gcs_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
     http_port = free_port(socket.SOCK_STREAM)
-    gcs = mavutil.mavlink_connection(
-        f"udpin:127.0.0.1:{gcs_port}", source_system=255, source_component=190,
-        dialect="ardupilotmega",
-    )  # fmt: skip
-    config = daemon_config(
-        sim, tmp_path / "strips.toml",
-        radar={"link": f"udp://127.0.0.1:{radar_port}"},
-        ins={"link": f"udpin:127.0.0.1:{free_port(socket.SOCK_DGRAM)}"},
-        status={"http_port": http_port},
-        camera={"enabled": True, "link": f"udpout:127.0.0.1:{gcs_port}",
-                "capture_at_start": False, "store_per_capture": True,
-                "statustext_interval_s": 60.0},
-    )  # fmt: skip
+    gcs = ground_station(gcs_port)
+    config = live_camera_config(
+        sim,
+        tmp_path / "strips.toml",
+        radar_port,
+        free_port(socket.SOCK_DGRAM),
+        http_port,
+        gcs_port,
+        store_per_capture=True,
+    )
     d = Daemon(config, tmp_path / "leg.zarr")
     strips: list[Any] = []
     try:
@@ -384,19 +400,16 @@ def test_a_strip_store_that_cannot_be_created_is_announced_and_the_daemon_runs_o
     answering and stops cleanly."""
     (tmp_path / "taken").write_text("a file where the strips' folder should be")
     gcs_port, http_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_STREAM)
-    gcs = mavutil.mavlink_connection(
-        f"udpin:127.0.0.1:{gcs_port}", source_system=255, source_component=190,
-        dialect="ardupilotmega",
-    )  # fmt: skip
-    config = daemon_config(
-        sim, tmp_path / "taken.toml",
-        radar={"link": f"udp://127.0.0.1:{free_port(socket.SOCK_DGRAM)}"},
-        ins={"link": f"udpin:127.0.0.1:{free_port(socket.SOCK_DGRAM)}"},
-        status={"http_port": http_port},
-        camera={"enabled": True, "link": f"udpout:127.0.0.1:{gcs_port}",
-                "capture_at_start": False, "store_per_capture": True,
-                "statustext_interval_s": 60.0},
-    )  # fmt: skip
+    gcs = ground_station(gcs_port)
+    config = live_camera_config(
+        sim,
+        tmp_path / "taken.toml",
+        free_port(socket.SOCK_DGRAM),
+        free_port(socket.SOCK_DGRAM),
+        http_port,
+        gcs_port,
+        store_per_capture=True,
+    )
     d = Daemon(config, tmp_path / "taken" / "leg.zarr", log=tmp_path / "taken.log")
     try:
         d.started()
