@@ -86,6 +86,15 @@ class TestNavigationAndMotion:
     def test_global_position_int(self, tmp_path: Path) -> None:
         run_case(tmp_path, "--nav-messages", "global", "--seed", "3")
 
+    def test_a_later_segment_of_the_flight(self, tmp_path: Path) -> None:
+        """The same flight 6 s later: its track heads 0.4° off the nominal, the INS's
+        attitude puts the beam 1.3° behind where the echoes put it (+26.6 Hz), and the
+        pixels' squint interval, widened to cover both, spans 116 Hz of Doppler while the
+        pre-filter keeps 77 Hz and decimates to 100 Hz. Taking pulses over all of it
+        imaged every target's along-track ambiguity 48-54 m away (-29 dB), which the
+        scoring then took for the targets: worst azimuth PSLR +7.88 dB."""
+        run_case(tmp_path, "--log-start", "20")
+
     @_xfail(
         "worst azimuth PSLR -12.50 dB (T1), just above -12.5; -12.54 with the autofocus "
         "lines left at their own Doppler centroid, which the crab cases cannot afford"

@@ -59,6 +59,7 @@ from sarmoco.processing.beam import (
     doppler_hz,
     resolve_ambiguity,
     squint_interval_rad,
+    within_band,
 )
 from sarmoco.processing.geometry import ReferenceTrack, look_angle, vector_to_imaging
 from sarmoco.processing.imaging.pfa_tiles import PfaTileImager
@@ -447,6 +448,9 @@ class _Segment:
             return []
         apc = self.track.position_imaging(t_ns)
         dy, beam = self._compensated_dy(t_ns), self.beam.interval_at(t_ns)
+        if self.prefilter is not None and self.prefilter.decimation > 1:
+            band = self.prefilter.passband_hz(t_ns)
+            beam = within_band(beam, band, self.track.v0_mps, self._radar.wavelength_m)
         return self._refine(self.imager.add(rc, t_ns, apc, dy, beam))
 
     def _compensated_dy(self, t_ns: IntArray) -> FloatArray | None:

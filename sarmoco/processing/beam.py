@@ -148,6 +148,34 @@ def doppler_hz(speed_mps: float, wavelength_m: float, squint_rad: FloatArray | f
     )
 
 
+def within_band(
+    intervals_rad: FloatArray, band_hz: FloatArray, speed_mps: float, wavelength_m: float
+) -> FloatArray:
+    """Squint intervals cut to the squints whose Doppler lies in a band.
+
+    Parameters
+    ----------
+    intervals_rad : ndarray of float64, shape (P, 2)
+        Squint intervals (low, high) from the plane normal to the track, rad.
+    band_hz : ndarray of float64, shape (P, 2)
+        Doppler band (low, high) of each, Hz: squint ``asin(f λ / (2 v))``.
+    speed_mps, wavelength_m : float
+        Along-track speed ``v`` (m/s) and wavelength ``λ`` (m).
+
+    Returns
+    -------
+    ndarray of float64, shape (P, 2)
+        Each interval's part inside its band, rad; the band's own squints where the two
+        do not overlap.
+    """
+    sine = np.asarray(band_hz, dtype=np.float64) * wavelength_m / (2.0 * speed_mps)
+    band = np.arcsin(np.clip(sine, -1.0, 1.0))
+    cut = np.column_stack(
+        [np.maximum(intervals_rad[:, 0], band[:, 0]), np.minimum(intervals_rad[:, 1], band[:, 1])]
+    )
+    return np.where((cut[:, 0] < cut[:, 1])[:, None], cut, band)
+
+
 def accc_centroid_hz(rc: ComplexArray, prf_hz: float) -> float:
     """Doppler centroid of range-compressed pulses modulo the pulse rate (ACCC), Hz.
 

@@ -161,6 +161,29 @@ class AzimuthPrefilter:
         """Demodulation phase phi of the history slots, rad."""
         self._last_phi = 0.0
         """phi at the last input pulse's time, rad."""
+        self._centroid_from_ns = np.zeros(0, np.int64)
+        self._centroids_hz = np.zeros(0)
+        """Slot times (GPS ns) from which each centroid the slots were demodulated by held."""
+
+    def passband_hz(self, t_ns: IntArray) -> npt.NDArray[np.float64]:
+        """Doppler band the outputs centred at ``t_ns`` (GPS ns, increasing across calls)
+        hold, Hz, (P, 2): ``centroid ± band_hz`` with the centroid their centre slot was
+        demodulated by. The centroids before the one of the first of them are forgotten.
+
+        An output holds that band and, at the output rate, the aliases of what lies
+        beside it: whoever integrates an output over more Doppler than the band takes
+        those aliases for signal.
+        """
+        t_ns = np.asarray(t_ns, dtype=np.int64)
+        if self._centroids_hz.size == 0:
+            centroid = np.full(t_ns.shape, self.centroid_hz)
+        else:
+            k = np.clip(np.searchsorted(self._centroid_from_ns, t_ns, side="right") - 1, 0, None)
+            first = int(k[0]) if k.size else 0
+            self._centroid_from_ns = self._centroid_from_ns[first:]
+            self._centroids_hz = self._centroids_hz[first:]
+            centroid = self._centroids_hz[k - first]
+        return np.column_stack([centroid - self.band_hz, centroid + self.band_hz])
 
     @property
     def delay_slots(self) -> int:
@@ -229,6 +252,9 @@ class AzimuthPrefilter:
     ) -> tuple[ComplexArray, IntArray]:
         """Place a block without long gaps on its slots (zeros between) and filter."""
         new, t_new = fill_slots(rc, t_ns, steps, self._last_t)
+        if self._centroids_hz.size == 0 or self._centroids_hz[-1] != self.centroid_hz:
+            self._centroid_from_ns = np.append(self._centroid_from_ns, t_new[0])
+            self._centroids_hz = np.append(self._centroids_hz, self.centroid_hz)
         phi = self._phases(t_new)
         if self.centroid_hz != 0.0 or np.any(phi != 0.0):
             new = new * np.exp(-1j * phi).astype(np.complex64)[:, None]
