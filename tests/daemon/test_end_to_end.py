@@ -102,7 +102,7 @@ def test_live_run_focuses_and_records(live_runs: dict[str, Path], ins: str, rada
     assert run["pulses_nav_flagged"] <= 0.05 * n_sent
     assert store.committed("nav") > 0 and store.n_images > 0
     summary = json.loads((out / "report" / "report.json").read_text())
-    found = assert_focused(out, summary.image.points)
+    found = assert_focused(out, summary["image"]["points"])
     print(  # the README's figures (pytest -s)
         f"\n{ins}+vita-{radar}: azimuth PSLR "
         + " / ".join(f"{p['pslr_az_db']:.2f}" for p in found)
