@@ -614,7 +614,9 @@ def test_status_endpoint_serves_json_prometheus_and_health(live: LiveRun) -> Non
 def test_file_links_that_end_are_finished_not_failed(sim: SimFiles, tmp_path: Path) -> None:
     """The ``.vrt`` and ``.tlog`` as file links, under a watchdog: once both are read to
     their end the daemon stays healthy (the links and the INS are "finished"), says so
-    in /status and STATUS=, keeps sending WATCHDOG=1 (no restart loop) and exits 0.
+    in /status and STATUS=, keeps sending WATCHDOG=1 (no restart loop) and exits 0. The
+    store's INS bytes are the ``.tlog``'s MAVLink log (:func:`check_ins_bytes`; the SBG
+    logs in :func:`test_ins_bytes_are_recorded_as_received`).
 
     The readers finish long before the pipeline has focused the file's pulses; the passes
     through that backlog may each take longer than half the watchdog period on a loaded
@@ -650,6 +652,7 @@ def test_file_links_that_end_are_finished_not_failed(sim: SimFiles, tmp_path: Pa
     pings = [t for t in notify.pings() if t_finished <= t <= t_checked]
     assert len(pings) >= 3, notify.notes
     assert any("radar: finished (end of file)" in note for _, note in notify.notes)
+    check_ins_bytes(open_store(d.store), load_config(config), sim.dir / NAV_FILES["mavlink"])
 
 
 def test_a_file_longer_than_the_ring_is_read_at_the_processing_pace(tmp_path: Path) -> None:
@@ -681,26 +684,34 @@ def test_a_file_longer_than_the_ring_is_read_at_the_processing_pace(tmp_path: Pa
     assert results.size and (results == PushResult.ACCEPTED).all(), np.unique(results)
 
 
-@pytest.mark.parametrize("protocol", ["mavlink", "sbg", "sbg-can"])
+@pytest.mark.parametrize("protocol", ["sbg", "sbg-can"])
 def test_ins_bytes_are_recorded_as_received(sim: SimFiles, tmp_path: Path, protocol: str) -> None:
-    """Each simulated INS log as the file link: the store's ``ins_bytes``, written to a
-    file with the log's suffix, is an INS log that decodes to the same samples (SBG:
-    the very bytes), in the format the store names."""
+    """Each simulated SBG log as the file link: :func:`check_ins_bytes` (the MAVLink
+    ``.tlog`` in :func:`test_file_links_that_end_are_finished_not_failed`). Focusing plays
+    no part: autofocus is off, so the daemon stops sooner."""
     log = sim.dir / NAV_FILES[protocol]
     port = free_port(socket.SOCK_STREAM)
     config = daemon_config(
         sim, tmp_path / "raw.toml",
         ins={"protocol": protocol, "link": str(log)}, status={"http_port": port},
+        autofocus={"enabled": False},
     )  # fmt: skip
     store, _ = run_files_to_end(config, tmp_path / "raw.zarr", port)
+    check_ins_bytes(store, load_config(config), log)
+
+
+def check_ins_bytes(store: RunStore, cfg: Config, log: Path) -> None:
+    """The store's ``ins_bytes``, written to a file with the log's suffix, is an INS log
+    that decodes to the same samples as ``log`` (SBG: the very bytes), in the format the
+    store names; their receive times are set and do not decrease."""
+    protocol = cfg.ins.protocol
     fmt = {"mavlink": "tlog", "sbg": "sbgecom", "sbg-can": "candump"}[protocol]
     assert store.attrs["ins_raw"] == {"format": fmt}
     raw = store.ins_bytes()
-    again = tmp_path / f"again{log.suffix}"
+    again = store.path.parent / f"again{log.suffix}"
     again.write_bytes(raw)
     if protocol == "sbg":
         assert raw == log.read_bytes()
-    cfg = load_config(config)
     original = decode_all(cfg, log)
     assert len(original) > 100 and decode_all(cfg, again) == original
     rx = store.read("ins_raw", ["rx_ns"])["rx_ns"]
@@ -713,7 +724,7 @@ def test_ins_bytes_not_recorded_when_switched_off(sim: SimFiles, tmp_path: Path)
     config = daemon_config(
         sim, tmp_path / "noraw.toml",
         ins={"protocol": "mavlink", "link": str(sim.dir / NAV_FILES["mavlink"])},
-        status={"http_port": port}, recorder={"raw_ins": False},
+        status={"http_port": port}, recorder={"raw_ins": False}, autofocus={"enabled": False},
     )  # fmt: skip
     store, _ = run_files_to_end(config, tmp_path / "noraw.zarr", port)
     assert store.committed("nav") > 100
