@@ -71,8 +71,10 @@ REALTIME: dict[str, tuple[str, ...]] = {
     "tests/app/test_batch.py": ("test_a_worker_killed_mid_job_costs_only_its_tasks",),
     # `sarmoco bench`: simulator and daemon live on loopback, pulses and latency judged
     "tests/app/test_bench.py": ("test_bench_prints_sane_figures_and_removes_its_folder",),
-    # `sarmoco run` processes: SIGKILL at random moments, sd_notify watchdog, /status
+    # `sarmoco run` processes: SIGKILL at random moments, sd_notify watchdog, /status; on
+    # file links to their end (two modules, so that the realtime phase runs them side by side)
     "tests/daemon/test_daemon_process.py": (),
+    "tests/daemon/test_daemon_files.py": (),
     # `sarmoco run` with its MAVLink camera component, driven by a pymavlink ground station
     "tests/daemon/test_camera_daemon.py": (),
     # live runs over every link (run_loopback); the replay test reads their stores
