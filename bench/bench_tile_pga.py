@@ -76,7 +76,7 @@ def pipeline_case(seed: int, autofocus: bool, pga: bool, work: Path) -> str:
     assert pipe.focuser is not None
     track = pipe.focuser.track
     targets = [track.rotation @ (tg - run.apc_ned[0]) for tg in run.targets_ned]
-    found = _at(summary["image"]["points"], [(float(t[0]), float(t[1])) for t in targets])
+    found = _at(summary.image.points, [(float(t[0]), float(t[1])) for t in targets])
     label = f"pipeline seed {seed}, {'sliding autofocus' if autofocus else 'INS only'}, "
     return _line(label + f"PGA {'on' if pga else 'off'}", found)
 
@@ -87,9 +87,7 @@ def live_case(pga: bool, work: Path) -> str:
     out.mkdir()
     summary = run_loopback(out, SCALE, autofocus={"pga": pga})
     targets = [(x, y) for x, y, _ in targets_in_image(out)]
-    return _line(
-        f"live demo, PGA {'on' if pga else 'off'}", _at(summary["image"]["points"], targets)
-    )
+    return _line(f"live demo, PGA {'on' if pga else 'off'}", _at(summary.image.points, targets))
 
 
 def main(argv: list[str] | None = None) -> None:

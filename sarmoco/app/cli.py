@@ -184,7 +184,7 @@ def _cmd_report(args: argparse.Namespace) -> int:
         raise ConfigError("report --truth: only an array run's DEM is compared with a truth")
     summary = write_report(store, out)
     if args.json:
-        print(json.dumps(summary))
+        print(json.dumps(summary.as_dict(), default=float))
         return 0
     print((out / "report.txt").read_text(), end="")
     print(f"quicklooks and report.json in {out}")

@@ -25,7 +25,7 @@ from sarmoco.app.simcommand import platform_arguments, scenario_overrides
 from sarmoco.app.simconfig import loopback_config
 from sarmoco.app.truth import read_true_motion
 from sarmoco.errors import SarmocoError
-from sarmoco.products.report import write_report
+from sarmoco.products.report import ReportSummary, write_report
 from sarmoco.sim.extended import load_scene
 from sarmoco.sim.insemitters import INS_EMITTERS
 
@@ -99,7 +99,7 @@ def run_loopback(
     scene: str = "points",
     daemon_env: Mapping[str, str] | None = None,
     **sections: dict[str, Any],
-) -> dict[str, Any]:
+) -> ReportSummary:
     """Play a scaled ku-vehicle scenario from ``sarmoco sim --serve`` into ``sarmoco run``.
 
     The simulator starts first (it opens the pseudo-terminals and the TCP radar port and
@@ -138,7 +138,7 @@ def run_loopback(
 
     Returns
     -------
-    dict
+    ReportSummary
         The report summary.
     """
     out.mkdir(parents=True, exist_ok=True)

@@ -92,24 +92,14 @@ def plot_series(
     t_s : ndarray
         Time axis, s from the start of the run.
     series : mapping of str to ndarray
-        Panel label (with unit, e.g. ``"d_los (m)"``) to values, same length as ``t_s``.
+        Panel label (with unit, e.g. ``"d_los (m)"``) to values, same length as ``t_s``; a
+        series of fewer than 50 points is drawn with markers.
     path : Path
         PNG to write.
     title : str
         Figure title.
     """
-    n = max(len(series), 1)
-    fig = Figure(figsize=(8, 2.0 * n + 0.8), dpi=100)
-    axes = fig.subplots(n, 1, sharex=True, squeeze=False)
-    for ax, (label, values) in zip(axes[:, 0], series.items(), strict=False):
-        ax.plot(t_s, values, linewidth=0.9)
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
-    axes[-1, 0].set_xlabel("time (s)")
-    axes[0, 0].set_title(title)
-    fig.tight_layout()
-    fig.savefig(path)
-    return path
+    return _stacked({label: {"": (t_s, v)} for label, v in series.items()}, path, title, 2.0)
 
 
 def plot_overlays(
@@ -129,16 +119,28 @@ def plot_overlays(
     title : str
         Figure title.
     """
+    return _stacked(panels, path, title, 2.3)
+
+
+def _stacked(
+    panels: Mapping[str, Mapping[str, tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]]],
+    path: Path,
+    title: str,
+    panel_in: float,
+) -> Path:
+    """Panels stacked on a shared time axis (s), ``panel_in`` inches tall each; curves with
+    an empty name get no legend entry."""
     n = max(len(panels), 1)
-    fig = Figure(figsize=(8, 2.3 * n + 0.8), dpi=100)
+    fig = Figure(figsize=(8, panel_in * n + 0.8), dpi=100)
     axes = fig.subplots(n, 1, sharex=True, squeeze=False)
     for ax, (label, curves) in zip(axes[:, 0], panels.items(), strict=False):
         for name, (t, v) in curves.items():
             style = "o-" if len(t) < 50 else "-"
-            ax.plot(t, v, style, linewidth=0.9, markersize=3, label=name)
+            ax.plot(t, v, style, linewidth=0.9, markersize=3, label=name or None)
         ax.set_ylabel(label)
         ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
+        if any(curves):
+            ax.legend(fontsize=8)
     axes[-1, 0].set_xlabel("time (s)")
     axes[0, 0].set_title(title)
     fig.tight_layout()

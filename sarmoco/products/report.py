@@ -19,6 +19,7 @@ Writes into the output folder:
 
 from __future__ import annotations
 
+import dataclasses
 import html
 import json
 import math
@@ -357,19 +358,11 @@ def _ideal_resolution_m(cfg: Config, slant_m: float, ground_m: float) -> tuple[f
 
 def write_comparison(
     store: RunStore, out_dir: Path, half_m: tuple[float, float] = (COMPARE_HALF_M, COMPARE_HALF_M)
-) -> dict[str, Any]:
+) -> ComparisonSummary:
     """Write ``compare.png`` and ``cuts.png``; the panels' point-target measures.
 
     ``half_m``: half size of the window around the brightest target, along track and in
     ground range, m (an extended scene's whole patch, or a point target's neighbourhood).
-
-    Returns
-    -------
-    dict
-        ``{"decimation": k, "panels": {title: {"pslr_az_db", "irw_az_m", "pslr_rg_db",
-        "irw_rg_m", "peak_db"}}}``; a measure the panel's response does not allow (no -3 dB
-        point or no sidelobe inside the window) is None. ``peak_db``: the panel's peak re
-        the brightest panel's.
     """
     panels, k = focus_comparison(store, half_m)
     ref = next(iter(panels.values()))
@@ -415,7 +408,7 @@ def write_comparison(
     plot_cuts(cuts, ideal, out_dir / "cuts.png",
               f"cuts through the brightest target (ideal sinc: {res_az:.3f} m azimuth, "
               f"{res_rg:.3f} m ground range resolution)")  # fmt: skip
-    return {"decimation": k, "ideal_resolution_m": [res_az, res_rg], "panels": stats}
+    return ComparisonSummary(k, (res_az, res_rg), stats)
 
 
 def _smooth(values: npt.NDArray[np.float64], n: int) -> npt.NDArray[np.float64]:
@@ -547,12 +540,149 @@ def motion_comparison(
     return panels, stats
 
 
+@dataclass(frozen=True)
+class ImageSummary:
+    """The focused strip of a run, as the report measures it.
+
+    Attributes
+    ----------
+    shape : tuple of int
+        Pixels along track and in ground range.
+    pixel_m : tuple of float
+        Pixel spacing along track and in ground range, m.
+    entropy : float
+        Image entropy (:func:`~sarmoco.processing.metrics.image_entropy`).
+    contrast : float
+        Image contrast (:func:`~sarmoco.processing.metrics.image_contrast`).
+    points : list of dict
+        The brightest isolated scatterers' measures (:func:`bright_points`), brightest first.
+    """
+
+    shape: tuple[int, int]
+    pixel_m: tuple[float, float]
+    entropy: float
+    contrast: float
+    points: list[dict[str, float]]
+
+
+@dataclass(frozen=True)
+class MotionSummary:
+    """The INS motion solution's line-of-sight displacement over the run.
+
+    Attributes
+    ----------
+    d_los_rms_m : float
+        RMS of the per-pulse LOS displacement (pulses with a solution), m.
+    d_los_peak_to_peak_m : float
+        Its peak-to-peak excursion, m.
+    """
+
+    d_los_rms_m: float
+    d_los_peak_to_peak_m: float
+
+
+@dataclass(frozen=True)
+class AutofocusSummary:
+    """The autofocus table of a run.
+
+    Attributes
+    ----------
+    subapertures : int
+        How many subaperture estimates the store holds.
+    """
+
+    subapertures: int
+
+
+@dataclass(frozen=True)
+class ComparisonSummary:
+    """The brightest target focused three ways (:func:`write_comparison`).
+
+    Attributes
+    ----------
+    decimation : int
+        The comparison keeps every ``decimation``-th pulse.
+    ideal_resolution_m : tuple of float
+        Ideal resolution along track and in ground range at the target, m.
+    panels : dict
+        Per panel title (:data:`PANELS`): ``peak_db`` (re the brightest panel's),
+        ``pslr_az_db``, ``irw_az_m``, ``pslr_rg_db``, ``irw_rg_m``; a measure the panel's
+        response does not allow (no -3 dB point or no sidelobe inside the window) is None.
+    """
+
+    decimation: int
+    ideal_resolution_m: tuple[float, float]
+    panels: dict[str, dict[str, float | None]]
+
+
+@dataclass(frozen=True)
+class ReportSummary:
+    """The summary of a recorded run (``report.json``, :meth:`as_dict`).
+
+    A part the store does not allow is None, and the reason, where one is known, is in the
+    matching ``*_skipped`` attribute.
+
+    Attributes
+    ----------
+    store : str
+        The store's path.
+    complete : bool
+        Whether the run closed its store.
+    run : dict
+        The run's metrics, as the store records them.
+    versions : dict
+        The software versions the store records.
+    pulses_committed : int
+        Pulses recorded.
+    image : ImageSummary or None
+        The focused strip, when the store holds image tiles.
+    geotiff : list of str or None
+        The GeoTIFF files written (one per reference-track segment).
+    geotiff_skipped : str or None
+        Why no GeoTIFF was written.
+    motion : MotionSummary or None
+        The INS motion solution, when some pulse has one.
+    autofocus : AutofocusSummary or None
+        The autofocus table, when recorded.
+    motion_estimates : dict or None
+        RMS figures of :func:`motion_comparison`, m.
+    motion_estimates_skipped : str or None
+        Why they were not drawn.
+    comparison : ComparisonSummary or None
+        The brightest target focused three ways.
+    comparison_skipped : str or None
+        Why it was not drawn.
+    damaged_chunks_skipped : dict or None
+        Damaged chunks read around: rows or tiles per chunk path.
+    """
+
+    store: str
+    complete: bool
+    run: dict[str, Any]
+    versions: dict[str, Any]
+    pulses_committed: int
+    image: ImageSummary | None = None
+    geotiff: list[str] | None = None
+    geotiff_skipped: str | None = None
+    motion: MotionSummary | None = None
+    autofocus: AutofocusSummary | None = None
+    motion_estimates: dict[str, float] | None = None
+    motion_estimates_skipped: str | None = None
+    comparison: ComparisonSummary | None = None
+    comparison_skipped: str | None = None
+    damaged_chunks_skipped: dict[str, int] | None = None
+
+    def as_dict(self) -> dict[str, Any]:
+        """The JSON document: every attribute that is not None, under its own name."""
+        return {k: v for k, v in dataclasses.asdict(self).items() if v is not None}
+
+
 def write_report(
     store_path: Path,
     out_dir: Path,
     compare_half_m: tuple[float, float] = (COMPARE_HALF_M, COMPARE_HALF_M),
     truth: TrueMotion | None = None,
-) -> dict[str, Any]:
+) -> ReportSummary:
     """Write the quicklooks and the summary of a store; returns the summary.
 
     ``compare_half_m``: half size of the comparison window (:func:`write_comparison`), m.
@@ -567,69 +697,86 @@ def write_report(
     store = open_store(store_path, skip_damaged=True)
     out_dir.mkdir(parents=True, exist_ok=True)
     attrs = store.attrs
-    summary: dict[str, Any] = {
-        "store": str(store_path),
-        "complete": bool(attrs.get("complete", False)),
-        "run": attrs.get("metrics", {}),
-        "versions": attrs.get("versions", {}),
-        "pulses_committed": store.committed("pulses"),
-    }
-    if summary["pulses_committed"] == 0:
+    if store.committed("pulses") == 0:
         raise RecorderError(f"{store_path}: no committed pulses")
     image = strip(store)
+    parts: dict[str, Any] = {}
     if image is not None:
-        plot_image(image.data, image.axis0_m, image.axis1_m, out_dir / "image.png",
-                   f"{store_path.name}: backprojection, ground plane",
-                   ("along-track x (m)", "ground range y (m)"))  # fmt: skip
-        summary["image"] = {
-            "shape": list(image.data.shape),
-            "pixel_m": list(image.spacing_m),
-            "entropy": image_entropy(image.data),
-            "contrast": image_contrast(image.data),
-            "points": bright_points(image),
-        }
-        try:  # the georeferenced quicklook, one GeoTIFF per reference-track segment
-            summary["geotiff"] = [g.path.name for g in write_geotiffs(store, out_dir)]
-        except RecorderError as exc:  # no absolute position, or not a ground-plane image
-            summary["geotiff_skipped"] = str(exc)
+        parts.update(_image_part(image, store, store_path, out_dir))
     if store.committed("motion"):
-        m = store.read("motion", ["t_ns", "d_los_m", "phase_rad", "range_shift_m"])
-        t = (m["t_ns"] - m["t_ns"][0]) * 1e-9
-        plot_series(t, {"d_los (m)": m["d_los_m"], "phase (rad)": m["phase_rad"],
-                        "range shift (m)": m["range_shift_m"]},
-                    out_dir / "motion.png", "INS motion solution per pulse")  # fmt: skip
-        d_los = m["d_los_m"][np.isfinite(m["d_los_m"])]  # turns, no navigation: no solution
-        if d_los.size:
-            summary["motion"] = {
-                "d_los_rms_m": float(np.sqrt(np.mean(d_los**2))),
-                "d_los_peak_to_peak_m": float(np.ptp(d_los)),
-            }
+        parts.update(_motion_part(store, truth, out_dir))
     if "autofocus" in store.tables() and store.committed("autofocus"):
         a = store.read("autofocus", ["t_center_s", "a_y_mps2", "a_z_mps2", "kappa"])
         plot_series(a["t_center_s"], {"a_y (m/s²)": a["a_y_mps2"], "a_z (m/s²)": a["a_z_mps2"],
                                        "κ0 (Hz/s)": a["kappa"][:, 0]},
                     out_dir / "autofocus.png", "autofocus estimates per subaperture")  # fmt: skip
-        summary["autofocus"] = {"subapertures": int(a["t_center_s"].shape[0])}
-    if store.committed("motion"):
-        try:
-            panels, summary["motion_estimates"] = motion_comparison(store, truth)
-            plot_overlays(panels, out_dir / "motion_estimates.png",
-                          "LOS motion: the INS solution and the autofocus's estimate"
-                          + ("" if truth is None else " (and the truth)"))  # fmt: skip
-        except RecorderError as exc:
-            summary["motion_estimates_skipped"] = str(exc)
+        parts["autofocus"] = AutofocusSummary(int(a["t_center_s"].shape[0]))
     if image is not None and store.committed("motion") and _has_echoes(store):
         try:
-            summary["comparison"] = write_comparison(store, out_dir, compare_half_m)
+            parts["comparison"] = write_comparison(store, out_dir, compare_half_m)
         except RecorderError as exc:  # e.g. the brightest target's pulses were not kept
-            summary["comparison_skipped"] = str(exc)
-    if store.skipped:
-        summary["damaged_chunks_skipped"] = dict(store.skipped)
-    (out_dir / "report.json").write_text(json.dumps(summary, indent=2, default=float))
+            parts["comparison_skipped"] = str(exc)
+    summary = ReportSummary(
+        store=str(store_path),
+        complete=bool(attrs.get("complete", False)),
+        run=attrs.get("metrics", {}),
+        versions=attrs.get("versions", {}),
+        pulses_committed=store.committed("pulses"),
+        damaged_chunks_skipped=dict(store.skipped) if store.skipped else None,
+        **parts,
+    )
+    (out_dir / "report.json").write_text(json.dumps(summary.as_dict(), indent=2, default=float))
     text = _text(summary)
     (out_dir / "report.txt").write_text(text)
     (out_dir / "index.html").write_text(_html(summary, text, out_dir))
     return summary
+
+
+def _image_part(image: Image, store: RunStore, store_path: Path, out_dir: Path) -> dict[str, Any]:
+    """``image.png`` and the GeoTIFFs; the summary's ``image`` and ``geotiff*`` attributes."""
+    plot_image(image.data, image.axis0_m, image.axis1_m, out_dir / "image.png",
+               f"{store_path.name}: backprojection, ground plane",
+               ("along-track x (m)", "ground range y (m)"))  # fmt: skip
+    rows, cols = image.data.shape
+    part: dict[str, Any] = {
+        "image": ImageSummary(
+            shape=(rows, cols),
+            pixel_m=image.spacing_m,
+            entropy=image_entropy(image.data),
+            contrast=image_contrast(image.data),
+            points=bright_points(image),
+        )
+    }
+    try:  # the georeferenced quicklook, one GeoTIFF per reference-track segment
+        part["geotiff"] = [g.path.name for g in write_geotiffs(store, out_dir)]
+    except RecorderError as exc:  # no absolute position, or not a ground-plane image
+        part["geotiff_skipped"] = str(exc)
+    return part
+
+
+def _motion_part(store: RunStore, truth: TrueMotion | None, out_dir: Path) -> dict[str, Any]:
+    """``motion.png`` and ``motion_estimates.png``; the summary's ``motion`` and
+    ``motion_estimates*`` attributes."""
+    m = store.read("motion", ["t_ns", "d_los_m", "phase_rad", "range_shift_m"])
+    t = (m["t_ns"] - m["t_ns"][0]) * 1e-9
+    plot_series(t, {"d_los (m)": m["d_los_m"], "phase (rad)": m["phase_rad"],
+                    "range shift (m)": m["range_shift_m"]},
+                out_dir / "motion.png", "INS motion solution per pulse")  # fmt: skip
+    part: dict[str, Any] = {}
+    d_los = m["d_los_m"][np.isfinite(m["d_los_m"])]  # turns, no navigation: no solution
+    if d_los.size:
+        part["motion"] = MotionSummary(
+            d_los_rms_m=float(np.sqrt(np.mean(d_los**2))),
+            d_los_peak_to_peak_m=float(np.ptp(d_los)),
+        )
+    try:
+        panels, part["motion_estimates"] = motion_comparison(store, truth)
+        plot_overlays(panels, out_dir / "motion_estimates.png",
+                      "LOS motion: the INS solution and the autofocus's estimate"
+                      + ("" if truth is None else " (and the truth)"))  # fmt: skip
+    except RecorderError as exc:
+        part["motion_estimates_skipped"] = str(exc)
+    return part
 
 
 def _has_echoes(store: RunStore) -> bool:
@@ -651,15 +798,15 @@ PICTURES = (
 """The report's pictures, in page order, with their headings."""
 
 
-def _html(summary: dict[str, Any], text: str, out_dir: Path) -> str:
+def _html(summary: ReportSummary, text: str, out_dir: Path) -> str:
     """``index.html``: report.txt's tables and the pictures present (relative links)."""
     parts = [
         "<!DOCTYPE html>",
         '<html lang="en"><head><meta charset="utf-8">',
-        f"<title>sarmoco report: {html.escape(Path(summary['store']).name)}</title>",
+        f"<title>sarmoco report: {html.escape(Path(summary.store).name)}</title>",
         "<style>body{font-family:sans-serif;margin:1em 2em}img{max-width:100%}"
         "pre{background:#f4f4f4;padding:.5em}</style></head><body>",
-        f"<h1>sarmoco report: {html.escape(Path(summary['store']).name)}</h1>",
+        f"<h1>sarmoco report: {html.escape(Path(summary.store).name)}</h1>",
         f"<pre>{html.escape(text)}</pre>",
     ]
     for name, heading in PICTURES:
@@ -669,45 +816,42 @@ def _html(summary: dict[str, Any], text: str, out_dir: Path) -> str:
     return "\n".join(parts) + "\n"
 
 
-def _text(summary: dict[str, Any]) -> str:
-    run = summary.get("run", {})
-    state = "complete" if summary["complete"] else "INCOMPLETE"
+def _text(summary: ReportSummary) -> str:
+    run = summary.run
+    state = "complete" if summary.complete else "INCOMPLETE"
     lines = [
-        f"store            {summary['store']} ({state})",
-        f"pulses           {summary['pulses_committed']} recorded, "
+        f"store            {summary.store} ({state})",
+        f"pulses           {summary.pulses_committed} recorded, "
         f"{run.get('pulses_processed', '?')} focused, "
         f"{run.get('pulses_nav_flagged', '?')} flagged for navigation",
         f"INS samples      {run.get('nav_samples', '?')}",
     ]
-    damaged = summary.get("damaged_chunks_skipped", {})
+    damaged = summary.damaged_chunks_skipped or {}
     if damaged:
         lines.append(f"DAMAGED          {len(damaged)} chunks skipped "
                      f"({sum(damaged.values())} rows or tiles): " + "; ".join(damaged))  # fmt: skip
-    if "motion" in summary:
-        mo = summary["motion"]
-        lines.append(f"d_los            rms {mo['d_los_rms_m']:.3f} m, "
-                     f"peak-to-peak {mo['d_los_peak_to_peak_m']:.3f} m")  # fmt: skip
-    if "motion_estimates" in summary:
-        me = summary["motion_estimates"]
-        parts = [f"{k.removesuffix('_m')} {1e3 * v:.1f} mm" for k, v in me.items()]
+    if (mo := summary.motion) is not None:
+        lines.append(f"d_los            rms {mo.d_los_rms_m:.3f} m, "
+                     f"peak-to-peak {mo.d_los_peak_to_peak_m:.3f} m")  # fmt: skip
+    if summary.motion_estimates is not None:
+        parts = [f"{k.removesuffix('_m')} {1e3 * v:.1f} mm"
+                 for k, v in summary.motion_estimates.items()]  # fmt: skip
         lines.append("LOS motion (rms) " + ", ".join(parts))
-    if "image" in summary:
-        im = summary["image"]
-        lines.append(f"image            {im['shape'][0]} x {im['shape'][1]} px, entropy "
-                     f"{im['entropy']:.3f}, contrast {im['contrast']:.3f}")  # fmt: skip
+    if (im := summary.image) is not None:
+        lines.append(f"image            {im.shape[0]} x {im.shape[1]} px, entropy "
+                     f"{im.entropy:.3f}, contrast {im.contrast:.3f}")  # fmt: skip
         lines.append("brightest points  x (m)    y (m)   PSLR az/rg (dB)   IRW az/rg (m)")
-        for p in im["points"]:
+        for p in im.points:
             lines.append(
                 f"                 {p['x_m']:7.2f} {p['y_m']:8.2f}   {p['pslr_az_db']:6.2f} "
                 f"{p['pslr_rg_db']:6.2f}     {p['irw_az_m']:.3f} {p['irw_rg_m']:.3f}"
             )
-    if "comparison_skipped" in summary:
-        lines.append(f"comparison       not drawn: {summary['comparison_skipped']}")
-    if "comparison" in summary:
-        comp = summary["comparison"]
-        lines.append(f"comparison       brightest target (pulses 1 in {comp['decimation']})")
+    if summary.comparison_skipped is not None:
+        lines.append(f"comparison       not drawn: {summary.comparison_skipped}")
+    if (comp := summary.comparison) is not None:
+        lines.append(f"comparison       brightest target (pulses 1 in {comp.decimation})")
         lines.append("                               peak (dB)  PSLR az/rg (dB)   IRW az/rg (m)")
-        for name, s in comp["panels"].items():
+        for name, s in comp.panels.items():
             keys = (("pslr_az_db", "6.2f"), ("pslr_rg_db", "6.2f"), ("irw_az_m", ".3f"),
                     ("irw_rg_m", ".3f"))  # fmt: skip
             cells = [_cell(s.get(k), f) for k, f in keys]

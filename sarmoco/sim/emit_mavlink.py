@@ -119,7 +119,65 @@ class PacketSink:
         self._emitter.send(bytes(buf), self._emitter.now_ns)
 
 
-class MavlinkEmitter(Emitter):
+class AutopilotSpeaker(Emitter):
+    """An emitter that speaks as the autopilot (:data:`SYSTEM_ID`, :data:`COMPONENT_ID`)
+    over MAVLink 2: its HEARTBEAT (scheduled by the subclass, and every
+    :data:`HEARTBEAT_PERIOD_S` while it waits for its peer before playback), a tally of the
+    messages sent, and the parsing of what comes back (garbage skipped).
+
+    Parameters
+    ----------
+    link, faults, seed, rank
+        See :class:`~sarmoco.sim.emitter.Emitter`.
+    """
+
+    def __init__(self, link: Link, faults: PacketFaults | None, seed: int, rank: int) -> None:
+        super().__init__(link, faults, seed, rank)
+        self._tx = mavlink2.MAVLink(
+            PacketSink(self), srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID
+        )
+        self._rx = mavlink2.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
+        self._rx.robust_parsing = True
+        self._last_preroll_heartbeat = -HEARTBEAT_PERIOD_S
+        self.sent: dict[str, int] = {}
+        """Messages sent, by name."""
+
+    def _count(self, name: str, n: int = 1) -> None:
+        self.sent[name] = self.sent.get(name, 0) + n
+
+    def _heartbeat(self, t_ns: int) -> None:
+        """The autopilot's HEARTBEAT at scenario time ``t_ns``."""
+        self.now_ns = t_ns
+        self._tx.heartbeat_send(
+            mavlink2.MAV_TYPE_FIXED_WING,
+            mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA,
+            mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
+            0,
+            mavlink2.MAV_STATE_ACTIVE,
+        )
+        self._count("HEARTBEAT")
+
+    def service(self, now_ns: int | None) -> None:
+        if now_ns is None and time.monotonic() - self._last_preroll_heartbeat >= HEARTBEAT_PERIOD_S:
+            self._last_preroll_heartbeat = time.monotonic()  # the peer answers whom it heard
+            self._heartbeat(self.now_ns)
+        super().service(now_ns)
+
+    def on_bytes(self, data: bytes, now_ns: int | None) -> None:
+        try:
+            msgs = self._rx.parse_buffer(data) or []
+        except mavlink2.MAVError:
+            return
+        for msg in msgs:
+            if msg.get_type() != "BAD_DATA":
+                self.on_message(msg, now_ns)
+
+    def on_message(self, msg: Any, now_ns: int | None) -> None:
+        """React to one well-formed message from the peer; default: ignore it."""
+        return None
+
+
+class MavlinkEmitter(AutopilotSpeaker):
     """Plays a run's INS samples as an autopilot's MAVLink 2 stream.
 
     Parameters
@@ -171,27 +229,20 @@ class MavlinkEmitter(Emitter):
             None if feed.pos_ned is None else ned_to_geodetic(feed.pos_ned, GEODETIC_ORIGIN)
         )
         """Latitude, longitude (deg) and altitude (m) of each sample (grades with a position)."""
-        self._tx = mavlink2.MAVLink(
-            PacketSink(self), srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID
-        )
         if signing_key is not None:
             if len(signing_key) != 32:
                 raise ConfigError(f"mavlink signing key: {len(signing_key)} bytes, need 32")
             self._tx.signing.secret_key = signing_key
             self._tx.signing.sign_outgoing = True
             self._tx.signing.timestamp = 1
-        self._rx = mavlink2.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
         self._rogue = (
             mavlink2.MAVLink(PacketSink(self), srcSystem=rogue_system, srcComponent=COMPONENT_ID)
             if rogue_system
             else None
         )
-        self._rx.robust_parsing = True
         self._rogue_rng = np.random.default_rng(rogue_system)
         self._last_rogue_preroll = -ROGUE_PREROLL_PERIOD_S
         self.peer_heard = False
-        self._last_preroll_heartbeat = -HEARTBEAT_PERIOD_S
-        self.sent: dict[str, int] = {}
         self.answered: dict[str, int] = {"TIMESYNC": 0, "SET_MESSAGE_INTERVAL": 0}
 
     # --- schedule -------------------------------------------------------------------
@@ -222,23 +273,12 @@ class MavlinkEmitter(Emitter):
         else:
             self.link.write(packet)
 
-    def _count(self, name: str, n: int = 1) -> None:
-        self.sent[name] = self.sent.get(name, 0) + n
-
     def _due(self, name: str, index: int) -> bool:
         hz = self.rates_hz.get(name, 0.0)
         return hz > 0 and index % max(1, round(self.feed.rate_hz / hz)) == 0
 
     def _heartbeat(self, t_ns: int) -> None:
-        self.now_ns = t_ns
-        self._tx.heartbeat_send(
-            mavlink2.MAV_TYPE_FIXED_WING,
-            mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA,
-            mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED,
-            0,
-            mavlink2.MAV_STATE_ACTIVE,
-        )
-        self._count("HEARTBEAT")
+        super()._heartbeat(t_ns)
         flags = _EKF_FLAGS_BASE | (_EKF_FLAGS_POSITION if self.feed.pos_ned is not None else 0)
         self._tx.ekf_status_report_send(flags, 0.0, 0.0, 0.0, 0.0, 0.0)
         self._count("EKF_STATUS_REPORT")
@@ -340,26 +380,16 @@ class MavlinkEmitter(Emitter):
             self._rogue_heartbeat("ROGUE_PREROLL")
             boot_ms = round(int(self.feed.uptime_ns[0]) / 1e6)
             self._rogue_sample(0, boot_ms, int(self.feed.uptime_ns[0]), "ROGUE_PREROLL")
-        if now_ns is None and time.monotonic() - self._last_preroll_heartbeat >= HEARTBEAT_PERIOD_S:
-            self._last_preroll_heartbeat = time.monotonic()
-            self._heartbeat(self.now_ns)
         super().service(now_ns)
 
-    def on_bytes(self, data: bytes, now_ns: int | None) -> None:
-        try:
-            msgs = self._rx.parse_buffer(data) or []
-        except mavlink2.MAVError:
-            return
-        for msg in msgs:
-            if msg.get_type() == "BAD_DATA":
-                continue
-            self.peer_heard = True
-            if msg.get_type() == "TIMESYNC" and msg.tc1 == 0 and now_ns is not None:
-                self.now_ns = now_ns
-                self._tx.timesync_send(self.feed.clock.uptime_ns(now_ns), msg.ts1)
-                self.answered["TIMESYNC"] += 1
-            elif msg.get_type() == "COMMAND_LONG" and msg.target_system in (0, SYSTEM_ID):
-                self._command(msg, now_ns)
+    def on_message(self, msg: Any, now_ns: int | None) -> None:
+        self.peer_heard = True
+        if msg.get_type() == "TIMESYNC" and msg.tc1 == 0 and now_ns is not None:
+            self.now_ns = now_ns
+            self._tx.timesync_send(self.feed.clock.uptime_ns(now_ns), msg.ts1)
+            self.answered["TIMESYNC"] += 1
+        elif msg.get_type() == "COMMAND_LONG" and msg.target_system in (0, SYSTEM_ID):
+            self._command(msg, now_ns)
 
     def _command(self, msg: Any, now_ns: int | None) -> None:
         if now_ns is not None:

@@ -20,7 +20,6 @@ COMMAND_ACKs it hears by result.
 from __future__ import annotations
 
 import os
-import time
 from collections.abc import Iterator, Sequence
 from functools import partial
 from typing import Any
@@ -30,8 +29,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2
 
 from sarmoco.drivers.clock import NS_PER_S
-from sarmoco.sim.emit_mavlink import COMPONENT_ID, HEARTBEAT_PERIOD_S, SYSTEM_ID, PacketSink
-from sarmoco.sim.emitter import Emitter
+from sarmoco.sim.emit_mavlink import COMPONENT_ID, HEARTBEAT_PERIOD_S, SYSTEM_ID, AutopilotSpeaker
 from sarmoco.sim.pacing import Event
 from sarmoco.sim.transports import Link
 
@@ -47,7 +45,7 @@ def leg_item(leg: int) -> int:
     return 4 * leg + 3
 
 
-class MissionEmitter(Emitter):
+class MissionEmitter(AutopilotSpeaker):
     """Plays a survey mission's capture commands to a MAVLink camera component.
 
     Parameters
@@ -65,14 +63,7 @@ class MissionEmitter(Emitter):
     def __init__(self, link: Link, legs: Sequence[tuple[int, int]], rank: int = 9) -> None:
         super().__init__(link, None, 0, rank)
         self.legs = [(int(a), int(b)) for a, b in legs]
-        self._tx = mavlink2.MAVLink(
-            PacketSink(self), srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID
-        )
-        self._rx = mavlink2.MAVLink(None, srcSystem=SYSTEM_ID, srcComponent=COMPONENT_ID)
-        self._rx.robust_parsing = True
         self.camera_heard = False
-        self._last_preroll = -HEARTBEAT_PERIOD_S
-        self.sent: dict[str, int] = {}
         self.acks: dict[str, int] = {}
         """COMMAND_ACKs heard from the camera, by ``<command>:<result>`` names."""
 
@@ -93,17 +84,6 @@ class MissionEmitter(Emitter):
         ]
         yield from sorted(beats + commands, key=lambda e: e.t_ns)
 
-    def _count(self, name: str) -> None:
-        self.sent[name] = self.sent.get(name, 0) + 1
-
-    def _heartbeat(self, t_ns: int) -> None:
-        self.now_ns = t_ns
-        self._tx.heartbeat_send(
-            mavlink2.MAV_TYPE_FIXED_WING, mavlink2.MAV_AUTOPILOT_ARDUPILOTMEGA,
-            mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 0, mavlink2.MAV_STATE_ACTIVE,
-        )  # fmt: skip
-        self._count("HEARTBEAT")
-
     def _capture(self, t_ns: int, leg: int, start: bool) -> None:
         """MISSION_CURRENT and the capture command at one end of leg ``leg``."""
         self.now_ns = t_ns
@@ -116,27 +96,16 @@ class MissionEmitter(Emitter):
         )
         self._count("VIDEO_START_CAPTURE" if start else "VIDEO_STOP_CAPTURE")
 
-    def service(self, now_ns: int | None) -> None:
-        if now_ns is None and time.monotonic() - self._last_preroll >= HEARTBEAT_PERIOD_S:
-            self._last_preroll = time.monotonic()  # the camera answers whom it heard
-            self._heartbeat(self.now_ns)
-        super().service(now_ns)
-
-    def on_bytes(self, data: bytes, now_ns: int | None) -> None:
-        try:
-            msgs = self._rx.parse_buffer(data) or []
-        except mavlink2.MAVError:
+    def on_message(self, msg: Any, now_ns: int | None) -> None:
+        if msg.get_srcComponent() != CAMERA_COMPONENT_ID:
             return
-        for msg in msgs:
-            if msg.get_srcComponent() != CAMERA_COMPONENT_ID:
-                continue
-            if msg.get_type() == "HEARTBEAT":
-                self.camera_heard = True
-            elif msg.get_type() == "COMMAND_ACK":
-                name = f"{_name(mavlink2.enums['MAV_CMD'], msg.command)}:" + _name(
-                    mavlink2.enums["MAV_RESULT"], msg.result
-                )
-                self.acks[name] = self.acks.get(name, 0) + 1
+        if msg.get_type() == "HEARTBEAT":
+            self.camera_heard = True
+        elif msg.get_type() == "COMMAND_ACK":
+            name = f"{_name(mavlink2.enums['MAV_CMD'], msg.command)}:" + _name(
+                mavlink2.enums["MAV_RESULT"], msg.result
+            )
+            self.acks[name] = self.acks.get(name, 0) + 1
 
     def ready(self) -> bool:
         return self.camera_heard

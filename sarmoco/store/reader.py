@@ -17,12 +17,10 @@ import itertools
 import logging
 from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any, Concatenate, ParamSpec, TypeVar
+from typing import TYPE_CHECKING, Any, Concatenate, ParamSpec, TypeVar
 
-import dask.array as da
 import numpy as np
 import numpy.typing as npt
-import xarray as xr
 import zarr
 from zarr.core.metadata import ArrayV3Metadata
 
@@ -36,6 +34,9 @@ from sarmoco.store import schema
 from sarmoco.store.flags import PushResult
 from sarmoco.store.schema import COMMITTED_ATTR
 from sarmoco.store.verify import DAMAGE, chunk_present, chunk_rows, describe
+
+if TYPE_CHECKING:
+    import xarray as xr
 
 log = logging.getLogger(__name__)
 _P = ParamSpec("_P")
@@ -238,6 +239,9 @@ class RunStore:
         zarr or numcodecs. The columns the others name in their ``coordinates`` attribute
         (``t_ns``...) are coordinates, as ``xarray.open_zarr`` makes them.
         """
+        import dask.array as da  # the daemon, which reads no Dataset, starts without them
+        import xarray as xr
+
         n = self.committed(table)
         group = self._group(table)
         data_vars = {}

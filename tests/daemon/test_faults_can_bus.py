@@ -85,7 +85,7 @@ def test_slcan_error_passive_and_bus_off(
     prf_hz = (sent_ns.size - 1) / ((sent_ns[-1] - sent_ns[0]) / 1e9)
     unusable = (pulses["flags"] & np.uint32(NAV_UNUSABLE)) != 0
     bridged = (pulses["flags"] & np.uint32(PulseFlag.NAV_BRIDGED)) != 0
-    pslr = [p["pslr_az_db"] for p in summary["image"]["points"][:3]]
+    pslr = [p["pslr_az_db"] for p in summary.image.points[:3]]
     print(f"slcan error passive {PASSIVE_S[1]} s + bus-off {BUS_OFF_S[1]} s: adapter "
           f"{stats['status_answers']} status answers, {stats['error_answers']} with error flags, "
           f"{stats['faults']['bus_off_lost']} frames lost bus-off; ins_bus_error_states "

@@ -97,7 +97,7 @@ def test_wall_clock_steps_under_a_live_run(
     nav = store.read("nav", ["t_ns", "vel_ned"])
     kin = np.isfinite(nav["vel_ned"]).all(axis=1)
     err = np.linalg.norm(nav["vel_ned"][kin] - _truth_vel(truth, nav["t_ns"][kin]), axis=1)
-    pslr = [p["pslr_az_db"] for p in summary["image"]["points"][:3]]
+    pslr = [p["pslr_az_db"] for p in summary.image.points[:3]]
     steps_logged = [line for line in log.splitlines() if "host wall clock stepped" in line]
     print(f"wall clock steps {OFFSETS_S} s: {len(stepped)} made, {len(steps_logged)} logged; "
           f"{flags.size} pulses, {(flags & np.uint32(NAV_UNUSABLE) != 0).sum()} flagged; "

@@ -20,12 +20,13 @@ target's aperture spans the run).
 from __future__ import annotations
 
 import json
-from typing import Any
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from sarmoco.app.demo import run_loopback
+from sarmoco.products.report import ReportSummary
 from sarmoco.store.flags import NAV_UNUSABLE, PulseFlag
 from sarmoco.store.reader import open_store
 from tests.daemon.test_faults_wire import SINC_PSLR_DB
@@ -40,7 +41,9 @@ INS_FAULTS = (
 )
 
 
-def _run(tmp_path_factory: pytest.TempPathFactory, name: str, faults: tuple[str, ...]) -> Any:
+def _run(
+    tmp_path_factory: pytest.TempPathFactory, name: str, faults: tuple[str, ...]
+) -> tuple[Path, ReportSummary]:
     out = tmp_path_factory.mktemp(name)
     return out, run_loopback(out, SCALE, faults=faults)
 
@@ -52,7 +55,7 @@ def test_combined_loss_corruption_and_ins_dropout(
     store = open_store(out / "run.zarr")
     assert store.attrs["complete"]
     faults = json.loads((out / "truth.json").read_text())["wire"]["links"]["radar"]
-    pslr = [p["pslr_az_db"] for p in summary["image"]["points"][:3]]
+    pslr = [p["pslr_az_db"] for p in summary.image.points[:3]]
     flags = store.read("pulses", ["flags"])["flags"]
     bridged = (flags & np.uint32(PulseFlag.NAV_BRIDGED)) != 0
     print(f"combined: azimuth PSLR {pslr} dB; {bridged.sum()} pulses bridged; radar "
@@ -76,7 +79,7 @@ def test_ins_clock_faults_and_dropouts(tmp_path_factory: pytest.TempPathFactory)
     bridged = (got["flags"] & np.uint32(PulseFlag.NAV_BRIDGED)) != 0
     in_long = (t_s >= 1.5) & (t_s < 2.5)
     in_short = (t_s >= 0.45) & (t_s < 0.56)
-    pslr = [p["pslr_az_db"] for p in summary["image"]["points"][:3]]
+    pslr = [p["pslr_az_db"] for p in summary.image.points[:3]]
     print(f"INS faults: {flagged.sum()} of {t_s.size} pulses flagged, {flagged[in_long].sum()} "
           f"of {in_long.sum()} in the 1 s dropout, {flagged[in_short].sum()} around the 10 ms "
           f"one; flagged span {t_s[flagged].min() if flagged.any() else None} .. "

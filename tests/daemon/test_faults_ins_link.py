@@ -40,6 +40,7 @@ import numpy as np
 import pytest
 
 from sarmoco.app.demo import run_loopback
+from sarmoco.products.report import ReportSummary
 from sarmoco.sim.emit_mavlink import ROGUE_VEL_NED
 from sarmoco.store.flags import NAV_UNUSABLE, PulseFlag
 from sarmoco.store.reader import open_store
@@ -56,7 +57,7 @@ def _free_tcp_port() -> int:
 
 def _run_watched(
     out: Path, faults: tuple[str, ...], ins: str = "mavlink"
-) -> tuple[dict[str, Any], dict[str, Any]]:
+) -> tuple[ReportSummary, dict[str, Any]]:
     """run_loopback with ``faults`` and the ``ins`` protocol; (the report summary, the last
     /status read while the daemon ran)."""
     port = _free_tcp_port()
@@ -110,7 +111,7 @@ def test_autopilot_reboot_and_second_system(tmp_path_factory: pytest.TempPathFac
     pulse_err = np.linalg.norm(
         motion["vel_ned"][ok] - _truth_vel(truth, motion["t_ns"][ok]), axis=1
     )
-    pslr = [p["pslr_az_db"] for p in summary["image"]["points"][:3]]
+    pslr = [p["pslr_az_db"] for p in summary.image.points[:3]]
     print(f"reboot + second system: rogue messages sent {sent.get('ROGUE')}, ins_rejected "
           f"{c.get('ins_rejected')}; {kin.sum()} velocity samples recorded, max |error| "
           f"{err.max():.3f} m/s; {(~usable).sum()} of {usable.size} pulses flagged "
@@ -146,7 +147,7 @@ def test_a_second_system_talking_first(
     kin = np.isfinite(nav["vel_ned"]).all(axis=1)
     err = np.linalg.norm(nav["vel_ned"][kin] - _truth_vel(truth, nav["t_ns"][kin]), axis=1)
     flags = store.read("pulses", ["flags"])["flags"]
-    pslr = [p["pslr_az_db"] for p in summary["image"]["points"][:3]]
+    pslr = [p["pslr_az_db"] for p in summary.image.points[:3]]
     print(f"second system first: messages {stats['messages']}, ins_rejected "
           f"{status['counters'].get('ins_rejected')}; {kin.sum()} velocity samples, max "
           f"|error| {err.max():.4f} m/s; {(flags & np.uint32(NAV_UNUSABLE) != 0).sum()} of "
@@ -195,7 +196,7 @@ def test_serial_garbage_and_baud_mismatch(tmp_path_factory: pytest.TempPathFacto
     flags = pulses["flags"]
     unusable = (flags & np.uint32(NAV_UNUSABLE)) != 0
     bridged = (flags & np.uint32(PulseFlag.NAV_BRIDGED)) != 0
-    pslr = [p["pslr_az_db"] for p in summary["image"]["points"][:3]]
+    pslr = [p["pslr_az_db"] for p in summary.image.points[:3]]
     print(f"serial garbage + baud mismatch: injected {injected}; ins counters {c}; "
           f"{unusable.sum()} pulses flagged, {bridged.sum()} bridged "
           f"({t_s[bridged | unusable].min() if (bridged | unusable).any() else None} .. "

@@ -42,6 +42,7 @@ import pytest
 
 from sarmoco.app.demo import run_loopback
 from sarmoco.daemon.runner import INS_STALE_S
+from sarmoco.products.report import ReportSummary
 from sarmoco.store.flags import NAV_UNUSABLE
 from sarmoco.store.reader import open_store
 from tests.daemon.statuswatch import watching_status
@@ -63,7 +64,7 @@ pytestmark = pytest.mark.bench
 @dataclass(frozen=True)
 class _Run:
     out: Path
-    summary: dict[str, Any]
+    summary: ReportSummary
     status: list[dict[str, Any]]
     """The ``/status`` documents read while the daemon ran, in order."""
 
@@ -100,7 +101,7 @@ def test_ten_second_ins_silence(silence_run: _Run) -> None:
     ins = [(d["components"]["ins"], d["healthy"]) for d in seen if "ins" in d["components"]]
     ages = [float(m[1]) if (m := AGE.search(c["detail"])) else np.nan for c, _ in ins]
     stale = [i for i, a in enumerate(ages) if INS_STALE_S < a < np.inf]  # inf: before the first
-    points = silence_run.summary["image"]["points"]
+    points = silence_run.summary.image.points
     targets = [p for p in points if p["peak_db"] > -6.0]  # the bright ones, not noise peaks
     print(f"INS silent {SILENCE_S[1]} s from {start} s, {t_s.size and t_s.max():.2f} s flight: "
           f"{t_s.size} of {sent_ns.size} pulses stored, {flagged.sum()} flagged "
@@ -140,7 +141,7 @@ def test_focus_resolution_after_ten_second_ins_silence(silence_run: _Run) -> Non
     scn = json.loads((silence_run.out / "truth.json").read_text())["scenario"]
     lam = 299_792_458.0 / scn["radar"]["carrier_hz"]
     irw_az = 0.886 * lam / (4 * math.sin(scn["integration_angle_rad"] / 2))
-    targets = [p for p in silence_run.summary["image"]["points"] if p["peak_db"] > -6.0]
+    targets = [p for p in silence_run.summary.image.points if p["peak_db"] > -6.0]
     print(f"after the 10 s silence: azimuth IRW {[p['irw_az_m'] for p in targets]} m, "
           f"theory {irw_az:.3f} m")  # fmt: skip
     assert targets and all(p["irw_az_m"] <= 1.1 * irw_az for p in targets), targets

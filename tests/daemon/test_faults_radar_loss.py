@@ -74,7 +74,7 @@ def test_radar_loss_is_flagged_and_focused_around(tmp_path: Path, fault: str, wh
     after_loss = np.isin(got["t_ns"], sent[runs_before])
     assert flagged[after_loss].mean() >= 0.9, (flagged[after_loss].sum(), after_loss.sum())
     q = aperture_loss(~arrived, truth["scenario"])
-    pslr = [p["pslr_az_db"] for p in summary["image"]["points"][:3]]
+    pslr = [p["pslr_az_db"] for p in summary.image.points[:3]]
     print(
         f"radar {what}: {faults['lost']} of {faults['packets']} datagrams lost "
         f"({faults['burst_lost']} in bursts; {100 * q:.1f} % of an aperture's pulses), "

@@ -36,6 +36,7 @@ from sarmoco.app.demo import run_loopback
 from sarmoco.app.simconfig import scenario_config, write_config
 from sarmoco.daemon.blocks import strictly_increasing
 from sarmoco.daemon.focuser import Focuser
+from sarmoco.products.report import ReportSummary
 from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import simulate
 from sarmoco.sim.scenario import load_preset
@@ -58,14 +59,14 @@ SINC_PSLR_DB = -13.26
 
 
 @pytest.fixture(scope="module")
-def faulty_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, dict[str, Any]]:
+def faulty_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, ReportSummary]:
     """The scaled ku-vehicle run with radar faults: (output folder, report summary)."""
     out = tmp_path_factory.mktemp("faulty")
     return out, run_loopback(out, SCALE, faults=FAULTS)
 
 
 def test_duplicated_reordered_lost_datagrams_cost_no_focus(
-    faulty_run: tuple[Path, dict[str, Any]],
+    faulty_run: tuple[Path, ReportSummary],
 ) -> None:
     out, summary = faulty_run  # run_loopback raised unless the daemon exited 0
     store = open_store(out / "run.zarr")
@@ -81,8 +82,8 @@ def test_duplicated_reordered_lost_datagrams_cost_no_focus(
     arrived = len(truth["pulses"]["t_ns"]) - faults["lost"]
     assert store.committed("pulses") + run["pulses_late_dropped"] == arrived
     assert (np.diff(store.read("pulses", ["t_ns"])["t_ns"]) > 0).all()
-    assert_focused(out, summary["image"]["points"])
-    for p in summary["image"]["points"][:3]:
+    assert_focused(out, summary.image.points)
+    for p in summary.image.points[:3]:
         # within 0.5 dB of the unweighted sinc's -13.26 dB, which the run without faults
         # reaches within 0.2 dB (-13.10..-13.13 dB measured)
         assert p["pslr_az_db"] <= SINC_PSLR_DB + 0.5, p

@@ -94,15 +94,15 @@ def test_pipeline_focuses_and_records(run: SimRun, tmp_path: Path, autofocus: bo
     pipe = feed(run, cfg, tmp_path / "run.zarr")
     assert pipe.focuser is not None
     summary = write_report(tmp_path / "run.zarr", tmp_path / "report")
-    assert summary["complete"]
-    assert summary["run"]["pulses_processed"] == run.t_ns.size
-    assert summary["run"]["pulses_nav_flagged"] == 0
+    assert summary.complete
+    assert summary.run["pulses_processed"] == run.t_ns.size
+    assert summary.run["pulses_nav_flagged"] == 0
     for name in ("image.png", "motion.png", "report.json", "report.txt"):
         assert (tmp_path / "report" / name).stat().st_size > 0
     store = open_store(tmp_path / "run.zarr")
     assert store.committed("pulses") == run.t_ns.size
     assert store.committed("motion") == run.t_ns.size
-    points = summary["image"]["points"]
+    points = summary.image.points
     track = pipe.focuser.track
     truth = [track.rotation @ (tg - run.apc_ned[0]) for tg in run.targets_ned]
     irw_az = 0.886 * scn.azimuth_resolution_m

@@ -64,7 +64,7 @@ def test_report_draws_it_with_and_without_the_truth(replayed: Path, tmp_path: Pa
         tmp_path / "r",
         truth=read_true_motion(replayed / "sim" / "truth.json"),
     )
-    assert "true_residual_rms_m" in summary["motion_estimates"]
+    assert "true_residual_rms_m" in summary.motion_estimates
     picture = PilImage.open(tmp_path / "r" / "motion_estimates.png")
     assert picture.size[0] > 500
     assert 'src="motion_estimates.png"' in (tmp_path / "r" / "index.html").read_text()

@@ -69,14 +69,14 @@ def test_report_compares_raw_ins_and_autofocus(tmp_path: Path) -> None:
     for name in ("image.png", "compare.png", "cuts.png", "motion.png"):
         assert f'src="{name}"' in page and (out / name).stat().st_size > 0
     assert html.escape((out / "report.txt").read_text()) in page
-    panels = summary["comparison"]["panels"]
+    panels = summary.comparison.panels
     assert list(panels) == list(PANELS)
     raw, ins, af = (panels[n] for n in PANELS)
     assert af["pslr_az_db"] < -12.5 and ins["pslr_az_db"] < -12.0
     assert raw["pslr_az_db"] is None or raw["pslr_az_db"] > af["pslr_az_db"] + 6.0
     assert raw["pslr_az_db"] is None or raw["pslr_az_db"] > ins["pslr_az_db"] + 6.0
     assert raw["peak_db"] < af["peak_db"] - 6.0
-    res_az, res_rg = summary["comparison"]["ideal_resolution_m"]  # sinc IRW: 0.886 x resolution
+    res_az, res_rg = summary.comparison.ideal_resolution_m  # sinc IRW: 0.886 x resolution
     assert abs(af["irw_az_m"] / (0.886 * res_az) - 1) < 0.05
     assert abs(af["irw_rg_m"] / (0.886 * res_rg) - 1) < 0.05
 
@@ -97,13 +97,13 @@ def test_report_refocuses_a_crabbed_flight_about_its_squinted_beam(tmp_path: Pat
     )
     feed(run, cfg, tmp_path / "run.zarr")
     summary = write_report(tmp_path / "run.zarr", tmp_path / "report")
-    res_az, _ = summary["comparison"]["ideal_resolution_m"]
-    points = summary["image"]["points"][:3]  # the three targets, measured through their peaks
+    res_az, _ = summary.comparison.ideal_resolution_m
+    points = summary.image.points[:3]  # the three targets, measured through their peaks
     assert len(points) == 3
     for p in points:
         assert p["pslr_az_db"] <= -12.5 and p["pslr_rg_db"] <= -12.5, p
         assert p["irw_az_m"] <= 1.1 * 0.886 * res_az, p
-    panels = summary["comparison"]["panels"]
+    panels = summary.comparison.panels
     for name in PANELS:
         assert panels[name]["peak_db"] > -0.5, (name, panels[name])
         assert abs(panels[name]["irw_az_m"] / (0.886 * res_az) - 1) < 0.05, (name, panels[name])

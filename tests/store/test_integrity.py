@@ -124,9 +124,10 @@ def test_report_skips_damaged_tiles_and_says_so(
     _, intact, damaged = stores
     whole = write_report(intact, tmp_path / "intact")
     summary = write_report(damaged, tmp_path / "damaged")
-    skipped = summary["damaged_chunks_skipped"]
+    skipped = summary.damaged_chunks_skipped
     assert any(k.startswith("images/tile_000000: ") for k in skipped)
-    assert "image" in summary and summary["image"]["shape"][0] < whole["image"]["shape"][0]
+    assert summary.image is not None and whole.image is not None
+    assert summary.image.shape[0] < whole.image.shape[0]
     assert "DAMAGED " in (tmp_path / "damaged" / "report.txt").read_text()
 
 

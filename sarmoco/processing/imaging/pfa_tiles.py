@@ -143,22 +143,11 @@ class PfaTileImager:
     ) -> list[Tile]:
         """Take a block of pulses; return the tiles whose apertures it completed.
 
-        Parameters
-        ----------
-        rc : ndarray of complex, shape (P, S)
-            Motion-compensated, autofocused range-compressed pulses.
-        t_ns : ndarray of int64, shape (P,)
-            Pulse times, GPS ns, increasing across calls.
-        apc_m : ndarray, shape (P, 3)
-            APC of each pulse in the imaging frame (on the reference track), m; x
-            increasing.
-        compensated_dy_m : ndarray, shape (P,), optional
-            Taken for the interface of :class:`TileImager`; the per-pixel squint residual
-            of the range-variant compensation is a backprojection term, not applied here.
-        beam_squint_rad : ndarray, shape (P, 2), optional
-            Squint interval of each pulse's beam, rad (positive: ahead): the first block's
-            median centre becomes the centroid the apertures are centred on (when none
-            was given). Default: broadside.
+        Arguments as for :meth:`~sarmoco.processing.imaging.tiles.TileImager.add`, with
+        the APCs' x increasing. The squint residual of the range-variant compensation
+        (``compensated_dy_m``) is a backprojection term, not applied here. With
+        ``beam_squint_rad`` the first block's median squint centres the apertures (when no
+        centroid was given); broadside without.
         """
         if rc.shape[0] == 0:
             return []

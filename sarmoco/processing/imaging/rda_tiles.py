@@ -231,24 +231,13 @@ class RdaTileImager:
     ) -> list[Tile]:
         """Take a block of pulses; return the tiles it finished.
 
-        Parameters
-        ----------
-        rc : ndarray of complex, shape (P, S)
-            Motion-compensated, autofocused range-compressed pulses.
-        t_ns : ndarray of int64, shape (P,)
-            Pulse times, GPS ns, increasing across calls.
-        apc_m : ndarray, shape (P, 3)
-            APC of each pulse in the imaging frame (on the reference track), m; x
-            increasing.
-        compensated_dy_m : ndarray, shape (P,), optional
-            Taken for the interface of :class:`TileImager`; the per-pixel squint residual
-            of the range-variant compensation is a backprojection term and is not applied
-            here (the autofocus, when on, absorbs it).
-        beam_squint_rad : ndarray, shape (P, 2), optional
-            Squint interval of each pulse's beam from the plane normal to the track, rad
-            (positive: ahead). The first block's median centre becomes the centroid the
-            band is processed about (when none was given), and the pulses each tile takes
-            reach as far as any pulse's footprint. Default: broadside.
+        The parameters are those of :meth:`~sarmoco.processing.imaging.tiles.TileImager.add`
+        (the APCs' x increasing), but for two. ``compensated_dy_m`` is taken for that
+        interface only: the per-pixel squint residual of the range-variant compensation is
+        a backprojection term and is not applied here (the autofocus, when on, absorbs it).
+        ``beam_squint_rad``: the first block's median centre becomes the centroid the band
+        is processed about (when none was given), and the pulses each tile takes reach as
+        far as any pulse's footprint; default broadside.
         """
         if rc.shape[0] == 0:
             return []
