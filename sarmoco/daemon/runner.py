@@ -161,6 +161,8 @@ class _LiveState:
     """What the INS link's adapter reports wrong with its bus (CAN bus-off), if anything."""
     finished: set[str] = field(default_factory=set)
     """Links that were files and reached their end (not a failure)."""
+    heap: HeapTrim = field(default_factory=HeapTrim)
+    """Hands the pages focusing freed back to the system after its passes."""
 
 
 def _keep_reading(
@@ -335,8 +337,6 @@ class _LiveRun:
         """The radar link is a network link (not a file)."""
         self._write_failure_reported = False
         """The recorder's writer thread failed and that was counted and logged."""
-        self._heap = HeapTrim()
-        """Hands the pages focusing freed back to the system after its passes."""
         self._record_lock = threading.Lock()
         """Held by the recording thread through a pass, and to change :attr:`pipe`."""
         self._nav_lock = threading.Lock()
@@ -791,7 +791,7 @@ class _LiveRun:
             self._processing_failed(exc)
             return 0
         if released:
-            self._heap.maybe_trim()
+            self.st.heap.maybe_trim()
         failure = self.pipe.recorder.write_failure
         if failure is None:
             if self._recording_failure is None:
