@@ -30,11 +30,12 @@ segment's tiles are handed out after the old segment's last (tiles come out segm
 segment, as a batch stores them).
 
 A live focuser that falls behind skips recorded pulses (the daemon's focus backlog); the
-pulses after such a skip continue the segment (``after_skip``): its track, D_los,
-autofocus, pre-filter and tile imager (with the range-Doppler filters of its block
-shape) carry across the hole, whose tiles are simply not formed live. Starting a segment
-there would spend on closing one segment and opening the next the time the focuser was
-short of, and fall further behind.
+pulses after such a skip continue the segment (``after_skip``): its track, D_los, beam
+and tile imager (with the range-Doppler filters of its block shape) carry across the
+hole, whose tiles are simply not formed live; the autofocus and the pre-filter end their
+runs at the hole and start new ones after it, as at any gap longer than their windows.
+Starting a segment there would spend on closing one segment and opening the next the
+time the focuser was short of, and fall further behind.
 """
 
 from __future__ import annotations
@@ -782,8 +783,8 @@ class Focuser:
             over the block); the beam keeps its pointing when omitted.
         after_skip : ndarray of bool, shape (P,), optional
             Pulses that follow recorded pulses the caller skipped (a live focuser fallen
-            behind): the segment goes on across the hole, with its track, D_los, filters
-            and tiles (:mod:`sarmoco.processing.segments`); none when omitted.
+            behind): the segment goes on across the hole, with its track, D_los and tile
+            imager (:mod:`sarmoco.processing.segments`); none when omitted.
         """
         start = time.perf_counter()
         out = self._push(raw, t_ns, vel_ned, known, quat, after_skip)

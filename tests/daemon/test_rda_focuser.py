@@ -161,7 +161,7 @@ def _push_with_hole(run: SimRun, hole: slice, tell: bool) -> tuple[Focuser, list
 def test_a_skip_carries_the_segment_across_the_hole() -> None:
     """A live focuser fallen behind skips 3.4 s of pulses (longer than the segmenter's
     window, after which a silence starts a new segment): told it was a skip, it keeps the
-    one segment (its track, D_los, autofocus, pre-filter and tile imager: one imager made,
+    one segment (its track, D_los, beam and tile imager: one imager made,
     counted) and forms tiles after the hole; not told, the same hole starts a second
     segment with new state."""
     scn = load_preset("ku-vehicle", 0.05)
