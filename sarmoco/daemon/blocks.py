@@ -12,7 +12,10 @@ on the cuts at the level of rounding). On the way:
   mean velocity of ``mocomp.heading_window_s`` of flight (the pulses are held until they
   cover it); the pulses before it are recorded unfocused;
 - pulses without navigation keep their place with zero echoes
-  (:class:`~sarmoco.daemon.navigation.GapFill`).
+  (:class:`~sarmoco.daemon.navigation.GapFill`);
+- a pulse whose store row does not follow the row of the pulse focused before it comes
+  after pulses that focusing skipped (the focus backlog's skip ahead): the focuser is told
+  (``after_skip``), and carries its segment across the hole instead of starting a new one.
 
 Every pulse ends in the motion table (:class:`~sarmoco.daemon.tables.RunTables`), with a
 solution or without, and is counted processed, unfocused or out of order.
@@ -61,6 +64,8 @@ class BlockFocusing:
         self._pending_n = 0
         self._focused_ns: int | None = None
         """Time of the newest pulse given to the focuser, GPS ns."""
+        self._last_row: int | None = None
+        """Store row of the newest pulse given to the focuser."""
 
     def accept(self, block: AlignedBlock) -> None:
         """Take an aligned block: record its navigation flags, and focus every whole
@@ -98,9 +103,16 @@ class BlockFocusing:
             return  # no navigation yet: the aperture has not begun
         assert self.focuser is not None and self._gaps is not None
         p = self._gaps.fill(p)
-        out = self.focuser.push(p.raw, p.t_ns, p.vel_ned, p.usable, p.quat)
+        out = self.focuser.push(p.raw, p.t_ns, p.vel_ned, p.usable, p.quat, self._after_skip(p))
         self.tables.motion(p, out)
         self.tables.products(out, self.focuser.autofocus)
+
+    def _after_skip(self, p: NavPulses) -> BoolArray:
+        """The pulses of ``p`` (about to be focused) whose store row is more than one past
+        the row focused before them: recorded pulses between them were skipped."""
+        before = p.row[0] - 1 if self._last_row is None else self._last_row
+        self._last_row = int(p.row[-1])
+        return np.asarray(np.diff(p.row, prepend=before) > 1, dtype=bool)
 
     def _in_time_order(self, p: NavPulses) -> NavPulses | None:
         """``p`` without the pulses not after every pulse focused before (counted in

@@ -28,6 +28,14 @@ their tiles (:attr:`TileLayout.keep`): the old segment keeps the pixels before i
 one those after it, so no target is imaged twice and none falls between. The new
 segment's tiles are handed out after the old segment's last (tiles come out segment by
 segment, as a batch stores them).
+
+A live focuser that falls behind skips recorded pulses (the daemon's focus backlog); the
+pulses after such a skip continue the segment (``after_skip``): its track, D_los, beam
+and tile imager (with the range-Doppler filters of its block shape) carry across the
+hole, whose tiles are simply not formed live; the autofocus and the pre-filter end their
+runs at the hole and start new ones after it, as at any gap longer than their windows.
+Starting a segment there would spend on closing one segment and opening the next the
+time the focuser was short of, and fall further behind.
 """
 
 from __future__ import annotations
@@ -758,6 +766,7 @@ class Focuser:
         vel_ned: FloatArray,
         known: BoolArray | None = None,
         quat: FloatArray | None = None,
+        after_skip: BoolArray | None = None,
     ) -> FocusOutput:
         """Process one block of aligned raw pulses.
 
@@ -776,9 +785,13 @@ class Focuser:
         quat : ndarray, shape (P, 4), optional
             Attitude at the pulses (scalar-first, body to NED): points the beam (its mean
             over the block); the beam keeps its pointing when omitted.
+        after_skip : ndarray of bool, shape (P,), optional
+            Pulses that follow recorded pulses the caller skipped (a live focuser fallen
+            behind): the segment goes on across the hole, with its track, D_los and tile
+            imager (:mod:`sarmoco.processing.segments`); none when omitted.
         """
         start = time.perf_counter()
-        out = self._push(raw, t_ns, vel_ned, known, quat)
+        out = self._push(raw, t_ns, vel_ned, known, quat, after_skip)
         if self.live is not None and t_ns.shape[0]:
             data_s = (int(t_ns[-1]) - self._last_t_ns) * 1e-9
             level = self.live.update(data_s, time.perf_counter() - start)
@@ -796,6 +809,7 @@ class Focuser:
         vel_ned: FloatArray,
         known: BoolArray | None,
         quat: FloatArray | None,
+        after_skip: BoolArray | None,
     ) -> FocusOutput:
         """:meth:`push` without the live level's accounting."""
         q = np.full((t_ns.shape[0], 4), np.nan) if quat is None else np.asarray(quat)
@@ -808,7 +822,7 @@ class Focuser:
             out.motion, tiles = self.segment.push(rc, t_ns, vel_ned, q)
             self._emit(out, self.segment, tiles)
             return out
-        plan = self.segmenter.plan(t_ns, vel_ned, known)
+        plan = self.segmenter.plan(t_ns, vel_ned, known, after_skip)
         out.turn = plan.turn
         begun = zip(plan.tracks, plan.cut_x_m, plan.offset_m, strict=True)
         new = dict(zip(plan.starts.tolist(), begun, strict=True))

@@ -28,6 +28,7 @@ from sarmoco.daemon.camera import (
 )
 from sarmoco.daemon.config import Config, StatusConfig, config_to_dict, live_imaging
 from sarmoco.daemon.focuser import SinkFactory
+from sarmoco.daemon.heap import HeapTrim
 from sarmoco.daemon.ingest import RadarIngest, ring_format
 from sarmoco.daemon.links import open_ins, open_radar
 from sarmoco.daemon.livefeed import LiveFeed
@@ -160,6 +161,8 @@ class _LiveState:
     """What the INS link's adapter reports wrong with its bus (CAN bus-off), if anything."""
     finished: set[str] = field(default_factory=set)
     """Links that were files and reached their end (not a failure)."""
+    heap: HeapTrim = field(default_factory=HeapTrim)
+    """Hands the pages focusing freed back to the system after its passes."""
 
 
 def _keep_reading(
@@ -776,7 +779,9 @@ class _LiveRun:
         (``recorder.writer_queue``) is raised by the next call to the recorder; if no
         call was made after it, it is counted and reported here, once, and processing
         stays unhealthy (the thread writes nothing after it). Nothing while no store is
-        open.
+        open. After a pass that focused, the heap's free pages go back to the system
+        (:class:`~sarmoco.daemon.heap.HeapTrim`), so the resident memory follows what
+        focusing holds rather than the most it ever held.
         """
         if self.pipe is None:
             return 0
@@ -785,6 +790,8 @@ class _LiveRun:
         except SarmocoError as exc:
             self._processing_failed(exc)
             return 0
+        if released:
+            self.st.heap.maybe_trim()
         failure = self.pipe.recorder.write_failure
         if failure is None:
             if self._recording_failure is None:

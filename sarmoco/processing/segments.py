@@ -53,6 +53,13 @@ and its own D_los starting at 0:
   silence on ku-vehicle x0.03 the segment started inside the silence along the held
   placeholder velocity, -14.2 mrad against the simulator's beam at 0, and the targets
   after it focused at 1.2 x the azimuth IRW (9 of the 50 mrad aperture cut).
+- **Across a skip**: pulses the caller left out on purpose (``after_skip``: a live
+  focuser that fell behind skipped recorded pulses with navigation) do not end the
+  segment, however long the hole: the flight went on along the same track, the D_los
+  integrates through the hole from the velocities each side (as across placeholders),
+  and the turn and deviation tests still cut where the flight after it asks for.
+  Starting over there would cost the focuser the ends and starts of segments exactly
+  when it is short of time.
 
 Everything here is a function of pulse times (GPS ns) and APC velocities (NED, m/s);
 the :class:`Segmenter` carries the state from one block to the next, so feeding a strip
@@ -192,7 +199,11 @@ class Segmenter:
         ``overlap_s`` of the last one (where an overlapping segment may start)."""
 
     def plan(
-        self, t_ns: IntArray, vel_ned: FloatArray, known: BoolArray | None = None
+        self,
+        t_ns: IntArray,
+        vel_ned: FloatArray,
+        known: BoolArray | None = None,
+        after_skip: BoolArray | None = None,
     ) -> SegmentPlan:
         """Decide turns and segment starts for the next block and advance the state.
 
@@ -205,13 +216,18 @@ class Segmenter:
         known : ndarray of bool, shape (P,), optional
             Pulses whose velocity is measured (false: a placeholder across a navigation
             gap); all when omitted.
+        after_skip : ndarray of bool, shape (P,), optional
+            Pulses that follow pulses the caller skipped (with navigation, not given
+            here): the hole before them never starts a segment. None: no skip.
         """
         t = np.asarray(t_ns, dtype=np.int64)
         v = np.asarray(vel_ned, dtype=np.float64)
         ok = np.ones(t.shape[0], dtype=bool) if known is None else np.asarray(known, dtype=bool)
-        if v.shape != (t.shape[0], 3) or ok.shape != t.shape:
+        skip = np.zeros(t.shape, bool) if after_skip is None else np.asarray(after_skip, bool)
+        if v.shape != (t.shape[0], 3) or ok.shape != t.shape or skip.shape != t.shape:
             raise ProcessingError(
-                f"Segmenter: t_ns {t.shape}, vel_ned {v.shape} and known {ok.shape} disagree"
+                f"Segmenter: t_ns {t.shape}, vel_ned {v.shape}, known {ok.shape} and "
+                f"after_skip {skip.shape} disagree"
             )
         if t.size == 0:
             return SegmentPlan(
@@ -219,7 +235,7 @@ class Segmenter:
             )
         pos, self._pos = integrate_los(t, v, self._pos)
         mean_v, turn = self._windowed(t, v, ok)
-        gap = self._after_gap(t, ok)
+        gap = self._after_gap(t, ok) & ~skip
         starts: list[int] = []
         tracks: list[ReferenceTrack] = []
         cut_x: list[float] = []

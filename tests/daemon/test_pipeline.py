@@ -56,12 +56,21 @@ def run() -> SimRun:
     return simulate(load_preset("ku-vehicle", 0.1), MOTION, "tactical", seed=0)
 
 
-def feed(run: SimRun, cfg: Config, store: Path, nav_from_ns: int | None = None) -> Pipeline:
+def feed(
+    run: SimRun,
+    cfg: Config,
+    store: Path,
+    nav_from_ns: int | None = None,
+    focus_paused_ns: tuple[int, int] | None = None,
+) -> Pipeline:
     """Play a simulated run into a pipeline on the radar's virtual clock (the INS from
-    ``nav_from_ns`` on, GPS ns; from its start when None)."""
+    ``nav_from_ns`` on, GPS ns; from its start when None). ``focus_paused_ns``: the
+    pipeline is a live one that skips ahead, and focusing does not run while the radar
+    clock is in that span (GPS ns), recording does."""
     nav = run.ins.nav
     with open_recorder(cfg, store) as rec:
-        pipe = Pipeline(cfg, rec, Counters())
+        pipe = Pipeline(cfg, rec, Counters(), focus_skips=focus_paused_ns is not None)
+        paused = focus_paused_ns or (0, 0)
         k = 0 if nav_from_ns is None else int(np.searchsorted(nav.t_ns, nav_from_ns))
         for i, t in enumerate(run.t_ns.tolist()):
             slot = pipe.ring.reserve()
@@ -82,7 +91,9 @@ def feed(run: SimRun, cfg: Config, store: Path, nav_from_ns: int | None = None) 
                 )
                 k += 1
             if i % 64 == 63:
-                pipe.process(t)
+                pipe.record(t)
+                if not paused[0] <= t < paused[1]:
+                    pipe.focus(t)
         pipe.finish()
     return pipe
 
@@ -134,6 +145,27 @@ def test_pulses_before_the_ins_starts_are_counted_once(run: SimRun, tmp_path: Pa
     assert metrics["pulses_unfocused"] == totals["pulses_unfocused"] == unfocused >= late
     fates = ("processed", "unfocused", "focus_skipped", "out_of_order")
     assert sum(metrics[f"pulses_{k}"] for k in fates) == run.t_ns.size
+
+
+def test_focusing_skips_ahead_on_the_same_segment(tmp_path: Path) -> None:
+    """Focusing stalls for 7 s of a live run (recording goes on): the focus backlog skips
+    ahead over more pulses than the segmenter's window, and the focuser goes on with the
+    pulses after the hole on the segment it had (no second segment: its state is kept),
+    while every pulse is recorded and the skipped ones are counted."""
+    scn = load_preset("ku-vehicle", 0.05)
+    run = simulate(scn, MOTION, "tactical", seed=0, n_pulses=round(14.0 * scn.radar.prf_hz))
+    cfg = scenario_config(
+        run.scenario,
+        radar={"sample_format": "float32"},
+        imaging={"method": "rda", "presum_first": True},
+    )
+    t0 = int(run.t_ns[0])
+    pause = (t0 + 3 * 10**9, t0 + 10 * 10**9)
+    pipe = feed(run, cfg, tmp_path / "skip.zarr", focus_paused_ns=pause)
+    summary = pipe.summary
+    assert summary.pulses_focus_skipped > 3.0 * scn.radar.prf_hz
+    assert open_store(tmp_path / "skip.zarr").read("pulses", ["t_ns"])["t_ns"].size == run.t_ns.size
+    assert pipe.focuser is not None and pipe.focuser.segments == 1
 
 
 def test_an_empty_tile_is_a_product_not_an_error() -> None:

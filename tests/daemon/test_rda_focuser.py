@@ -133,3 +133,45 @@ def test_live_page_names_every_level() -> None:
     names = level_names()
     assert names[0] == "full" and len(names) == len(LEVELS)
     assert json.dumps(names) in LIVE_PAGE
+
+
+def _push_with_hole(run: SimRun, hole: slice, tell: bool) -> tuple[Focuser, list[Tile], int]:
+    """Focus ``run`` as the live daemon does (presum first, autofocus on) without the pulses
+    of ``hole``; ``tell``: the first pulse after it is marked ``after_skip``. Returns the
+    focuser, the tiles, and how many times a segment's tile imager was made."""
+    cfg = scenario_config(run.scenario, imaging={"method": "rda", "presum_first": True})
+    keep = np.ones(run.t_ns.size, dtype=bool)
+    keep[hole] = False
+    rows = np.flatnonzero(keep)
+    after_skip = np.diff(rows, prepend=-1) > 1 if tell else np.zeros(rows.size, dtype=bool)
+    focuser = Focuser(cfg, int(run.t_ns[0]), run.vel_ned[:256].mean(axis=0))
+    imagers = {id(focuser._last.tiles)}
+    tiles: list[Tile] = []
+    for a in range(0, rows.size, cfg.imaging.block_pulses):
+        r = rows[a : a + cfg.imaging.block_pulses]
+        out = focuser.push(
+            run.echo[r], run.t_ns[r], run.vel_ned[r], quat=run.traj.quat[r],
+            after_skip=after_skip[a : a + cfg.imaging.block_pulses],
+        )  # fmt: skip
+        tiles += out.tiles
+        imagers.add(id(focuser._last.tiles))
+    return focuser, tiles + focuser.finish().tiles, len(imagers)
+
+
+def test_a_skip_carries_the_segment_across_the_hole() -> None:
+    """A live focuser fallen behind skips 3.4 s of pulses (longer than the segmenter's
+    window, after which a silence starts a new segment): told it was a skip, it keeps the
+    one segment (its track, D_los, beam and tile imager: one imager made,
+    counted) and forms tiles after the hole; not told, the same hole starts a second
+    segment with new state."""
+    scn = load_preset("ku-vehicle", 0.05)
+    run = simulate(scn, MotionSpec(kind="turbulence", seed=1), "ideal", n_pulses=1800)
+    prf = scn.radar.prf_hz
+    hole = slice(round(3.0 * prf), round(6.4 * prf))
+    after_ns = int(run.t_ns[hole.stop])
+    focuser, tiles, imagers = _push_with_hole(run, hole, tell=True)
+    assert focuser.segments == 1 and imagers == 1
+    assert any(t.t0_ns >= after_ns for t in tiles)
+    assert any(t.t1_ns < int(run.t_ns[hole.start]) for t in tiles)
+    focuser, _, imagers = _push_with_hole(run, hole, tell=False)
+    assert focuser.segments == 2 and imagers == 2

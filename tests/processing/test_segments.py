@@ -149,6 +149,34 @@ def test_after_a_navigation_gap_the_track_follows_the_flight_after_it() -> None:
         assert abs(heading - after) < 0.5e-3, (block, heading)
 
 
+def test_a_skip_does_not_start_a_segment_and_a_turn_after_it_still_does() -> None:
+    """Straight flight with 4 s of pulses left out (longer than the window): a hole with
+    nothing said about it starts a segment at the first pulse after it (as after a
+    navigation gap); marked ``after_skip`` it does not, whatever the block cut. A turn
+    flown after a skip is still flagged and the leg after it gets its own track."""
+    t, vel, turn_start, _ = _racetrack(leg_s=20.0)
+    keep = (t < 8.0) | (t >= 12.0)
+    t, vel = t[keep], vel[keep]
+    after = np.diff(np.flatnonzero(keep), prepend=-1) > 1
+    t_ns = (10**18 + np.round(t * 1e9)).astype(np.int64)
+    north = ReferenceTrack.from_velocity(np.zeros(3), vel[0], int(t_ns[0]))
+    first_after = int(np.flatnonzero(after)[0])
+    for block in (t.size, 256, 97):
+        for tell, expect_skip_start in ((False, True), (True, False)):
+            seg = Segmenter(LIMITS, north, "right")
+            starts: list[int] = []
+            turn: list[np.ndarray] = []
+            for a in range(0, t.size, block):
+                mark = after[a : a + block] if tell else None
+                p = seg.plan(t_ns[a : a + block], vel[a : a + block], after_skip=mark)
+                starts += (p.starts + a).tolist()
+                turn.append(p.turn)
+            assert (first_after in starts) == expect_skip_start, (block, tell, starts)
+            turned = np.concatenate(turn)
+            assert turned.any() and t[np.argmax(turned)] > turn_start
+            assert any(t[s] > turn_start for s in starts)
+
+
 def test_known_must_match_the_pulses() -> None:
     north = ReferenceTrack.from_velocity(np.zeros(3), np.array([SPEED_MPS, 0.0, 0.0]), 10**18)
     t_ns = 10**18 + np.arange(4, dtype=np.int64) * 10**7
