@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from sarmoco.daemon.array_pipeline import READ_PACKETS, RING_PULSES
+from sarmoco.daemon.array_ingest import READ_PACKETS, RING_PULSES
 from sarmoco.daemon.config import Config
 from sarmoco.daemon.ingest import READ_BLOCK_PULSES, RING_SECONDS, ring_format
 from sarmoco.daemon.pipeline import FOCUS_BACKLOG_S

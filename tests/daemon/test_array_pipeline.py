@@ -7,7 +7,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from sarmoco.daemon.aligner import Aligner
-from sarmoco.daemon.array_pipeline import RING_PULSES, ArrayPipeline
+from sarmoco.daemon.array_ingest import RING_PULSES
+from sarmoco.daemon.array_pipeline import ArrayPipeline
 from sarmoco.daemon.config import parse_config
 from sarmoco.daemon.pipeline import Pipeline
 from sarmoco.daemon.runner import open_recorder
@@ -44,7 +45,7 @@ def test_both_pipelines_align_as_the_ins_section_says(tmp_path: Path) -> None:
         assert _alignment(pipe.aligner) == expected
         assert pipe.aligner.max_block == single.imaging.block_pulses
     with open_recorder(array, tmp_path / "array.zarr") as rec:
-        mimo = ArrayPipeline(array, rec)
+        mimo = ArrayPipeline(array, rec, Counters())
         assert _alignment(mimo.aligner) == expected
-        assert mimo.aligner.max_block == RING_PULSES and mimo.aligner.ring is mimo.ring
+        assert mimo.aligner.max_block == RING_PULSES and mimo.aligner.ring is mimo.backlog
         assert mimo.aligner.nav is mimo.nav

@@ -1,0 +1,131 @@
+"""``sarmoco run`` in array mode, fed live by the simulator over UDP and MAVLink on 127.0.0.1.
+
+``sarmoco sim --preset mimo-array --scale 0.1 --serve`` plays the scaled MIMO scene (2 Tx x
+80 Rx: 160 VITA 49.2 streams, one packet per pair per pulse, and the INS over MAVLink) in
+real time to a daemon with the camera component on; the daemon records every channel of
+every pulse as it comes and, at its stop, forms the DEMs. The DEM's elevation error against
+the true terrain meets the array paper's bar, as the replay of the simulator's files does
+on the same scene, and the replay of the store the daemon wrote forms the same DEMs bit for
+bit. The ground station hears the DEM announced (STATUSTEXT and CAMERA_IMAGE_CAPTURED of
+the store).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import socket
+import subprocess
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from pymavlink.dialects.v20 import ardupilotmega as mav
+
+from sarmoco.app.cli import main
+from sarmoco.app.demo import read_json_line
+from sarmoco.app.simarray import array_config_table
+from sarmoco.app.simconfig import write_config
+from sarmoco.sim.array_scenario import load_array_preset
+from sarmoco.store.reader import open_store
+from tests.app.test_array_mode import _assert_paper_bar, _run, constant_roll  # noqa: F401
+from tests.daemon.test_camera_daemon import WAIT_S, ground_station
+from tests.daemon.test_daemon_process import PY, Daemon, free_port
+
+SCALE = 0.1
+
+
+def _report(store: Path, truth: Path) -> dict[str, Any]:
+    return dict(json.loads(_run(["report", str(store), "--truth", str(truth), "--json"])))
+
+
+def _heard(gcs: Any, kinds: set[str]) -> dict[str, Any]:
+    """The first message of each of ``kinds`` from the camera component (STATUSTEXT: the
+    first starting ``SAR: DEM``)."""
+    heard: dict[str, Any] = {}
+    deadline = time.monotonic() + WAIT_S
+    while heard.keys() != kinds and (left := deadline - time.monotonic()) > 0:
+        msg = gcs.recv_match(type=list(kinds - heard.keys()), blocking=True, timeout=left)
+        if msg is None or msg.get_srcComponent() != mav.MAV_COMP_ID_CAMERA:
+            continue
+        if msg.get_type() != "STATUSTEXT" or msg.text.startswith("SAR: DEM"):
+            heard[msg.get_type()] = msg
+    assert heard.keys() == kinds, f"heard only {sorted(heard)} from the camera in {WAIT_S} s"
+    return heard
+
+
+def _live_config(out: Path, radar_url: str, ins_port: int, gcs_port: int) -> Path:
+    """The simulator's array configuration on the live links, camera component on."""
+    table = array_config_table(load_array_preset(SCALE), out, "int16")
+    table["radar"]["link"] = radar_url
+    table["ins"]["link"] = f"udpin:127.0.0.1:{ins_port}"
+    table["camera"] = {"enabled": True, "link": f"udpout:127.0.0.1:{gcs_port}"}
+    write_config(out / "sarmoco.toml", table)
+    return out / "sarmoco.toml"
+
+
+def test_live_array_run_records_every_stream_and_forms_the_dem_replay_forms(
+    tmp_path: Path,
+    constant_roll: tuple[Path, Path, dict[str, Any]],  # noqa: F811 - the imported fixture
+) -> None:
+    radar_url = f"udp://127.0.0.1:{free_port(socket.SOCK_DGRAM)}"
+    ins_port, gcs_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
+    truth = tmp_path / "truth.json"
+    sim_proc = subprocess.Popen(
+        [*PY, "sim", "--preset", "mimo-array", "--scale", str(SCALE), "--serve",
+         "--radar", radar_url, "--ins", f"mavlink:udpout:127.0.0.1:{ins_port}",
+         "--truth", str(truth)],
+        stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    gcs = ground_station(gcs_port)
+    daemon: Daemon | None = None
+    store = tmp_path / "live.zarr"
+    try:
+        hello = read_json_line(sim_proc, "the simulator", 60.0)
+        config = _live_config(tmp_path, hello["radar"]["connect"], ins_port, gcs_port)
+        daemon = Daemon(config, store)
+        daemon.started()
+        assert sim_proc.wait(timeout=60) == 0
+        done = read_json_line(sim_proc, "the simulator", 5.0)
+        assert daemon.stop() == 0, daemon.log.read_text()
+        heard = _heard(gcs, {"STATUSTEXT", "CAMERA_IMAGE_CAPTURED"})
+    finally:
+        if daemon is not None:
+            daemon.kill_if_running()
+        sim_proc.kill()
+        sim_proc.wait()
+        assert sim_proc.stdout is not None
+        sim_proc.stdout.close()
+        gcs.close()
+    n_pulses = hello["n_pulses"]
+    assert done["links"]["radar"]["packets"] == n_pulses * 160
+    s = open_store(store)
+    metrics = s.attrs["metrics"]
+    assert metrics["mode"] == "array" and metrics["pulses"] == metrics["pulses_imaged"] == n_pulses
+    p = s.read("pulses", ["t_ns", "channel"])
+    assert (p["channel"].reshape(n_pulses, 160) == np.arange(160)).all()
+    dem_text, captured = heard["STATUSTEXT"], heard["CAMERA_IMAGE_CAPTURED"]
+    assert dem_text.severity == mav.MAV_SEVERITY_INFO
+    cells = int(metrics["dem"]["compensated"]["valid_cells"])
+    assert dem_text.text == f"SAR: DEM {cells} cells of {n_pulses} pulses"
+    assert captured.file_url == store.resolve().as_uri()
+
+    live = _report(store, truth)
+    _, _, files = constant_roll  # the replay of the simulator's files, the same scene
+    for key in ("dem", "dem_uncompensated"):
+        print(f"\n{key}: live {live[key]}\n{key}: files {files[key]}")
+    _assert_paper_bar(live)
+    assert live["dem"]["std_m"] <= 1.05 * files["dem"]["std_m"]
+    assert live["dem"]["within_half_cell"] >= files["dem"]["within_half_cell"] - 0.01
+
+    again = tmp_path / "again.zarr"
+    with contextlib.redirect_stdout(io.StringIO()):
+        status = main(["replay", "--config", str(config), "--recording", str(store),
+                       "--out", str(again)])  # fmt: skip
+    assert status == 0
+    for name in ("compensated", "uncompensated"):
+        want, _ = s.dem(name)
+        got, _ = open_store(again).dem(name)
+        np.testing.assert_array_equal(got.height_m, want.height_m)
