@@ -261,6 +261,12 @@ class _LiveRun:
     The processing's numba kernels are compiled (or loaded from numba's cache) first,
     before the links open and READY=1 (:func:`~sarmoco.daemon.warmup.warm_up_kernels`).
 
+    In array mode (``radar.mode = "array"``) the pipeline is an
+    :class:`~sarmoco.daemon.array_pipeline.ArrayPipeline`: the reader groups every Tx/Rx
+    pair's packets into whole pulses, the recording thread stores them per channel as they
+    come, the focusing loop aligns them with the INS, and closing the store (the daemon's
+    stop, or a strip's) forms its DEMs, announced by the camera component.
+
     With ``camera.enabled`` the MAVLink camera component (:mod:`sarmoco.daemon.camera`)
     runs beside, and the ground station starts and stops the capture: outside a capture
     the radar's pulses are read and let go (``pulses_not_captured``). The capture
