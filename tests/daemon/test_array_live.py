@@ -7,7 +7,8 @@ every pulse as it comes and, at its stop, forms the roll-compensated DEM. Its el
 error against the true terrain meets the array paper's bar and what the replay of the
 simulator's files reaches on the same scene, and the replay of the store the daemon wrote
 forms the same DEM bit for bit. The ground station hears the DEM announced (STATUSTEXT,
-and CAMERA_IMAGE_CAPTURED of the store).
+and CAMERA_IMAGE_CAPTURED of the store). With a store per capture, each strip the ground
+station starts and stops is closed with the DEM of its own pulses.
 """
 
 from __future__ import annotations
@@ -31,8 +32,8 @@ from sarmoco.app.simconfig import write_config
 from sarmoco.sim.array_scenario import load_array_preset
 from sarmoco.store.reader import open_store
 from tests.app.test_array_mode import _run
-from tests.daemon.test_camera_daemon import WAIT_S, ground_station
-from tests.daemon.test_daemon_process import PY, Daemon, free_port
+from tests.daemon.test_camera_daemon import WAIT_S, command, ground_station, recv, send
+from tests.daemon.test_daemon_process import PY, Daemon, free_port, wait_status
 
 SCALE = 0.1
 
@@ -143,3 +144,65 @@ def test_live_array_run_records_every_stream_and_forms_the_dem_replay_forms(
     want, _ = s.dem("compensated")
     got, _ = open_store(again).dem("compensated")
     np.testing.assert_array_equal(got.height_m, want.height_m)
+
+
+def _packets(vrt: bytes) -> list[bytes]:
+    """The VITA 49 packets of a ``.vrt`` file, in order (the size field counts 32-bit words)."""
+    out, pos = [], 0
+    while pos < len(vrt):
+        size = 4 * (int.from_bytes(vrt[pos : pos + 4], "big") & 0xFFFF)
+        out.append(vrt[pos : pos + size])
+        pos += size
+    return out
+
+
+def test_each_capture_of_an_array_run_is_a_strip_with_its_dem(tmp_path: Path) -> None:
+    """``camera.store_per_capture`` in array mode: the simulator's packets sent over UDP in
+    two halves, each within a start and a stop capture of the ground station, give two
+    strip stores, each closed with the DEM of its own pulses and announced."""
+    sim = tmp_path / "sim"
+    _run(["sim", "--preset", "mimo-array", "--scale", str(SCALE), "--out", str(sim)])
+    packets = _packets((sim / "radar.vrt").read_bytes())
+    radar_port, gcs_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
+    http_port = free_port(socket.SOCK_STREAM)
+    config = _config(sim, tmp_path / "strips.toml", {
+        "radar": {"link": f"udp://127.0.0.1:{radar_port}"},
+        "status": {"http_port": http_port},
+        "camera": {"enabled": True, "link": f"udpout:127.0.0.1:{gcs_port}",
+                   "capture_at_start": False, "store_per_capture": True},
+    })  # fmt: skip
+    gcs = ground_station(gcs_port)
+    daemon = Daemon(config, tmp_path / "strip.zarr")
+    half = len(packets) // 2 // 160 * 160 + 1  # the context packet, then whole pulses
+    dems: list[Any] = []
+    try:
+        daemon.started()
+        recv(gcs, "HEARTBEAT")
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as tx:
+            for part in (packets[:half], packets[half:]):
+                assert command(gcs, mav.MAV_CMD_VIDEO_START_CAPTURE) == mav.MAV_RESULT_ACCEPTED
+                send(tx, part, radar_port)
+                wait_status(http_port, "counters", "radar_frames", packets.index(part[-1]) + 1)
+                assert command(gcs, mav.MAV_CMD_VIDEO_STOP_CAPTURE) == mav.MAV_RESULT_ACCEPTED
+                dems.append(recv(gcs, "STATUSTEXT", "SAR: DEM"))
+        assert daemon.stop() == 0
+    finally:
+        daemon.kill_if_running()
+        gcs.close()
+    paths = sorted(tmp_path.glob("strip-*.zarr"))
+    assert len(paths) == 2
+    n_pulses = (len(packets) - 1) // 160
+    firsts = []
+    for path, dem in zip(paths, dems, strict=True):
+        store = open_store(path)
+        m = store.attrs["metrics"]
+        assert m["pulses"] == m["pulses_imaged"] > 10, m
+        assert (
+            dem.text == f"SAR: DEM {int(m['dem']['compensated']['valid_cells'])} cells of "
+            f"{m['pulses']} pulses"
+        )
+        height, _ = store.dem("compensated")
+        assert np.isfinite(height.height_m).any()
+        firsts.append(int(store.read("pulses", ["t_ns"])["t_ns"][0]))
+    assert sum(open_store(p).attrs["metrics"]["pulses"] for p in paths) == n_pulses
+    assert firsts[0] < firsts[1]
