@@ -484,7 +484,9 @@ class _LiveRun:
 
     def _change_strips(self) -> None:
         """Open and close strips as the start and stop capture requests ask (the focusing
-        loop's thread, between passes)."""
+        loop's thread, between passes). A start that came while the last strip was closing
+        keeps its pulses until its strip is open: only the start's own request ends
+        :attr:`_opening`."""
         while True:
             try:
                 on, item = self._strip_requests.get_nowait()
@@ -494,7 +496,8 @@ class _LiveRun:
                 self._open_strip(item)
             elif not on and self.strip is not None:
                 self._close_strip()
-            self._opening = False
+            if on:
+                self._opening = False
 
     def _open_strip(self, mission_item: int | None) -> None:
         """Open the next strip's store and let it take pulses, with the INS samples of the

@@ -87,7 +87,7 @@ def test_live_array_run_records_every_stream_and_forms_the_dem_replay_forms(
     sim_proc = subprocess.Popen(
         [*PY, "sim", "--preset", "mimo-array", "--scale", str(SCALE), "--serve",
          "--radar", radar_url, "--ins", f"mavlink:udpout:127.0.0.1:{ins_port}",
-         "--truth", str(truth)],
+         "--truth", str(truth), "--wait", "180"],
         stdout=subprocess.PIPE, text=True,
     )  # fmt: skip
     gcs = ground_station(gcs_port)
