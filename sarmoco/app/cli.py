@@ -92,11 +92,6 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from sarmoco.daemon.runner import run_live
 
     cfg = _load_checked(args.config)
-    if cfg.radar.mode == "array":
-        raise ConfigError(
-            'radar.mode: "array" runs are imaged from files (sarmoco replay --radar --nav); '
-            'the live daemon focuses radar.mode = "single"'
-        )
     setup_logging(cfg.status.log_level, "json")
     install_sighup()
     store = Path(args.store) if args.store else None
@@ -108,26 +103,26 @@ def _cmd_replay(args: argparse.Namespace) -> int:
 
     cfg = _load_checked(args.config)
     out = Path(args.out)
+    if not args.recording and not (args.radar and args.nav):
+        raise ConfigError("replay: give --recording STORE, or both --radar FILE.vrt and --nav FILE")
     if cfg.radar.mode == "array":
         return _replay_array(args, cfg, out)
     if args.recording:
         summary = replay_store(cfg, Path(args.recording), out, progress=not args.quiet)
-    elif args.radar and args.nav:
-        summary = replay_files(cfg, Path(args.radar), Path(args.nav), out, not args.quiet)
     else:
-        raise ConfigError("replay: give --recording STORE, or both --radar FILE.vrt and --nav FILE")
+        summary = replay_files(cfg, Path(args.radar), Path(args.nav), out, not args.quiet)
     print(f"{out}: {summary.pulses_processed} pulses focused, {summary.tiles} tiles")
     return 0
 
 
 def _replay_array(args: argparse.Namespace, cfg: Config, out: Path) -> int:
-    from sarmoco.daemon.array_pipeline import replay_array_files
+    from sarmoco.daemon.array_pipeline import replay_array_files, replay_array_store
 
-    if args.recording or not (args.radar and args.nav):
-        raise ConfigError("replay: array mode replays files: give --radar FILE.vrt and --nav FILE")
-    s = replay_array_files(cfg, Path(args.radar), Path(args.nav), out)
-    dems = ", ".join(f"{k} {int(v['valid_cells'])} cells" for k, v in s.dem.items())
-    print(f"{out}: {s.pulses_imaged} of {s.pulses} array pulses imaged; DEM {dems}")
+    if args.recording:
+        s = replay_array_store(cfg, Path(args.recording), out)
+    else:
+        s = replay_array_files(cfg, Path(args.radar), Path(args.nav), out)
+    print(f"{out}: {s.pulses_imaged} of {s.pulses} array pulses imaged; {s.dem_text()}")
     return 0
 
 

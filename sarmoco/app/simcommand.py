@@ -56,7 +56,12 @@ from pathlib import Path
 from types import FrameType
 from typing import Any
 
-from sarmoco.app.simarray import add_array_arguments, check_array_arguments, run_array
+from sarmoco.app.simarray import (
+    add_array_arguments,
+    check_array_arguments,
+    run_array,
+    serve_array,
+)
 from sarmoco.drivers.clock import GPS_LEAP_SECONDS_DEFAULT
 from sarmoco.errors import ConfigError
 from sarmoco.sim.array_scenario import ARRAY_PRESET
@@ -373,8 +378,11 @@ def run_command(args: argparse.Namespace) -> int:
     if args.serve and args.out is not None:
         raise ConfigError("sim: --out and --serve exclude each other")
     check_array_arguments(args)
-    if args.preset == ARRAY_PRESET:
+    if args.preset == ARRAY_PRESET and args.out is not None:
         return run_array(args)
+    if args.preset == ARRAY_PRESET:
+        signal.signal(signal.SIGTERM, _stop)
+        return serve_array(args, radar_link(args.radar), _pacing(args, live=True))
     faults = parse_faults(args.fault)
     run = build_run(args, faults)
     if args.out is not None:

@@ -4,8 +4,8 @@ The report scores a run against what really happened when it is given it: the an
 true motion (:class:`~sarmoco.products.report.TrueMotion`) for a single-channel run, the
 true terrain (:class:`~sarmoco.products.array_report.TrueTerrain`) for an array run. The
 simulator's record holds the pulses as they were synthesised, on the simulator's clock;
-``wire.shift_ns`` is what was added to every time on the wire (0 for files, so an array
-run, imaged from files, keeps its times), so the truth's times plus it are the store's.
+``wire.shift_ns`` is what was added to every time on the wire (0 for files; a live run
+played in real time is put *now*), so the truth's times plus it are the store's.
 """
 
 from __future__ import annotations
@@ -60,7 +60,7 @@ def read_true_terrain(path: Path) -> TrueTerrain:
     path : Path
         The run's ``truth.json`` (``dem``: ``height_m``, ``spacing_m``, ``origin_ne_m``;
         ``pulses``: ``t_ns``, ``pos_ned``; ``scenario``: ``scene_north_m``,
-        ``scene_half_width_m``).
+        ``scene_half_width_m``; ``wire.shift_ns`` if any, added to the pulse times).
 
     Raises
     ------
@@ -91,7 +91,14 @@ def read_true_terrain(path: Path) -> TrueTerrain:
         origin_ne_m=(n0, e0),
         scene_north_m=(lo, hi),
         scene_half_width_m=float(scn["scene_half_width_m"]),
-        t_ns=np.asarray(pulses["t_ns"], dtype=np.int64),
+        t_ns=np.asarray(pulses["t_ns"], dtype=np.int64) + _shift_ns(truth),
         pos_ned=np.asarray(pulses["pos_ned"], dtype=np.float64),
         source=f"--truth {path}",
     )
+
+
+def _shift_ns(truth: dict[str, Any]) -> int:
+    """``wire.shift_ns`` of a truth record (0 without one), ns."""
+    wire = truth.get("wire")
+    shift = wire.get("shift_ns", 0) if isinstance(wire, dict) else 0
+    return int(shift) if isinstance(shift, int) else 0

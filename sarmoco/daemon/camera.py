@@ -18,6 +18,10 @@ component ids (``camera.system_id``, ``camera.component_id``):
   :mod:`sarmoco.daemon.runner`). MAV_CMD_IMAGE_START_CAPTURE for a single image
   (``param3`` = 1, what a distance trigger sends) is answered ``MAV_RESULT_UNSUPPORTED``:
   a strip has no snapshot, and a capture it started would never be stopped.
+  MAV_CMD_DO_SET_CAM_TRIGG_DIST (a survey mission's camera trigger distance) starts the
+  capture for a distance (``param1``, m) above 0 and stops it for 0, as for a video
+  payload; a distance that is negative or not a number is answered
+  ``MAV_RESULT_DENIED`` and changes nothing.
   Commands are taken only from ``camera.command_system_ids``; a refused one is
   answered ``MAV_RESULT_DENIED``, counted (``camera_commands_refused``) and logged with
   its sender. With ``camera.signing_key_hex`` only signed packets are taken (MAVLink 2
@@ -564,6 +568,12 @@ class CameraComponent:
             answer = None  # a single still (a distance trigger): a strip has no snapshot
         elif cmd in START or cmd in STOP:
             self._set_capture(cmd in START, sender)
+            answer = self._capture_status
+        elif cmd == mav.MAV_CMD_DO_SET_CAM_TRIGG_DIST:
+            if not math.isfinite(msg.param1) or msg.param1 < 0:
+                self._ack(cmd, mav.MAV_RESULT_DENIED, sender)
+                return
+            self._set_capture(msg.param1 > 0, sender)
             answer = self._capture_status
         result = mav.MAV_RESULT_UNSUPPORTED if answer is None else mav.MAV_RESULT_ACCEPTED
         self._ack(cmd, result, sender)

@@ -71,6 +71,39 @@ def ring_format(cfg: Config) -> SampleFormat:
     return "int16" if cfg.radar.sample_format == "int16" else "complex64"
 
 
+class RadarClock:
+    """The radar's clock: the newest pulse time stamp plus the host's monotonic time since
+    it came (any thread)."""
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._first_ns: int | None = None
+        self._latest_ns: int | None = None
+        self._latest_mono_ns = 0
+
+    def advance(self, first_ns: int, latest_ns: int) -> None:
+        """Pulses stamped ``first_ns`` .. ``latest_ns`` (GPS ns) came now."""
+        with self._lock:
+            if self._first_ns is None:
+                self._first_ns = first_ns
+            self._latest_ns = latest_ns
+            self._latest_mono_ns = time.monotonic_ns()
+
+    def now_ns(self, live: bool) -> int | None:
+        """The radar clock, GPS ns: the newest pulse time, plus (``live``) the host's
+        monotonic time elapsed since it arrived; None before the first pulse."""
+        with self._lock:
+            if self._latest_ns is None:
+                return None
+            elapsed = time.monotonic_ns() - self._latest_mono_ns if live else 0
+            return self._latest_ns + elapsed
+
+    def first_and_latest_ns(self) -> tuple[int | None, int | None]:
+        """Times of the first and of the newest pulse read, GPS ns (None before the first)."""
+        with self._lock:
+            return self._first_ns, self._latest_ns
+
+
 class RadarIngest:
     """The echo ring of a run and the reads that fill it.
 
@@ -107,10 +140,8 @@ class RadarIngest:
         """Where pulses that find the ring full are decoded, then dropped."""
         self._id_lock = threading.Lock()
         self._next_pulse_id = 0
-        self._latest_pulse_ns: int | None = None
-        self._latest_pulse_mono_ns = 0
-        self._first_pulse_ns: int | None = None
-        """Time of the first pulse read, GPS ns."""
+        self.clock = RadarClock()
+        """The radar's clock (the pulses taken)."""
         self.time_jumps = 0
         """Pulses refused as stamped too far ahead (:data:`TIME_JUMP_S`)."""
         self._jump_logged_mono = -math.inf
@@ -160,18 +191,12 @@ class RadarIngest:
         return n
 
     def now_ns(self, live: bool) -> int | None:
-        """The radar clock, GPS ns: the newest pulse time, plus (``live``) the host's
-        monotonic time elapsed since it arrived; None before the first pulse."""
-        with self._id_lock:
-            if self._latest_pulse_ns is None:
-                return None
-            elapsed = time.monotonic_ns() - self._latest_pulse_mono_ns if live else 0
-            return self._latest_pulse_ns + elapsed
+        """The radar clock, GPS ns (:meth:`RadarClock.now_ns`)."""
+        return self.clock.now_ns(live)
 
     def first_and_latest_ns(self) -> tuple[int | None, int | None]:
         """Times of the first and of the newest pulse read, GPS ns (None before the first)."""
-        with self._id_lock:
-            return self._first_pulse_ns, self._latest_pulse_ns
+        return self.clock.first_and_latest_ns()
 
     def _commit(self, block: Block, packets: EchoPackets) -> None:
         """Publish the pulses decoded into ``block`` with running ids (gives back the rest)."""
@@ -188,11 +213,8 @@ class RadarIngest:
         with self._id_lock:
             first = self._next_pulse_id
             self._next_pulse_id += k
-            if k:
-                self._latest_pulse_ns = int(t_ns[-1])
-                self._latest_pulse_mono_ns = time.monotonic_ns()
-                if self._first_pulse_ns is None:
-                    self._first_pulse_ns = int(t_ns[0])
+        if k:
+            self.clock.advance(int(t_ns[0]), int(t_ns[-1]))
         self.ring.commit_block(block, t_ns, np.arange(first, first + k), channel, flags)
 
     def _not_jumped(self, t_ns: IntArray) -> BoolArray:
@@ -200,10 +222,9 @@ class RadarIngest:
         INS sample and of the radar clock (each pulse taken moves the clock on); counts
         and logs the others."""
         refs = []
-        with self._id_lock:
-            if self._latest_pulse_ns is not None:
-                elapsed = time.monotonic_ns() - self._latest_pulse_mono_ns
-                refs.append(self._latest_pulse_ns + elapsed)
+        clock_ns = self.clock.now_ns(live=True)
+        if clock_ns is not None:
+            refs.append(clock_ns)
         span = self.nav.span_ns()
         if span is not None:
             refs.append(span[1])

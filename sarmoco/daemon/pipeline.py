@@ -189,14 +189,8 @@ class Pipeline:
         all_aligned : bool
             Every pulse read has been recorded and taken by the aligner.
         """
-        waiting = self.backlog.oldest_ns()
-        if waiting is not None:
-            return waiting, False
-        first, latest = self.radar.first_and_latest_ns()
-        recorded_ns = self.tables.recorded_ns
-        if recorded_ns is not None:
-            return recorded_ns, recorded_ns == latest
-        return first, False
+        return unaligned_since(self.backlog, self.radar.first_and_latest_ns(),
+                               self.tables.recorded_ns)  # fmt: skip
 
     def process(self, now_ns: int | None, on_block: Callable[[], None] | None = None) -> int:
         """:meth:`record` then :meth:`focus` (one thread does both: a replay, tests);
@@ -311,3 +305,35 @@ class Pipeline:
         if live is not None:  # the live image's degraded level (sarmoco.daemon.livelevel)
             self.counters.set("live_image_level", live.level)
             self.counters.set("live_image_load", live.load)
+
+
+def unaligned_since(
+    backlog: FocusBacklog, first_and_latest: tuple[int | None, int | None], recorded_ns: int | None
+) -> tuple[int | None, bool]:
+    """Where the pulses still waiting for their navigation begin (``oldest_unaligned_ns``
+    of a pipeline).
+
+    Parameters
+    ----------
+    backlog : FocusBacklog
+        The recorded pulses waiting for the aligner.
+    first_and_latest : (int or None, int or None)
+        Times of the first and of the newest pulse read, GPS ns.
+    recorded_ns : int or None
+        Time of the newest pulse recorded, GPS ns.
+
+    Returns
+    -------
+    oldest_ns : int or None
+        GPS ns, a bound from below: the oldest pulse in the backlog, else the newest
+        recorded, else the first read; None before the first pulse.
+    all_aligned : bool
+        Every pulse read has been recorded and taken by the aligner.
+    """
+    waiting = backlog.oldest_ns()
+    if waiting is not None:
+        return waiting, False
+    first, latest = first_and_latest
+    if recorded_ns is not None:
+        return recorded_ns, recorded_ns == latest
+    return first, False

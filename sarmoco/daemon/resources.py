@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from sarmoco.daemon.array_pipeline import READ_PACKETS, RING_PULSES
+from sarmoco.daemon.array_ingest import READ_PACKETS, RING_PULSES
 from sarmoco.daemon.config import Config
 from sarmoco.daemon.ingest import READ_BLOCK_PULSES, RING_SECONDS, ring_format
 from sarmoco.daemon.pipeline import FOCUS_BACKLOG_S
@@ -74,8 +74,9 @@ def plan(cfg: Config) -> list[Buffer]:
     -------
     list of Buffer
         Single mode: echo ring, read scratch, focus backlog, focusing block, image tile,
-        recorder's waiting chunk and writer queue; array mode: echo ring, read scratch and
-        the recorder's.
+        recorder's waiting chunk and writer queue; array mode: echo ring, read scratch,
+        alignment backlog and the recorder's (the pulses held for the DEM grow with the
+        run: not counted).
     """
     r, im, rec = cfg.radar, cfg.imaging, cfg.recorder
     pulse = echo_bytes_per_pulse(cfg)
@@ -84,11 +85,14 @@ def plan(cfg: Config) -> list[Buffer]:
         size += f" x {r.channels} channels"
     buffers: list[Buffer] = []
     if r.mode == "array":
+        backlog = max(math.ceil(FOCUS_BACKLOG_S * r.prf_hz), RING_PULSES)
         buffers += [
             Buffer("echo ring", ("radar.n_samples", "radar.channels"),
                    RING_PULSES * (pulse + PULSE_META_BYTES), f"{RING_PULSES} pulses x {size}"),
             Buffer("read scratch", ("radar.n_samples",), READ_PACKETS * pulse // r.channels,
                    f"{READ_PACKETS} packets x {r.n_samples} samples"),
+            Buffer("alignment backlog", ("radar.n_samples", "radar.channels", "radar.prf_hz"),
+                   backlog * pulse, f"{backlog} pulses ({FOCUS_BACKLOG_S:g} s) x {size}"),
         ]  # fmt: skip
     else:
         ring = max(1024, math.ceil(RING_SECONDS * r.prf_hz))

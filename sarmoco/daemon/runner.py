@@ -18,6 +18,8 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from types import FrameType
 
+from sarmoco.daemon.array_ingest import ArrayIngest
+from sarmoco.daemon.array_pipeline import ArrayPipeline, ArraySummary
 from sarmoco.daemon.camera import (
     SEVERITY_INFO,
     SEVERITY_WARNING,
@@ -26,16 +28,17 @@ from sarmoco.daemon.camera import (
     ProductLog,
     operator_faults,
 )
-from sarmoco.daemon.config import Config, StatusConfig, config_to_dict, live_imaging
+from sarmoco.daemon.config import Config, StatusConfig, live_imaging
 from sarmoco.daemon.focuser import SinkFactory
 from sarmoco.daemon.heap import HeapTrim
-from sarmoco.daemon.ingest import RadarIngest, ring_format
+from sarmoco.daemon.ingest import RadarIngest
 from sarmoco.daemon.links import open_ins, open_radar
 from sarmoco.daemon.livefeed import LiveFeed
 from sarmoco.daemon.navbuffer import NavBuffer
 from sarmoco.daemon.pipeline import Pipeline
 from sarmoco.daemon.sdnotify import Notifier
 from sarmoco.daemon.status import Counters, Health, LiveView, StatusServer
+from sarmoco.daemon.storeopen import open_recorder, record_ins_format
 from sarmoco.daemon.tables import RunSummary
 from sarmoco.daemon.threadcpu import stage_cpu_seconds
 from sarmoco.daemon.warmup import warm_up_kernels
@@ -44,12 +47,16 @@ from sarmoco.drivers.samples import Sample
 from sarmoco.drivers.source import Source
 from sarmoco.errors import ConfigError, DataFileError, RecorderError, SarmocoError
 from sarmoco.store.reader import StoreNav, StorePulses, open_store
-from sarmoco.store.recorder import Recorder, meta_chunk_pulses
+from sarmoco.store.recorder import Recorder
 
 log = logging.getLogger(__name__)
 
 _Link = RadarSource | Source
 """A radar or navigation link."""
+_Pipe = Pipeline | ArrayPipeline
+"""What records (and focuses or images) a live run's store: single-channel or array."""
+_Ingest = RadarIngest | ArrayIngest
+"""What reads the radar into a live run's echo ring."""
 
 POLL_S = 0.05
 """Reader poll timeout and idle sleep of the focusing loop, s."""
@@ -83,37 +90,6 @@ def new_store_path(directory: str | Path, kind: str, item: int | None = None) ->
     stamp = datetime.datetime.now(datetime.UTC).strftime("%Y%m%dT%H%M%S.%fZ")
     suffix = "" if item is None else f"-item{item}"
     return Path(directory) / f"{kind}-{stamp}{suffix}.zarr"
-
-
-def open_recorder(cfg: Config, path: Path, live: LiveFeed | None = None) -> Recorder:
-    """The run's recorder, configured from ``recorder.*`` (handing tiles and autofocus
-    estimates to ``live``, the live page's feed, if given)."""
-    return Recorder(
-        path,
-        cfg.radar.n_samples,
-        ring_format(cfg),
-        config=config_to_dict(cfg),
-        raw_echoes=cfg.recorder.raw_echoes,
-        chunk_pulses=cfg.recorder.chunk_pulses,
-        echo_compression=cfg.recorder.echo_compression,
-        fsync_interval_s=cfg.recorder.fsync_interval_s,
-        flush_interval_s=cfg.recorder.flush_interval_s,
-        meta_chunk_pulses=meta_chunk_pulses(cfg.recorder.chunk_pulses, cfg.radar.prf_hz),
-        live=live,
-        writer_queue=cfg.recorder.writer_queue,
-    )
-
-
-def record_ins_format(recorder: Recorder, ins: Source) -> None:
-    """Name the format of the store's raw INS bytes (``ins_raw`` attribute) if it keeps any.
-
-    ``ins_bytes`` then holds what the driver received, back to back, in that format:
-    ``tlog`` (MAVLink: a telemetry log), ``sbgecom`` (SBG: the bytes as read),
-    ``candump`` (SBG CAN: a ``candump -L`` log); written to a file with the suffix
-    ``.tlog``, ``.sbg`` or ``.log`` it is an INS log the daemon reads again.
-    """
-    if ins.keeping_raw:
-        recorder.set_attribute("ins_raw", {"format": ins.raw_format})
 
 
 REOPEN_S = 1.0
@@ -288,6 +264,12 @@ class _LiveRun:
     The processing's numba kernels are compiled (or loaded from numba's cache) first,
     before the links open and READY=1 (:func:`~sarmoco.daemon.warmup.warm_up_kernels`).
 
+    In array mode (``radar.mode = "array"``) the pipeline is an
+    :class:`~sarmoco.daemon.array_pipeline.ArrayPipeline`: the reader groups every Tx/Rx
+    pair's packets into whole pulses, the recording thread stores them per channel as they
+    come, the focusing loop aligns them with the INS, and closing the store (the daemon's
+    stop, or a strip's) forms its DEMs, announced by the camera component.
+
     With ``camera.enabled`` the MAVLink camera component (:mod:`sarmoco.daemon.camera`)
     runs beside, and the ground station starts and stops the capture: outside a capture
     the radar's pulses are read and let go (``pulses_not_captured``). The capture
@@ -344,7 +326,7 @@ class _LiveRun:
         self._ingest = self._new_ingest()
         """What reads the radar: the open strip's pipeline's, else one that lets the pulses
         go (or, while a strip opens, keeps them for its pipeline to take over)."""
-        self.pipe: Pipeline | None = None if self.per_capture else self._new_pipeline(path)
+        self.pipe: _Pipe | None = None if self.per_capture else self._new_pipeline(path)
         """The pipeline of the open store (None between strips)."""
         self.strip: _Strip | None = None
         """The open strip (``camera.store_per_capture``; None: none open)."""
@@ -359,7 +341,7 @@ class _LiveRun:
         for it (not let go)."""
         self._recent_nav: deque[Sample] = deque()
         """INS samples of the last :data:`STRIP_NAV_LEAD_S` (a new strip starts with them)."""
-        self.last_summary = RunSummary()
+        self.last_summary: RunSummary | ArraySummary = RunSummary()
         """The totals of the last store closed (or of the run's one store at its end)."""
         self._pulses_closed = 0
         """Pulses received by the strips closed so far."""
@@ -418,19 +400,26 @@ class _LiveRun:
             raise RecorderError("recorder: no store is open between strips")
         return self.pipe.recorder
 
-    def _new_ingest(self) -> RadarIngest:
-        """A radar ingest of its own (an echo ring, the reads that fill it)."""
+    def _new_ingest(self) -> _Ingest:
+        """A radar ingest of its own (an echo ring, the reads that fill it): whole pulses of
+        every Tx/Rx pair in array mode."""
+        if self.cfg.radar.mode == "array":
+            return ArrayIngest(self.cfg, self.counters)
         return RadarIngest(self.cfg, NavBuffer(), self.counters, refuse_jumps=self._network)
 
-    def _new_pipeline(self, path: Path) -> Pipeline:
-        """A new store at ``path`` and the pipeline that records and focuses into it, taking
-        over :attr:`_ingest` (and the pulses in its ring)."""
+    def _new_pipeline(self, path: Path) -> _Pipe:
+        """A new store at ``path`` and the pipeline that records and focuses (array mode:
+        images at its end) into it, taking over :attr:`_ingest` (and the pulses in its
+        ring)."""
         recorder = open_recorder(self.cfg, path, self.live)
         record_ins_format(recorder, self.ins)
         self._write_failure_reported = False
+        ingest = self._ingest
+        if isinstance(ingest, ArrayIngest):
+            return ArrayPipeline(self.cfg, recorder, self.counters, ingest, self._network)
         return Pipeline(
             live_imaging(self.cfg), recorder, self.counters, refuse_jumps=self._network,
-            focus_skips=self._network, radar=self._ingest,
+            focus_skips=self._network, radar=ingest,
         )  # fmt: skip
 
     # -- the camera component ---------------------------------------------------------------
@@ -485,7 +474,7 @@ class _LiveRun:
             self.captures[-1].stop_utc = now
         log.info("capture started" if on else "capture stopped", extra={"store": str(self.path)})
 
-    def _capturing(self, ingest: RadarIngest) -> bool:
+    def _capturing(self, ingest: _Ingest) -> bool:
         """Whether pulses read into ``ingest`` are kept now (always without the camera
         component). With a store per capture: while it is the current ingest, and a strip
         is open and taking pulses, or none is open and one is opening."""
@@ -498,7 +487,9 @@ class _LiveRun:
 
     def _change_strips(self) -> None:
         """Open and close strips as the start and stop capture requests ask (the focusing
-        loop's thread, between passes)."""
+        loop's thread, between passes). A start that came while the last strip was closing
+        keeps its pulses until its strip is open: only the start's own request ends
+        :attr:`_opening`."""
         while True:
             try:
                 on, item = self._strip_requests.get_nowait()
@@ -508,7 +499,8 @@ class _LiveRun:
                 self._open_strip(item)
             elif not on and self.strip is not None:
                 self._close_strip()
-            self._opening = False
+            if on:
+                self._opening = False
 
     def _open_strip(self, mission_item: int | None) -> None:
         """Open the next strip's store and let it take pulses, with the INS samples of the
@@ -561,8 +553,9 @@ class _LiveRun:
         self._pulses_closed += summary.pulses_received
         log.info("strip closed", extra=summary.as_dict() | {"store": str(strip.path)})
         self._announce_strip(strip, pipe, summary.pulses_received)
+        self._announce_dem(summary)
 
-    def _announce_strip(self, strip: _Strip, pipe: Pipeline, pulses: int) -> None:
+    def _announce_strip(self, strip: _Strip, pipe: _Pipe, pulses: int) -> None:
         """CAMERA_IMAGE_CAPTURED (placed at the middle of its pulses) and a STATUSTEXT for a
         closed strip; a strip without pulses only the STATUSTEXT, at warning."""
         camera = self.camera
@@ -576,6 +569,19 @@ class _LiveRun:
         if camera is not None:
             text = f"SAR: strip {strip.number}{item} stored, {pulses} pulses"
             camera.notify(SEVERITY_INFO, text)
+
+    def _announce_dem(self, summary: RunSummary | ArraySummary) -> None:
+        """A STATUSTEXT for the DEM an array store's end formed (``SAR: DEM 17272 cells of
+        61 pulses``: the valid cells of the first product), at warning when none was;
+        nothing for a single-channel store, or without the camera component."""
+        if self.camera is None or not isinstance(summary, ArraySummary):
+            return
+        dem = next(iter(summary.dem.values()), None)
+        if dem is None:
+            self.camera.notify(SEVERITY_WARNING, "SAR: no DEM formed")
+            return
+        text = f"SAR: DEM {int(dem['valid_cells'])} cells of {summary.pulses_imaged} pulses"
+        self.camera.notify(SEVERITY_INFO, text)
 
     # -- reader threads ---------------------------------------------------------------------
 
@@ -929,6 +935,10 @@ class _LiveRun:
                 self.last_summary = pipe.finish()
                 intervals = [asdict(c) for c in self.captures]
                 pipe.recorder.set_attribute("captures", {"intervals": intervals})
+                first, last = pipe.radar.first_and_latest_ns()
+                if isinstance(pipe, ArrayPipeline) and first is not None and last is not None:
+                    self.products.add_strip(self.path, first, last)  # the DEM's store
+                self._announce_dem(self.last_summary)
         finally:  # a processing error in the last blocks must not leave the store open
             if self.camera is not None:  # after the last tiles: it announces them
                 self.camera.stop()

@@ -13,6 +13,7 @@ truth.json    the scenario, the true DEM (``dem``: heights, spacing, origin), th
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -25,7 +26,7 @@ from sarmoco.processing.types import ComplexArray, IntArray
 from sarmoco.sim.array_echo import synthesize_array, terrain_scatterers
 from sarmoco.sim.array_scenario import ArrayScenario
 from sarmoco.sim.emit_array import ArrayRadarEmitter
-from sarmoco.sim.emitter import Emitter
+from sarmoco.sim.emitter import Emitter, WireTime
 from sarmoco.sim.faults import Faults
 from sarmoco.sim.ins import InsMeasurement, measure_ins
 from sarmoco.sim.insclock import InsClock
@@ -35,7 +36,7 @@ from sarmoco.sim.outfiles import RADAR_FILE, TRUTH_FILE, write_truth
 from sarmoco.sim.player import Pacing, play_emitters
 from sarmoco.sim.run import INS_MARGIN_S, pulse_times_ns
 from sarmoco.sim.trajectory import Trajectory
-from sarmoco.sim.transports import FileLink
+from sarmoco.sim.transports import FileLink, Link
 
 NAV_PROTOCOL = "mavlink"
 """The INS recording written for array runs (its file: ``INS_EMITTERS[...].file``)."""
@@ -119,7 +120,7 @@ def simulate_array(
     return ArrayRun(scn, t_ns, echo, traj, ins, int(amps.size))
 
 
-def _ins_feed(run: ArrayRun) -> InsFeed:
+def array_ins_feed(run: ArrayRun) -> InsFeed:
     """Every INS sample of the run, on a fault-free device clock."""
     nav, ins = run.ins.nav, run.ins
     clock = InsClock.from_faults(run.scenario.t0_ns, run.scenario.t0_ns, Faults())
@@ -175,11 +176,8 @@ def write_array_run(
         out_dir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise DataFileError(f"{out_dir}: cannot create: {exc}") from exc
-    feed = _ins_feed(run)
-    radar = ArrayRadarEmitter(
-        FileLink(out_dir / RADAR_FILE), run.scenario.radar, run.t_ns, run.echo,
-        payload=payload, seed=seed * 16, rank=0,
-    )  # fmt: skip
+    feed = array_ins_feed(run)
+    radar = array_radar_emitter(run, FileLink(out_dir / RADAR_FILE), payload, seed)
     emitters: dict[str, Emitter] = {"radar": radar}
     nav = INS_EMITTERS[NAV_PROTOCOL]
     emitters[NAV_PROTOCOL] = nav.to_file(
@@ -190,11 +188,26 @@ def write_array_run(
     finally:
         for e in emitters.values():
             e.close()
-    truth = truth_dict(run)
-    truth["wire"] = {
-        "shift_ns": result.wire.shift_ns,
-        "leap_s": result.wire.leap_s,
-        "links": {name: {**e.describe(), "stats": e.stats()} for name, e in emitters.items()},
-    }
+    truth = truth_dict(run) | {"wire": wire_section(result.wire, emitters)}
     write_truth(out_dir / TRUTH_FILE, truth)
     return truth
+
+
+def array_radar_emitter(
+    run: ArrayRun, link: Link, payload: PayloadFormat, seed: int
+) -> ArrayRadarEmitter:
+    """The radar of ``run`` on ``link`` (a file, or a live link): every channel of each
+    pulse, one stream per Tx/Rx pair; its noise seeded ``seed * 16``."""
+    return ArrayRadarEmitter(
+        link, run.scenario.radar, run.t_ns, run.echo, payload=payload, seed=seed * 16, rank=0
+    )
+
+
+def wire_section(wire: WireTime, emitters: Mapping[str, Emitter]) -> dict[str, Any]:
+    """The truth record's ``wire`` section: the wire time base (``shift_ns`` added to every
+    time on the wire, GPS - UTC) and each link's description and statistics."""
+    return {
+        "shift_ns": wire.shift_ns,
+        "leap_s": wire.leap_s,
+        "links": {name: {**e.describe(), "stats": e.stats()} for name, e in emitters.items()},
+    }

@@ -1,4 +1,4 @@
-"""MIMO downward-looking array mode end to end (issue 13) through the user's three commands:
+"""MIMO downward-looking array mode end to end through the user's three commands:
 
     sarmoco sim --preset mimo-array --scale 0.1 [--roll-series] --out DIR
     sarmoco replay --config DIR/sarmoco.toml --radar DIR/radar.vrt --nav DIR/nav.tlog --out RUN
@@ -110,10 +110,12 @@ def test_store_holds_every_channel_and_both_dems(
     run = report["run"]  # the store's metrics, by the names the report and users read
     assert set(run) == {
         "mode", "pulses", "pulses_imaged", "pulses_incomplete", "packets_foreign",
-        "packets_duplicate", "pulses_nav_flagged", "dem",
+        "packets_duplicate", "pulses_nav_flagged", "pulses_dropped_ring", "pulses_focus_skipped",
+        "dem",
     }, run  # fmt: skip
     assert run["mode"] == "array" and run["pulses"] == run["pulses_imaged"] == n_pulses, run
     assert run["pulses_incomplete"] == run["packets_foreign"] == run["pulses_nav_flagged"] == 0
+    assert run["pulses_dropped_ring"] == run["pulses_focus_skipped"] == 0
     assert set(run["dem"]) == {"compensated", "uncompensated"}, run
 
 
@@ -127,19 +129,21 @@ def test_roll_series_from_the_ins_stream(tmp_path: Path) -> None:
     _assert_paper_bar(report)
 
 
-def test_live_run_and_store_replay_refuse_array_mode(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+def test_replay_of_the_store_forms_the_same_dems(
+    constant_roll: tuple[Path, Path, dict[str, Any]], tmp_path: Path
 ) -> None:
-    config = tmp_path / "array.toml"
-    config.write_text(
-        '[radar]\nmode = "array"\nchannels = 160\nrange_gate_delay_s = 1e-6\n'
-        "[geometry]\nheight_m = 200.0\n"
-    )
-    assert main(["run", "--config", str(config)]) == 2
-    assert 'radar.mode: "array" runs are imaged from files' in capsys.readouterr().err
-    argv = ["replay", "--config", str(config), "--recording", "x.zarr", "--out", "y.zarr"]
-    assert main(argv) == 2
-    assert "array mode replays files" in capsys.readouterr().err
+    """``sarmoco replay --recording STORE`` of an array store: the pulses of every channel
+    and the INS samples it holds, through the same pipeline, give its DEMs bit for bit."""
+    sim, store_path, _ = constant_roll
+    again = tmp_path / "again.zarr"
+    argv = ["replay", "--config", str(sim / "sarmoco.toml"), "--recording", str(store_path)]
+    assert "array pulses imaged; DEM compensated" in _run([*argv, "--out", str(again)])
+    for name in ("compensated", "uncompensated"):
+        want, _ = open_store(store_path).dem(name)
+        got, _ = open_store(again).dem(name)
+        np.testing.assert_array_equal(got.height_m, want.height_m)
+    flags = [open_store(p).read("pulses", ["flags"])["flags"] for p in (store_path, again)]
+    np.testing.assert_array_equal(*flags)
 
 
 def _renumber_streams(vrt: bytes, new_id: dict[int, int]) -> bytes:

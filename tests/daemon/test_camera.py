@@ -152,6 +152,24 @@ def test_start_and_stop_capture(bench: Bench, start: int, stop: int) -> None:
     assert bench.recv("HEARTBEAT").system_status == mav.MAV_STATE_STANDBY
 
 
+def test_a_mission_trigger_distance_starts_and_stops_a_strip(bench: Bench) -> None:
+    """DO_SET_CAM_TRIGG_DIST as a survey mission sends it: a distance above 0 starts the
+    capture (a strip), 0 stops it; a negative or NaN distance is denied and changes nothing."""
+    trigger = mav.MAV_CMD_DO_SET_CAM_TRIGG_DIST
+    assert bench.command(trigger, 25.0).result == mav.MAV_RESULT_ACCEPTED
+    assert bench.captures == [True] and bench.camera.capturing
+    assert bench.recv("CAMERA_CAPTURE_STATUS").video_status == 1
+    assert bench.recv("HEARTBEAT").system_status == mav.MAV_STATE_ACTIVE
+    assert bench.command(trigger, 40.0).result == mav.MAV_RESULT_ACCEPTED  # a new distance
+    assert bench.captures == [True]  # the strip goes on
+    for bad in (-5.0, math.nan):
+        assert bench.command(trigger, bad).result == mav.MAV_RESULT_DENIED
+        assert bench.captures == [True] and bench.camera.capturing
+    assert bench.command(trigger, 0.0).result == mav.MAV_RESULT_ACCEPTED
+    assert bench.captures == [True, False] and not bench.camera.capturing
+    assert bench.recv("CAMERA_CAPTURE_STATUS").video_status == 0
+
+
 def test_commands_from_other_systems_are_refused_counted_and_logged(
     bench: Bench, caplog: pytest.LogCaptureFixture
 ) -> None:
