@@ -77,6 +77,8 @@ REALTIME: dict[str, tuple[str, ...]] = {
     "tests/daemon/test_daemon_files.py": (),
     # `sarmoco run` with its MAVLink camera component, driven by a pymavlink ground station
     "tests/daemon/test_camera_daemon.py": (),
+    # `sarmoco run` in array mode: the simulator's MIMO scene over UDP and MAVLink
+    "tests/daemon/test_array_live.py": (),
     # live runs over every link (run_loopback); the replay test reads their stores
     "tests/daemon/test_end_to_end.py": (),
     # daemons under faults: bus-off windows, full or frozen disks, the OOM killer and
