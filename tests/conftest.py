@@ -138,13 +138,10 @@ EXCLUSIVE: dict[str, tuple[str, ...]] = {
     "tests/app/test_live_browser.py": (),  # headless Chromium beside a live run
     "tests/app/test_batch.py": ("test_a_worker_killed_mid_job_costs_only_its_tasks",),
     "tests/app/test_bench.py": ("test_bench_prints_sane_figures_and_removes_its_folder",),
-    "tests/daemon/test_faults_host.py": (  # CPU hogs, memory limits, the OOM killer, and
-        # the watchdog's pings timed while the store is frozen (the refused writes of a
-        # full, read-only or removed store are judged by what is said, not by when)
-        "test_memory_pressure_and_the_oom_killer",
-        "test_sigterm_under_full_load_exits_cleanly",
-        "test_a_frozen_store_stops_the_watchdog_until_it_thaws",
-    ),
+    # CPU hogs, memory limits, the OOM killer, the watchdog's pings while the store is
+    # frozen; the refused writes too: beside another test, a /status poll during a
+    # read-only store's refusals was once reset by the daemon (cause not found)
+    "tests/daemon/test_faults_host.py": (),
     "tests/daemon/test_ingest_keeps_up.py": (  # a focuser spinning with the GIL held (the
         # file run whose recording stalls reads as fast as the disk allows: no pace judged)
         "test_a_slow_focuser_loses_no_pulse_and_leaves_none_without_navigation",
