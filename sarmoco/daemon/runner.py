@@ -515,11 +515,12 @@ class _LiveRun:
         self._strips += 1
         self.products.open_store(path)
         now = datetime.datetime.now(datetime.UTC).isoformat()
-        self.strip = _Strip(self._strips, path, Capture(now), mission_item)
+        # taking before the strip is seen: the reader asks _taking once a strip is open
+        self._taking = True
         with self._nav_lock, self._record_lock:
             pipe.add_nav(list(self._recent_nav), None)
             self.pipe = pipe
-        self._taking = True
+            self.strip = _Strip(self._strips, path, Capture(now), mission_item)
         log.info("strip opened", extra={"store": str(path), "strip": self._strips,
                                          "mission_item": mission_item})  # fmt: skip
 
