@@ -8,14 +8,20 @@ from typing import Any
 
 import tomli_w
 
-from sarmoco.daemon.config import AutofocusSection, Config, parse_config
+from sarmoco.daemon.config import Config, parse_config
 from sarmoco.sim.scenario import Scenario, radar_table
 
 TILE_LENGTH_M = 10.0
 """Along-track tile length used for simulated scenes, m."""
 SUBAPERTURES_PER_APERTURE = 4.0
 """A simulated scene's autofocus subaperture is at most this fraction of its synthetic
-aperture time (and never longer than the ``autofocus.subaperture_s`` default)."""
+aperture time (and never longer than :data:`MAX_SUBAPERTURE_S`)."""
+MAX_SUBAPERTURE_S = 0.4
+"""Longest autofocus subaperture of a simulated scene, s: the presets' figures on the
+measurements pages were taken with it (the ``autofocus.subaperture_s`` default is chosen
+on the independent acceptance flight)."""
+HOPS_PER_SUBAPERTURE = 4.0
+"""A simulated scene's hop is this fraction of its subaperture (75 % overlap)."""
 MIN_SUBAPERTURE_PULSES = 32
 """Fewest pulses in a subaperture: the Doppler-rate estimators need some Doppler resolution."""
 
@@ -36,10 +42,10 @@ def synthetic_aperture_s(scn: Scenario) -> float:
 def autofocus_table(scn: Scenario) -> dict[str, Any]:
     """``autofocus`` keys that fit the subapertures into the scene's synthetic aperture.
 
-    The subaperture is the configured default, or a quarter of the synthetic aperture
-    time when that is shorter (a ``thz-spotlight`` aperture is 0.12 s, the default
-    subaperture 0.4 s), but at least :data:`MIN_SUBAPERTURE_PULSES` at the PRF; the hop
-    keeps the default's overlap. When the aperture cannot hold two such subapertures
+    The subaperture is :data:`MAX_SUBAPERTURE_S`, or a quarter of the synthetic aperture
+    time when that is shorter (a ``thz-spotlight`` aperture is 0.12 s), but at least
+    :data:`MIN_SUBAPERTURE_PULSES` at the PRF; the hop is a quarter of it
+    (:data:`HOPS_PER_SUBAPERTURE`). When the aperture cannot hold two such subapertures
     the autofocus is switched off (INS-only focusing).
 
     Returns
@@ -47,15 +53,14 @@ def autofocus_table(scn: Scenario) -> dict[str, Any]:
     dict
         ``{"subaperture_s": ..., "hop_s": ...}`` or ``{"enabled": False}``.
     """
-    default = AutofocusSection()
     aperture_s = synthetic_aperture_s(scn)
     sub_s = max(
-        min(default.subaperture_s, aperture_s / SUBAPERTURES_PER_APERTURE),
+        min(MAX_SUBAPERTURE_S, aperture_s / SUBAPERTURES_PER_APERTURE),
         MIN_SUBAPERTURE_PULSES / scn.radar.prf_hz,
     )
     if 2.0 * sub_s > aperture_s:
         return {"enabled": False}
-    return {"subaperture_s": sub_s, "hop_s": default.hop_s * (sub_s / default.subaperture_s)}
+    return {"subaperture_s": sub_s, "hop_s": sub_s / HOPS_PER_SUBAPERTURE}
 
 
 def config_table(scn: Scenario, **sections: dict[str, Any]) -> dict[str, Any]:

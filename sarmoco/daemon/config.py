@@ -255,18 +255,16 @@ class MocompConfig:
         "pulses in turns are flagged TURN and not imaged); false: one track for the run",
     )
     heading_window_s: float = _key(
-        0.0,
+        4.0,
         "The first reference track, and with it the along-track axis of the image grid, "
-        "follows the mean antenna velocity of this much flight from the first pulse with "
-        "navigation (of the whole run when it is shorter); focusing starts once the pulses "
-        "cover it and holds them meanwhile (this times the PRF pulses in memory). 0: the "
-        "first processing block's pulses (imaging.block_pulses), no wait. Over a short span "
-        "turbulence turns the mean velocity off the course (one 1.3 s block of the "
-        "acceptance flight: 0.42 deg), and the image grid with it: targets 130 m apart in "
-        "range then sit 0.3-0.4 m apart along track from where they are (4 s: 0.014 m). "
-        "With a crab, 4 s leaves the acceptance case at -4 deg looking left at -12.45 dB "
-        "azimuth PSLR (0 s: -12.76), and the targets of the longer 6-8 deg crab runs "
-        "0.16-0.18 m from where they are",
+        "follows the mean INS velocity of this much flight from the first pulse with "
+        "navigation (of the whole INS log when it is shorter) where the navigation "
+        "received covers it when focusing starts: a replay reads its INS log this far "
+        "ahead; a live run holds no pulse for it and takes the first processing block's "
+        "mean velocity (imaging.block_pulses), as does 0. Over a short span turbulence "
+        "turns the mean velocity off the course (one 1.3 s block of the acceptance flight: "
+        "0.42 deg), and the image grid with it: targets 130 m apart in range then sit "
+        "0.3-0.4 m apart along track from where they are (4 s: 0.014 m)",
         unit="s",
         ge=0,
     )

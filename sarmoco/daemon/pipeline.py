@@ -123,7 +123,7 @@ class Pipeline:
         self.radar = radar
         self.ins = InsIngest(self.nav)
         self.tables = RunTables(recorder)
-        self.blocks = BlockFocusing(cfg, self.tables, sink)
+        self.blocks = BlockFocusing(cfg, self.tables, self.nav, sink)
         self._taken_ns: int | None = None
         """Time of the newest pulse the aligner took from the backlog, GPS ns."""
         counters.add_source("pipeline", self.totals)
@@ -165,6 +165,12 @@ class Pipeline:
     def add_nav(self, samples: list[Sample], rx_ns: int | None) -> None:
         """Offer INS samples to the nav buffer and queue them for the recorder."""
         self.ins.add(samples, rx_ns)
+
+    def end_of_navigation(self) -> None:
+        """No INS sample will come after those offered (an INS log read to its end): the
+        first reference track's course takes what there is
+        (:class:`~sarmoco.daemon.blocks.BlockFocusing`)."""
+        self.blocks.nav_ended = True
 
     def add_ins_raw(self, data: bytes, rx_ns: int | None) -> None:
         """Queue bytes received from the INS link for the store

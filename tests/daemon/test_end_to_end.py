@@ -114,10 +114,16 @@ def test_live_run_focuses_and_records(live_runs: dict[str, Path], ins: str, rada
     )
 
 
+LIVE_HEADING = "[mocomp]\nheading_window_s = 0.0\n"
+"""What a replay adds to a live run's configuration to lay its grid as the live run did:
+along the first processing block's velocity (a replay would follow 4 s of the INS log)."""
+
+
 def test_replay_of_store_reproduces_live_image(live_runs: dict[str, Path], tmp_path: Path) -> None:
     live = live_runs["mavlink"]
-    cfg = load_config(live / "sarmoco.toml")
-    replay_store(cfg, live / "run.zarr", tmp_path / "replay.zarr", progress=False)
+    config = tmp_path / "sarmoco.toml"
+    config.write_text((live / "sarmoco.toml").read_text() + LIVE_HEADING)
+    replay_store(load_config(config), live / "run.zarr", tmp_path / "replay.zarr", progress=False)
     assert_same_images(open_store(live / "run.zarr"), open_store(tmp_path / "replay.zarr"))
 
 
@@ -132,6 +138,8 @@ def test_replay_of_raw_files_gives_the_same_image(
          "tactical", "--out", str(sim)],
         check=True, capture_output=True,
     )  # fmt: skip
+    with (sim / "sarmoco.toml").open("a") as config:
+        config.write(LIVE_HEADING)
     subprocess.run(
         [sys.executable, "-m", "sarmoco", "replay", "--config", str(sim / "sarmoco.toml"),
          "--radar", str(sim / "radar.vrt"), "--nav", str(sim / "nav.tlog"),

@@ -62,12 +62,16 @@ def feed(
     store: Path,
     nav_from_ns: int | None = None,
     focus_paused_ns: tuple[int, int] | None = None,
+    replay: bool = False,
 ) -> Pipeline:
     """Play a simulated run into a pipeline on the radar's virtual clock (the INS from
     ``nav_from_ns`` on, GPS ns; from its start when None). ``focus_paused_ns``: the
     pipeline is a live one that skips ahead, and focusing does not run while the radar
-    clock is in that span (GPS ns), recording does."""
+    clock is in that span (GPS ns), recording does. ``replay``: the INS is offered
+    ``mocomp.heading_window_s`` further ahead, and its end told, as ``sarmoco replay``
+    reads an INS log."""
     nav = run.ins.nav
+    lead_ns = NAV_LEAD_NS + (round(cfg.mocomp.heading_window_s * 1e9) if replay else 0)
     with open_recorder(cfg, store) as rec:
         pipe = Pipeline(cfg, rec, Counters(), focus_skips=focus_paused_ns is not None)
         paused = focus_paused_ns or (0, 0)
@@ -77,7 +81,7 @@ def feed(
             assert slot is not None
             slot.samples[...] = run.echo[i]
             pipe.ring.commit(slot, t, i)
-            while k < nav.t_ns.size and nav.t_ns[k] < t + NAV_LEAD_NS:
+            while k < nav.t_ns.size and nav.t_ns[k] < t + lead_ns:
                 tk = int(nav.t_ns[k])
                 vel = (float(nav.vel_ned[k, 0]), float(nav.vel_ned[k, 1]), float(nav.vel_ned[k, 2]))
                 q = nav.quat[k]
@@ -90,6 +94,8 @@ def feed(
                     None,
                 )
                 k += 1
+            if replay and k == nav.t_ns.size:
+                pipe.end_of_navigation()
             if i % 64 == 63:
                 pipe.record(t)
                 if not paused[0] <= t < paused[1]:
@@ -195,11 +201,12 @@ def _with_ins_accel_bias(run: SimRun, bias_mps2: float) -> SimRun:
 
 
 def _target_metrics(
-    run: SimRun, cfg: Config, store_path: Path
+    run: SimRun, cfg: Config, store_path: Path, replay: bool = False
 ) -> list[tuple[PointTargetMetrics, tuple[float, float, float]]]:
-    """Feed ``run`` through a pipeline with ``cfg``; the metrics of every target in the
-    recorded strip (a ±1 m window: one target only) and its place in the imaging frame, m."""
-    pipe = feed(run, cfg, store_path)
+    """Feed ``run`` through a pipeline with ``cfg`` (``replay``: see :func:`feed`); the
+    metrics of every target in the recorded strip (a ±1 m window: one target only) and its
+    place in the imaging frame, m."""
+    pipe = feed(run, cfg, store_path, replay=replay)
     store = open_store(store_path)
     if cfg.autofocus.enabled:
         assert store.committed("autofocus") >= 2

@@ -30,8 +30,7 @@ def test_a_backlog_pass_pings_after_each_block(tmp_path: Path) -> None:
     run = simulate(load_preset("ku-vehicle", 0.03), MotionSpec("turbulence", seed=1), "tactical",
                    n_pulses=PULSES)  # fmt: skip
     cfg = scenario_config(run.scenario, radar={"sample_format": "float32"},
-                          imaging={"block_pulses": BLOCK},
-                          mocomp={"heading_window_s": 0.0})  # fmt: skip
+                          imaging={"block_pulses": BLOCK})  # fmt: skip
     listener = socket.socket(socket.AF_UNIX, socket.SOCK_DGRAM)
     listener.bind(str(tmp_path / "notify.sock"))
     listener.settimeout(0.0)

@@ -65,7 +65,14 @@ class AutofocusConfig:
     Offline (:func:`autofocus_offline`) ``pin_window_s`` runs to the last subaperture centre.
     """
 
-    subaperture_s: float = key(0.4, "Subaperture length", unit="s", gt=0)
+    subaperture_s: float = key(
+        0.6,
+        "Subaperture length: longer estimates each Doppler rate from more pulses, shorter "
+        "follows faster motion errors (docs/measurements/acceptance.md compares 0.4, 0.6 "
+        "and 0.8 s on the acceptance flight)",
+        unit="s",
+        gt=0,
+    )
     hop_s: float = key(
         0.1,
         "Hop between subaperture starts (overlap = 1 - hop / subaperture, at least 50 % "
@@ -118,7 +125,7 @@ class AutofocusConfig:
         3,
         "Passes of the phase step, each on the output of the one before (their kappa add "
         "up); the release latency is subaperture_s/2 + (phase_passes * ceil(subaperture_s / "
-        "(2 hop_s)) + 1) * hop_s (0.9 s by default, 0.5 s = subaperture_s + hop_s with one "
+        "(2 hop_s)) + 1) * hop_s (1.3 s by default, 0.7 s = subaperture_s + hop_s with one "
         "pass)",
         ge=1,
     )

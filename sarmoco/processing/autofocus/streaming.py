@@ -101,7 +101,7 @@ class SlidingSubapertureAutofocus:
     never extrapolated (on the ku-vehicle table case extrapolating the passes ahead left
     0.34 rad rms of phase error against 0.07 offline). The price is latency: pulses up to
     the centre of the latest subaperture through every pass are released,
-    ``subaperture / 2 + (passes L + 1) hop`` after they arrive at most (0.9 s by default).
+    ``subaperture / 2 + (passes L + 1) hop`` after they arrive at most (1.3 s by default).
 
     The constant and linear terms of the LOS displacement and of the phase are not
     observable from Doppler rates; a linear phase in time moves targets along track. They
