@@ -9,10 +9,10 @@ on the cuts at the level of rounding). On the way:
 - pulses not later than every pulse focused before are kept from the focuser (it needs
   strictly increasing times), counted in ``pulses_out_of_order``;
 - the focuser starts at the first pulse with navigation, on a reference track along the
-  mean INS velocity of ``mocomp.heading_window_s`` of flight from there when the
-  navigation received covers it (a replay reads its INS log that far ahead), else of the
-  first processing block's pulses (a live run: no pulse waits for the course); the pulses
-  before it are recorded unfocused;
+  mean antenna velocity of the pulses of ``mocomp.heading_window_s`` of flight from there
+  when the pulses are held for it (a replay: ``hold_course``), else of the first
+  processing block's (a live run: no pulse waits for the course); the pulses before it
+  are recorded unfocused;
 - pulses without navigation keep their place with zero echoes
   (:class:`~sarmoco.daemon.navigation.GapFill`);
 - a pulse whose store row does not follow the row of the pulse focused before it comes
@@ -32,10 +32,9 @@ import numpy as np
 from sarmoco.daemon.aligner import AlignedBlock
 from sarmoco.daemon.config import Config
 from sarmoco.daemon.focuser import Focuser, SinkFactory
-from sarmoco.daemon.navbuffer import NavBuffer
 from sarmoco.daemon.navigation import GapFill, NavPulses
 from sarmoco.daemon.tables import RunTables
-from sarmoco.processing.types import BoolArray, FloatArray, IntArray
+from sarmoco.processing.types import BoolArray, IntArray
 from sarmoco.store.flags import NAV_UNUSABLE
 
 log = logging.getLogger(__name__)
@@ -51,19 +50,26 @@ class BlockFocusing:
         the focuser's own).
     tables : RunTables
         Where the pulses' motion and the products are recorded and counted.
-    nav : NavBuffer
-        The run's navigation (the first reference track's course).
     sink : SinkFactory, optional
         Imaging deferred (:class:`~sarmoco.daemon.focuser.Focuser`).
+    hold_course : bool
+        Hold the first pulses until they cover ``mocomp.heading_window_s`` (or the run
+        ends), and lay the first reference track along their mean velocity (a replay,
+        where the pulses wait for nothing); otherwise along the first processing block's.
     """
 
     def __init__(
-        self, cfg: Config, tables: RunTables, nav: NavBuffer, sink: SinkFactory | None = None
+        self,
+        cfg: Config,
+        tables: RunTables,
+        sink: SinkFactory | None = None,
+        hold_course: bool = False,
     ) -> None:
         self.cfg = cfg
         self.tables = tables
-        self.nav = nav
         self.sink = sink
+        self._window_ns = round(cfg.mocomp.heading_window_s * 1e9) if hold_course else 0
+        """Flight the first reference track's course is taken over, GPS ns (0: one block)."""
         self.focuser: Focuser | None = None
         """The focusing chain, from the first pulse with navigation on (None before)."""
         self._gaps: GapFill | None = None
@@ -74,22 +80,22 @@ class BlockFocusing:
         """Time of the newest pulse given to the focuser, GPS ns."""
         self._last_row: int | None = None
         """Store row of the newest pulse given to the focuser."""
-        self.nav_ended = False
-        """No INS sample will come after those in :attr:`nav` (an INS log read to its end)."""
 
     def accept(self, block: AlignedBlock) -> None:
         """Take an aligned block: record its navigation flags, and focus every whole
-        processing block gathered."""
+        processing block gathered (once the first track's course is held)."""
         self.tables.nav_flags(block)
         self._pending.append(NavPulses.of(block))
         self._pending_n += len(block)
+        if self.focuser is None and not self._course_held():
+            return  # the first track waits for its course
         block_pulses = self.cfg.imaging.block_pulses
         while self._pending_n >= block_pulses:
             self._focus_pending(block_pulses)
 
     def finish(self) -> None:
         """Focus every pulse still gathered (a block at a time) and close the focuser."""
-        while self._pending_n > 0:  # the last, shorter block
+        while self._pending_n > 0:  # a block at a time: held for the course, or the last
             self._focus_pending(min(self._pending_n, self.cfg.imaging.block_pulses))
         if self.focuser is not None:
             self.tables.products(self.focuser.finish(), self.focuser.autofocus)
@@ -106,7 +112,7 @@ class BlockFocusing:
             return
         summary = self.tables.summary
         summary.pulses_nav_flagged += int(np.count_nonzero(in_order.flags & NAV_UNUSABLE))
-        p = in_order if self.focuser is not None else self._start(in_order)
+        p = in_order if self.focuser is not None else self._start(in_order, pending)
         if p is None:
             return  # no navigation yet: the aperture has not begun
         assert self.focuser is not None and self._gaps is not None
@@ -137,13 +143,23 @@ class BlockFocusing:
         self._focused_ns = int(p.t_ns[-1])
         return p
 
-    def _start(self, p: NavPulses) -> NavPulses | None:
+    def _course_held(self) -> bool:
+        """Whether the pulses gathered and not focused cover the course's window from the
+        first one with navigation (or none has navigation, or no window: nothing to wait
+        for)."""
+        first = next((int(p.t_ns[p.usable][0]) for p in self._pending if p.usable.any()), None)
+        if first is None or self._window_ns == 0:
+            return True
+        return int(self._pending[-1].t_ns[-1]) >= first + self._window_ns
+
+    def _start(self, p: NavPulses, held: NavPulses) -> NavPulses | None:
         """Start the focuser at the first pulse of ``p`` with navigation; the pulses from
         there on (the pulses before it are recorded unfocused).
 
-        The first reference track follows :meth:`_course` from that pulse, else the mean
-        velocity of the first ``imaging.block_pulses`` usable pulses of ``p``. None while
-        no pulse has navigation.
+        The first reference track follows the mean velocity of the usable pulses ``held``
+        (``p`` and the pulses gathered after it) within the course's window of that first
+        one, or (no window) of the first ``imaging.block_pulses`` usable pulses of ``p``.
+        None while no pulse has navigation.
         """
         if not p.usable.any():
             self.tables.unfocused(p)
@@ -153,30 +169,15 @@ class BlockFocusing:
         p = p.since(first_usable)
         t0 = int(p.t_ns[0])
         first = slice(0, self.cfg.imaging.block_pulses)
-        start_vel = self._course(t0)
-        if start_vel is None:
+        if self._window_ns == 0:
             start_vel = p.vel_ned[p.usable][first].mean(axis=0)
+        else:
+            window = held.usable & (held.t_ns >= t0) & (held.t_ns < t0 + self._window_ns)
+            start_vel = held.vel_ned[window].mean(axis=0)
         self.focuser = Focuser(self.cfg, t0, start_vel, self.sink, quat=p.quat[p.usable][first])
         self.tables.reference_track(self.focuser.track)
         self._gaps = GapFill(t0, p.vel_ned[0], p.quat[0])
         return p
-
-    def _course(self, t0_ns: int) -> FloatArray | None:
-        """Time-weighted mean INS velocity (m/s, NED) over ``mocomp.heading_window_s`` from
-        ``t0_ns`` (GPS ns), when the navigation buffer holds all of it (or all there is:
-        :attr:`nav_ended`); else None (a live run: the INS has not sent it yet; or a window
-        of 0)."""
-        window_ns = round(self.cfg.mocomp.heading_window_s * 1e9)
-        span = self.nav.kinematics.span_ns()
-        if window_ns == 0 or span is None or not span[0] <= t0_ns:
-            return None
-        if span[1] < t0_ns + window_ns and not self.nav_ended:
-            return None
-        t, values = self.nav.kinematics.window(t0_ns, t0_ns + window_ns, extra=0)
-        if len(t) < 2:
-            return None
-        vel = values[:, :3]
-        return np.trapezoid(vel, (t - t[0]) * 1e-9, axis=0) / ((t[-1] - t[0]) * 1e-9)
 
 
 def strictly_increasing(t_ns: IntArray, after_ns: int | None) -> BoolArray:

@@ -257,14 +257,14 @@ class MocompConfig:
     heading_window_s: float = _key(
         4.0,
         "The first reference track, and with it the along-track axis of the image grid, "
-        "follows the mean INS velocity of this much flight from the first pulse with "
-        "navigation (of the whole INS log when it is shorter) where the navigation "
-        "received covers it when focusing starts: a replay reads its INS log this far "
-        "ahead; a live run holds no pulse for it and takes the first processing block's "
-        "mean velocity (imaging.block_pulses), as does 0. Over a short span turbulence "
-        "turns the mean velocity off the course (one 1.3 s block of the acceptance flight: "
-        "0.42 deg), and the image grid with it: targets 130 m apart in range then sit "
-        "0.3-0.4 m apart along track from where they are (4 s: 0.014 m)",
+        "follows the mean antenna velocity of this much flight from the first pulse with "
+        "navigation (of the whole run when it is shorter) in a replay or batch, which "
+        "holds those pulses before focusing (this times the PRF pulses in memory); a live "
+        "run holds none and takes the first processing block's mean velocity "
+        "(imaging.block_pulses), as does 0. Over a short span turbulence turns the mean "
+        "velocity off the course (one 1.3 s block of the acceptance flight: 0.42 deg), and "
+        "the image grid with it: targets 130 m apart in range then sit 0.3-0.4 m apart "
+        "along track from where they are",
         unit="s",
         ge=0,
     )

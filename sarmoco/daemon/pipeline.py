@@ -98,6 +98,11 @@ class Pipeline:
     radar : RadarIngest, optional
         The echo ring and reads to take over, with the pulses already in its ring (a strip's
         store opened while its first pulses were read); default: a new one.
+    hold_course : bool
+        Hold the first pulses until they cover ``mocomp.heading_window_s`` and lay the
+        first reference track (and the image grid) along their mean velocity
+        (:class:`~sarmoco.daemon.blocks.BlockFocusing`): a replay, where pulses wait for
+        nothing. A live run lays it along the first processing block's.
     """
 
     def __init__(
@@ -109,6 +114,7 @@ class Pipeline:
         refuse_jumps: bool = False,
         focus_skips: bool = False,
         radar: RadarIngest | None = None,
+        hold_course: bool = False,
     ) -> None:
         self.cfg = cfg
         self.recorder = recorder
@@ -123,7 +129,7 @@ class Pipeline:
         self.radar = radar
         self.ins = InsIngest(self.nav)
         self.tables = RunTables(recorder)
-        self.blocks = BlockFocusing(cfg, self.tables, self.nav, sink)
+        self.blocks = BlockFocusing(cfg, self.tables, sink, hold_course)
         self._taken_ns: int | None = None
         """Time of the newest pulse the aligner took from the backlog, GPS ns."""
         counters.add_source("pipeline", self.totals)
@@ -165,12 +171,6 @@ class Pipeline:
     def add_nav(self, samples: list[Sample], rx_ns: int | None) -> None:
         """Offer INS samples to the nav buffer and queue them for the recorder."""
         self.ins.add(samples, rx_ns)
-
-    def end_of_navigation(self) -> None:
-        """No INS sample will come after those offered (an INS log read to its end): the
-        first reference track's course takes what there is
-        (:class:`~sarmoco.daemon.blocks.BlockFocusing`)."""
-        self.blocks.nav_ended = True
 
     def add_ins_raw(self, data: bytes, rx_ns: int | None) -> None:
         """Queue bytes received from the INS link for the store

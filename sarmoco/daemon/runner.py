@@ -1009,9 +1009,9 @@ def _replay(
 
     The radar is read a block (``imaging.block_pulses``) at a time; INS samples are read
     ahead until they cover the newest pulse plus the longest bridged gap, so the aligner
-    sees what it would have seen live, as fast as the CPU allows; until the focuser has
-    started, plus ``mocomp.heading_window_s`` (the first reference track's course, which
-    a live run cannot wait for). The aligner's clock is the newest pulse time.
+    sees what it would have seen live, as fast as the CPU allows. The aligner's clock is
+    the newest pulse time. The first pulses are held for the first reference track's
+    course (``mocomp.heading_window_s``, which a live run cannot wait for).
 
     Parameters
     ----------
@@ -1028,17 +1028,15 @@ def _replay(
     """
     cfg = replace(cfg, imaging=replace(cfg.imaging, live_degrade=False))  # full image
     lead_ns = round(cfg.ins.max_gap_s * 1e9)
-    start_lead_ns = lead_ns + round(cfg.mocomp.heading_window_s * 1e9)
     ins_span = _Span()
     with open_recorder(cfg, out) as recorder:
-        pipe = Pipeline(cfg, recorder, Counters(), sink)
+        pipe = Pipeline(cfg, recorder, Counters(), sink, hold_course=True)
         record_ins_format(recorder, ins)
         ahead: list[Sample] = []  # read from the log, not yet due (a poll may return seconds)
         while not radar.eof:
             pipe.read_radar(radar, 0.0, cfg.imaging.block_pulses)
             now = pipe.now_ns(live=False)
-            lead = lead_ns if pipe.focuser is not None else start_lead_ns
-            horizon = None if now is None else now + lead
+            horizon = None if now is None else now + lead_ns
             while not ins.eof and (horizon is None or not ahead or ahead[-1].t_gps_ns < horizon):
                 ahead += ins.poll(0.0)
                 pipe.add_ins_raw(ins.take_raw(), None)
@@ -1046,8 +1044,6 @@ def _replay(
             pipe.add_nav(ahead[:due], None)
             ins_span.add(*(s.t_gps_ns for s in ahead[:due]))
             del ahead[:due]
-            if ins.eof and not ahead:
-                pipe.end_of_navigation()
             pipe.process(now)
             if done is not None:
                 _progress(done())

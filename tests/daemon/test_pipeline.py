@@ -67,13 +67,13 @@ def feed(
     """Play a simulated run into a pipeline on the radar's virtual clock (the INS from
     ``nav_from_ns`` on, GPS ns; from its start when None). ``focus_paused_ns``: the
     pipeline is a live one that skips ahead, and focusing does not run while the radar
-    clock is in that span (GPS ns), recording does. ``replay``: the INS is offered
-    ``mocomp.heading_window_s`` further ahead, and its end told, as ``sarmoco replay``
-    reads an INS log."""
+    clock is in that span (GPS ns), recording does. ``replay``: the first pulses are held
+    for the first track's course, as ``sarmoco replay`` holds them."""
     nav = run.ins.nav
-    lead_ns = NAV_LEAD_NS + (round(cfg.mocomp.heading_window_s * 1e9) if replay else 0)
     with open_recorder(cfg, store) as rec:
-        pipe = Pipeline(cfg, rec, Counters(), focus_skips=focus_paused_ns is not None)
+        pipe = Pipeline(
+            cfg, rec, Counters(), focus_skips=focus_paused_ns is not None, hold_course=replay
+        )
         paused = focus_paused_ns or (0, 0)
         k = 0 if nav_from_ns is None else int(np.searchsorted(nav.t_ns, nav_from_ns))
         for i, t in enumerate(run.t_ns.tolist()):
@@ -81,7 +81,7 @@ def feed(
             assert slot is not None
             slot.samples[...] = run.echo[i]
             pipe.ring.commit(slot, t, i)
-            while k < nav.t_ns.size and nav.t_ns[k] < t + lead_ns:
+            while k < nav.t_ns.size and nav.t_ns[k] < t + NAV_LEAD_NS:
                 tk = int(nav.t_ns[k])
                 vel = (float(nav.vel_ned[k, 0]), float(nav.vel_ned[k, 1]), float(nav.vel_ned[k, 2]))
                 q = nav.quat[k]
@@ -94,8 +94,6 @@ def feed(
                     None,
                 )
                 k += 1
-            if replay and k == nav.t_ns.size:
-                pipe.end_of_navigation()
             if i % 64 == 63:
                 pipe.record(t)
                 if not paused[0] <= t < paused[1]:
