@@ -51,7 +51,11 @@ What is measured (one JSON line with ``--json``):
     Pulse to live tile: the store's ``images`` ``committed`` counter is polled with the
     pulses'; a tile that became committed gets the poll's host GPS time, less the time of
     the first pulse that formed it (its ``t0_ns``: the longest wait of its pulses), over
-    the tiles.
+    the tiles. This includes the synthetic aperture itself.
+``tile_latency_last_p50_s``, ``tile_latency_last_p99_s``
+    The same from the last pulse that formed the tile (its ``t1_ns``): what the tile
+    waited for once its aperture was complete (the blocks of tiles formed together, the
+    stages' delays, the focus backlog, the forming and storing).
 ``peak_rss_mb``, ``rss_growth_mb_per_min``, ``rss_mb_start``, ``rss_mb_middle``, ``rss_mb_end``
     The daemon's peak VmHWM, and the slope of a line fitted to its VmRSS (sampled every
     second) after a warm-up of a third of the stream (30 s at most); VmRSS at the first
@@ -123,6 +127,8 @@ KEYS = (
     "latency_p99_s",
     "tile_latency_p50_s",
     "tile_latency_p99_s",
+    "tile_latency_last_p50_s",
+    "tile_latency_last_p99_s",
     "lost_pulses",
     "peak_rss_mb",
     "rss_growth_mb_per_min",
@@ -209,19 +215,20 @@ def latencies_s(commits: list[tuple[int, int, int]], t_ns: np.ndarray) -> np.nda
     return np.concatenate(lat) if lat else np.zeros(0)
 
 
-def tile_first_pulses_ns(store: Path, n_tiles: int) -> np.ndarray:
-    """The ``t0_ns`` attribute (first pulse, GPS ns) of the store's first ``n_tiles`` tiles."""
-    t0 = []
+def tile_pulse_times_ns(store: Path, n_tiles: int, key: str) -> np.ndarray:
+    """An attribute of the store's first ``n_tiles`` tiles: ``t0_ns`` (first pulse) or
+    ``t1_ns`` (last pulse), GPS ns."""
+    times = []
     for i in range(n_tiles):
         meta = json.loads((store / "images" / f"tile_{i:06d}" / "zarr.json").read_text())
-        t0.append(int(meta["attributes"]["t0_ns"]))
-    return np.array(t0, dtype=np.int64)
+        times.append(int(meta["attributes"][key]))
+    return np.array(times, dtype=np.int64)
 
 
-def tile_latencies_s(tiles: list[tuple[int, int, int]], t0_ns: np.ndarray) -> np.ndarray:
+def tile_latencies_s(tiles: list[tuple[int, int, int]], pulse_ns: np.ndarray) -> np.ndarray:
     """Pulse-to-tile latency of every tile committed while :func:`watch` polled: the poll's
-    time less the tile's first pulse time ``t0_ns`` (GPS ns, by tile), s."""
-    lat = [(t_poll - t0_ns[a:b]) / 1e9 for t_poll, a, b in tiles if b <= t0_ns.size]
+    time less a pulse time of the tile ``pulse_ns`` (GPS ns, by tile), s."""
+    lat = [(t_poll - pulse_ns[a:b]) / 1e9 for t_poll, a, b in tiles if b <= pulse_ns.size]
     return np.concatenate(lat) if lat else np.zeros(0)
 
 
@@ -294,6 +301,8 @@ class BenchRun:
     """Times of the recorded pulses, GPS ns."""
     tile_t0_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     """First pulse time of each tile seen committed, GPS ns."""
+    tile_t1_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    """Last pulse time of each tile seen committed, GPS ns."""
     live: dict[str, Any] = field(default_factory=dict)
     """The daemon's ``/live.json`` at the end of the stream (the live page's rendering)."""
 
@@ -428,7 +437,8 @@ def live_run(
         store=store,
         live=live,
         t_ns=open_store(store).read("pulses", ["t_ns"])["t_ns"],
-        tile_t0_ns=tile_first_pulses_ns(store, seen.tiles[-1][2] if seen.tiles else 0),
+        tile_t0_ns=tile_pulse_times_ns(store, seen.tiles[-1][2] if seen.tiles else 0, "t0_ns"),
+        tile_t1_ns=tile_pulse_times_ns(store, seen.tiles[-1][2] if seen.tiles else 0, "t1_ns"),
     )
 
 
@@ -461,9 +471,11 @@ def figures(run: BenchRun, fft_s_per_pulse: float) -> dict[str, float]:
     busy = c.get("processing_busy_seconds", 0.0)
     lat = latencies_s(run.watch.commits, run.t_ns)
     p50, p99 = np.percentile(lat, [50, 99]) if lat.size else (float("nan"), float("nan"))
-    tile_lat = tile_latencies_s(run.watch.tiles, run.tile_t0_ns)
     nan2 = (float("nan"), float("nan"))
+    tile_lat = tile_latencies_s(run.watch.tiles, run.tile_t0_ns)
     tile_p50, tile_p99 = np.percentile(tile_lat, [50, 99]) if tile_lat.size else nan2
+    last_lat = tile_latencies_s(run.watch.tiles, run.tile_t1_ns)
+    last_p50, last_p99 = np.percentile(last_lat, [50, 99]) if last_lat.size else nan2
     warmup = min(RSS_WARMUP_MAX_S, run.duration_s / 3.0)
     return {
         "realtime_ratio": focused / run.prf_hz / busy if busy > 0 else float("nan"),
@@ -472,6 +484,8 @@ def figures(run: BenchRun, fft_s_per_pulse: float) -> dict[str, float]:
         "latency_p99_s": float(p99),
         "tile_latency_p50_s": float(tile_p50),
         "tile_latency_p99_s": float(tile_p99),
+        "tile_latency_last_p50_s": float(last_p50),
+        "tile_latency_last_p99_s": float(last_p99),
         "lost_pulses": float(run.pulses_sent - run.t_ns.size),
         "peak_rss_mb": run.peak_rss_kb / 1024.0,
         "rss_growth_mb_per_min": rss_trend_mb_per_min(run.watch.rss, warmup),

@@ -57,8 +57,9 @@ class RdaFilters:
     ----------
     n_az : int
         Azimuth FFT length.
-    src : ndarray of complex, shape (n_az, S) or None
-        Secondary range compression, a range-frequency phase per Doppler row (None: off).
+    src : ndarray of complex, shape (n_az, N) or None
+        Secondary range compression, a range-frequency phase per Doppler row over a range
+        FFT of ``N = next_fast_len(S)`` bins (the bins zero-padded; None: off).
     rcmc_bins : ndarray of float64, shape (n_az, S)
         Where each Doppler row takes the range bin of ``r0``: ``(r0 / D - r_first) / dr``.
     azimuth : ndarray of complex, shape (n_az, S)
@@ -116,7 +117,7 @@ def rda_filters(
     src_filter = None
     if src:
         fc = C_MPS / wavelength_m
-        fr = np.fft.fftfreq(s, dr) * C_MPS / 2.0
+        fr = np.fft.fftfreq(scipy.fft.next_fast_len(s), dr) * C_MPS / 2.0
         a2 = (fc * sin_sq[:, None]) ** 2
         resid = np.sqrt((fc + fr[None, :]) ** 2 - a2) - fc * d[:, None] - fr[None, :] / d[:, None]
         r_ref = float(range_axis_m[s // 2])
@@ -134,10 +135,12 @@ def focus_block(rc: ComplexArray, filters: RdaFilters, taps: int = 16) -> Comple
     Returns the (P × S) image in the filters' precision (complex64 filters and pulses
     are transformed in single precision).
     """
-    p = rc.shape[0]
+    p, s = rc.shape
     rd = scipy.fft.fft(np.asarray(rc, dtype=filters.azimuth.dtype), n=filters.n_az, axis=0)
     if filters.src is not None:
-        rd = scipy.fft.ifft(scipy.fft.fft(rd, axis=1) * filters.src, axis=1)
+        spectrum = scipy.fft.fft(rd, n=filters.src.shape[1], axis=1, overwrite_x=True)
+        spectrum *= filters.src
+        rd = scipy.fft.ifft(spectrum, axis=1, overwrite_x=True)[:, :s]
     rd = sinc_interp(rd, filters.rcmc_bins, taps)
     rd *= filters.azimuth
     out: ComplexArray = scipy.fft.ifft(rd, axis=0)[:p]

@@ -53,7 +53,7 @@ import scipy.fft
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.imaging.grid import PlaneGrid
-from sarmoco.processing.imaging.interp import sinc_interp
+from sarmoco.processing.imaging.interp import sinc_interp, sinc_interp_columns
 from sarmoco.processing.imaging.rda import RdaFilters, focus_block, rda_filters
 from sarmoco.processing.imaging.tiles import Tile, TileLayout
 from sarmoco.processing.phasor import phasor
@@ -320,8 +320,7 @@ class RdaTileImager:
         nxt = np.clip(np.searchsorted(x, x_u), 1, x.size - 1)
         hole = (x[nxt] - x[nxt - 1] > HOLE_SPACINGS * dx) | (x_u < x[0]) | (x_u > x[-1])
         idx[hole] = -1.0  # zeros
-        cols = np.ascontiguousarray(rc.T)
-        uniform = sinc_interp(cols, np.broadcast_to(idx, (cols.shape[0], x_u.size)), TAPS).T
+        uniform = sinc_interp_columns(rc, idx, TAPS)
         if kx_c:
             uniform = uniform * np.exp(2j * np.pi * kx_c * x_u)[:, None].astype(np.complex64)
         img = focus_block(uniform, self._block_filters(x_u.size, bins), TAPS)
@@ -367,12 +366,10 @@ class RdaTileImager:
             return None
         r = np.hypot(grid.axis1_m, self.layout.height_m)
         rg = (r - range_m[0]) / self._dr
-        part = sinc_interp(image[a0:a1], np.broadcast_to(rg, (a1 - a0, rg.size)), TAPS)
-        cols = np.ascontiguousarray(part.T)
-        data = sinc_interp(cols, np.broadcast_to(az - a0, (cols.shape[0], az.size)), TAPS).T
+        part = sinc_interp(image[a0:a1], rg[None, :], TAPS)
+        data = sinc_interp_columns(part, az - a0, TAPS)
         # remodulation exp(j 2 pi (kx_c x + 2 r / lambda)), one factor per axis
         kx_c = 2.0 * math.sin(self.centroid_squint_rad) / self.wavelength_m
-        data = np.ascontiguousarray(data, dtype=np.complex64)
         data *= phasor(2.0 * np.pi * kx_c * grid.axis0_m)[:, None]
         data *= (self._gain * phasor(4.0 * np.pi / self.wavelength_m * r))[None, :]
         return Tile(
