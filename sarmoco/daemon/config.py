@@ -366,10 +366,12 @@ class ImagingConfig:
     live_degrade: bool = _key(
         True,
         "With method rda or pfa in a live run: when focusing needs more than live_budget of real "
-        "time, form the live tiles at a degraded level (1: twice the pixel spacing; 2: also "
-        "half the swath; 3: four times the pixel spacing and half the swath), one level up "
-        "at a time, and back down when the level below would fit with a margin; the level "
-        "is the status gauge live_image_level. A replay never degrades",
+        "time, form the live tiles at a degraded level (1: twice the pixel spacing and, for "
+        "rda, a presum by 2: half the Doppler band, twice the azimuth resolution; 2: also "
+        "half the swath; 3: four times the pixel spacing, presum by 4, half the swath), one "
+        "level up at a time, and back down when the level below, at its measured cost, "
+        "would fit with a margin; the level is the status gauge live_image_level. A replay "
+        "never degrades",
     )
     live_budget: float = _key(
         0.8,

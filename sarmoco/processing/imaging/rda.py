@@ -43,7 +43,7 @@ import scipy.fft
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.imaging.interp import sinc_interp
 from sarmoco.processing.phasor import phasor
-from sarmoco.processing.types import C_MPS, ComplexArray, FloatArray, Image
+from sarmoco.processing.types import C_MPS, ComplexArray, FloatArray, Image, IntArray
 
 BAND_MARGIN = 1.5
 """Default processed angle over the angle the block subtends."""
@@ -57,19 +57,25 @@ class RdaFilters:
     ----------
     n_az : int
         Azimuth FFT length.
-    src : ndarray of complex, shape (n_az, N) or None
+    src : ndarray of complex, shape (M, N) or None
         Secondary range compression, a range-frequency phase per Doppler row over a range
         FFT of ``N = next_fast_len(S)`` bins (the bins zero-padded; None: off).
-    rcmc_bins : ndarray of float64, shape (n_az, S)
+    rcmc_bins : ndarray of float64, shape (M, S)
         Where each Doppler row takes the range bin of ``r0``: ``(r0 / D - r_first) / dr``.
-    azimuth : ndarray of complex, shape (n_az, S)
+    azimuth : ndarray of complex, shape (M, S)
         Azimuth compression ``exp(+j 4 pi r0 D / lambda)`` in the processed band, 0 outside.
+    rows : ndarray of int, shape (M,), or None
+        The bins of the ``n_az``-point azimuth FFT the ``M`` Doppler rows take, a band
+        ``n_az / M`` times narrower than the pulses' (a presum in the Doppler domain: the
+        image comes out on an along-track grid that much coarser); None: all ``n_az``, in
+        FFT order.
     """
 
     n_az: int
     src: ComplexArray | None
     rcmc_bins: FloatArray
     azimuth: ComplexArray
+    rows: IntArray | None = None
 
 
 def rda_filters(
@@ -132,11 +138,15 @@ def rda_filters(
 def focus_block(rc: ComplexArray, filters: RdaFilters, taps: int = 16) -> ComplexArray:
     """Range-Doppler focus of ``rc`` (P × S, P <= ``filters.n_az``) with ``filters``.
 
-    Returns the (P × S) image in the filters' precision (complex64 filters and pulses
-    are transformed in single precision).
+    Returns the image in the filters' precision (complex64 filters and pulses are
+    transformed in single precision): P × S, or with ``filters.rows`` the
+    ``ceil(P M / n_az)`` rows of its coarser grid (M Doppler rows).
     """
     p, s = rc.shape
     rd = scipy.fft.fft(np.asarray(rc, dtype=filters.azimuth.dtype), n=filters.n_az, axis=0)
+    if filters.rows is not None:
+        rd = rd[filters.rows]
+        p = -(-p * filters.rows.size // filters.n_az)
     if filters.src is not None:
         spectrum = scipy.fft.fft(rd, n=filters.src.shape[1], axis=1, overwrite_x=True)
         spectrum *= filters.src
