@@ -55,6 +55,11 @@ class RdaFilters:
 
     Attributes
     ----------
+    The filters hold only the ``M`` Doppler rows with a bin in the processed band: the
+    others are zero after azimuth compression, so their range steps are left out.
+
+    Attributes
+    ----------
     n_az : int
         Azimuth FFT length.
     src : ndarray of complex, shape (M, N) or None
@@ -64,18 +69,23 @@ class RdaFilters:
         Where each Doppler row takes the range bin of ``r0``: ``(r0 / D - r_first) / dr``.
     azimuth : ndarray of complex, shape (M, S)
         Azimuth compression ``exp(+j 4 pi r0 D / lambda)`` in the processed band, 0 outside.
-    rows : ndarray of int, shape (M,), or None
-        The bins of the ``n_az``-point azimuth FFT the ``M`` Doppler rows take, a band
-        ``n_az / M`` times narrower than the pulses' (a presum in the Doppler domain: the
-        image comes out on an along-track grid that much coarser); None: all ``n_az``, in
-        FFT order.
+    rows : ndarray of int, shape (M,)
+        The bins of the ``n_az``-point azimuth FFT the rows take.
+    n_out : int
+        Inverse azimuth FFT length: ``n_az``, or fewer for a band narrower than the pulses'
+        grid holds (a presum in the Doppler domain: the image comes out on an along-track
+        grid ``n_az / n_out`` times coarser).
+    out_rows : ndarray of int, shape (M,)
+        The bins of the inverse FFT the rows go to (the others are zero).
     """
 
     n_az: int
     src: ComplexArray | None
     rcmc_bins: FloatArray
     azimuth: ComplexArray
-    rows: IntArray | None = None
+    rows: IntArray
+    n_out: int
+    out_rows: IntArray
 
 
 def rda_filters(
@@ -132,29 +142,38 @@ def rda_filters(
     rcmc = (range_axis_m[None, :] / d[:, None] - range_axis_m[0]) / dr
     azimuth = phasor((4.0 * np.pi / wavelength_m) * d[:, None] * range_axis_m[None, :], dtype)
     azimuth[~band] = 0.0
-    return RdaFilters(n_az, src_filter, rcmc, azimuth)
+    rows = np.flatnonzero(band.any(axis=1))
+    return RdaFilters(
+        n_az,
+        None if src_filter is None else src_filter[rows],
+        rcmc[rows],
+        azimuth[rows],
+        rows,
+        n_az,
+        rows,
+    )
 
 
 def focus_block(rc: ComplexArray, filters: RdaFilters, taps: int = 16) -> ComplexArray:
     """Range-Doppler focus of ``rc`` (P × S, P <= ``filters.n_az``) with ``filters``.
 
     Returns the image in the filters' precision (complex64 filters and pulses are
-    transformed in single precision): P × S, or with ``filters.rows`` the
-    ``ceil(P M / n_az)`` rows of its coarser grid (M Doppler rows).
+    transformed in single precision): P × S, or ``ceil(P n_out / n_az)`` rows of a
+    coarser grid (``filters.n_out``).
     """
     p, s = rc.shape
     rd = scipy.fft.fft(np.asarray(rc, dtype=filters.azimuth.dtype), n=filters.n_az, axis=0)
-    if filters.rows is not None:
-        rd = rd[filters.rows]
-        p = -(-p * filters.rows.size // filters.n_az)
+    rd = rd[filters.rows]  # the rows in the band
     if filters.src is not None:
         spectrum = scipy.fft.fft(rd, n=filters.src.shape[1], axis=1, overwrite_x=True)
         spectrum *= filters.src
         rd = scipy.fft.ifft(spectrum, axis=1, overwrite_x=True)[:, :s]
     rd = sinc_interp(rd, filters.rcmc_bins, taps)
     rd *= filters.azimuth
-    out: ComplexArray = scipy.fft.ifft(rd, axis=0)[:p]
-    return out
+    spectrum = np.zeros((filters.n_out, s), dtype=rd.dtype)
+    spectrum[filters.out_rows] = rd
+    out: ComplexArray = scipy.fft.ifft(spectrum, axis=0, overwrite_x=True)
+    return out[: -(-p * filters.n_out // filters.n_az)]
 
 
 def range_doppler(

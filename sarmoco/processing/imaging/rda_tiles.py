@@ -133,7 +133,8 @@ def block_filters(
     backprojection's amplitude for pulses ``dx_m`` apart and basebanded in range (step 3
     of the module). With ``presum`` > 1, the processed band is ``presum`` times narrower
     about the centroid, and only the ``n_az / presum`` Doppler bins about the centroid are
-    kept (``RdaFilters.rows``): the image comes out on a grid ``presum * dx_m`` apart.
+    kept (``RdaFilters.rows``, ``n_out``): the image comes out on a grid ``presum * dx_m``
+    apart.
 
     Parameters
     ----------
@@ -167,16 +168,17 @@ def block_filters(
     # the coarser grid, 1 / dx_out; its inverse FFT over n_out rows gains presum back)
     phase = -4.0 * np.pi * r / wavelength_m + np.pi / 4.0
     column = np.sqrt(wavelength_m * r / 2.0) / dx_out * np.exp(1j * phase)
-    rows = None
-    if presum > 1:
-        # the Doppler bins of the coarse grid (unwrapped about the centroid as the filters'),
-        # found among the n_az bins of the pulses' grid: kx = m / (n_az dx_m)
-        kx_c = 2.0 * math.sin(centroid_squint_rad) / wavelength_m
-        span = 1.0 / dx_out
-        kx = np.fft.fftfreq(n_out, dx_out)
-        kx = kx_c + (kx - kx_c + span / 2.0) % span - span / 2.0
-        rows = np.round(kx * n_az * dx_m).astype(np.int64) % n_az
-    return replace(f, n_az=n_az, azimuth=f.azimuth * column.astype(np.complex64), rows=rows)
+    azimuth = f.azimuth * column.astype(np.complex64)
+    if presum == 1:
+        return replace(f, azimuth=azimuth)
+    # the Doppler bins of the coarse grid (unwrapped about the centroid as the filters'),
+    # found among the n_az bins of the pulses' grid: kx = m / (n_az dx_m)
+    kx_c = 2.0 * math.sin(centroid_squint_rad) / wavelength_m
+    span = 1.0 / dx_out
+    kx = np.fft.fftfreq(n_out, dx_out)
+    kx = kx_c + (kx - kx_c + span / 2.0) % span - span / 2.0
+    fine = np.round(kx * n_az * dx_m).astype(np.int64) % n_az
+    return replace(f, n_az=n_az, azimuth=azimuth, rows=fine[f.rows])
 
 
 class RdaTileImager:
