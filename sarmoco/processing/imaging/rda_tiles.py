@@ -115,7 +115,8 @@ def grid_spacing(dx_m: float) -> float:
     return math.floor(dx_m / scale) * scale
 
 
-@functools.lru_cache(maxsize=4)
+# the running block shape at each of the four levels, and the last blocks of segments
+@functools.lru_cache(maxsize=6)
 def block_filters(
     n_az: int,
     dx_m: float,
