@@ -92,6 +92,7 @@ import scipy.fft
 from sarmoco.app.demo import free_udp_port, read_json_line
 from sarmoco.app.simconfig import loopback_config, scenario_config
 from sarmoco.daemon.config import live_imaging
+from sarmoco.daemon.livelevel import level_names
 from sarmoco.daemon.status import LIVE_PAGE_POLL_S
 from sarmoco.daemon.threadcpu import STAGES
 from sarmoco.drivers.clock import GPS_LEAP_SECONDS_DEFAULT
@@ -522,13 +523,29 @@ def pulse_figures(run: BenchRun) -> dict[str, Any]:
     }
 
 
-def _check_arguments(preset: str, scale: float, duration_s: float) -> None:
+def _check_arguments(preset: str, scale: float, duration_s: float, min_level: int) -> None:
     if preset not in PRESETS:
         raise ConfigError(f"bench --preset: {preset!r} is not one of {', '.join(PRESETS)}")
     if not 0.0 < scale <= 1.0:
         raise ConfigError(f"bench --scale: {scale!r} is not in (0, 1]")
     if not duration_s > 0.0:
         raise ConfigError(f"bench --duration: {duration_s!r} s is not > 0")
+    if not 0 <= min_level < len(level_names()):
+        raise ConfigError(f"bench --min-level: {min_level!r} is not a level of the live image")
+
+
+def _sections(
+    record: bool, autofocus: bool, presum_first: bool, method: str | None, min_level: int
+) -> dict[str, dict[str, Any]]:
+    """The configuration keys the bench sets on top of the scenario's (see :func:`bench`)."""
+    sections: dict[str, dict[str, Any]] = {
+        "recorder": {"raw_echoes": record},
+        "imaging": {"presum_first": presum_first, "live_min_level": min_level}
+        | ({} if method is None else {"method": method, "live_method": "method"}),
+    }
+    if not autofocus:
+        sections["autofocus"] = {"enabled": False}
+    return sections
 
 
 def bench(
@@ -540,6 +557,7 @@ def bench(
     autofocus: bool = True,
     presum_first: bool = False,
     method: str | None = None,
+    min_level: int = 0,
     work: Path | None = None,
     keep: bool = False,
 ) -> dict[str, Any]:
@@ -564,6 +582,9 @@ def bench(
         Tile image formation of the live run (``imaging.method``: direct, ffbp, rda or
         pfa, with ``imaging.live_method = "method"``); default: the scenario's
         configuration (``imaging.live_method``: pfa for spotlight; else ``imaging.method``).
+    min_level : int
+        Lowest degraded level of the live image (``imaging.live_min_level``; 0: full
+        resolution).
     work : Path, optional
         Where the temporary run folder is made (default: the system's temporary folder).
     keep : bool
@@ -574,23 +595,18 @@ def bench(
     ConfigError
         For an unknown preset, a scale outside (0, 1] or a duration not > 0.
     """
-    _check_arguments(preset, scale, duration_s)
+    _check_arguments(preset, scale, duration_s, min_level)
     if work is not None:
         work.mkdir(parents=True, exist_ok=True)
     out = Path(tempfile.mkdtemp(prefix=f"sarmoco-bench-{preset}-", dir=work))
-    sections: dict[str, dict[str, Any]] = {
-        "recorder": {"raw_echoes": record},
-        "imaging": {"presum_first": presum_first}
-        | ({} if method is None else {"method": method, "live_method": "method"}),
-    }
-    if not autofocus:
-        sections["autofocus"] = {"enabled": False}
+    sections = _sections(record, autofocus, presum_first, method, min_level)
     load_start = os.getloadavg()[0]
     try:
         fft_s = fft_cpu_s_per_pulse(load_preset(preset, scale).radar.n_samples)
         run = live_run(out, preset, scale, duration_s, **sections)
         written = dir_bytes(run.store)
         counted = pulse_figures(run)
+        level = run.status.get("gauges", {}).get("live_image_level")
     finally:
         if not keep:
             shutil.rmtree(out, ignore_errors=True)
@@ -610,7 +626,9 @@ def bench(
             "method": live_imaging(
                 scenario_config(load_preset(preset, scale), **sections)
             ).imaging.method,
-            "live_image_level": run.status.get("gauges", {}).get("live_image_level"),
+            "live_min_level": min_level,
+            "live_image_level": level,
+            "live_image": None if level is None else level_names()[int(level)],
             "bytes_written": written,
             "exit_status": run.exit_status,
             "load_average": [load_start, os.getloadavg()[0]],
@@ -642,6 +660,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="tile image formation of the live run, imaging.method (default: the scenario's "
         "live imager, imaging.live_method: pfa for spotlight, direct otherwise)",
     )
+    p.add_argument(
+        "--min-level",
+        type=int,
+        default=0,
+        help="lowest degraded level of the live image, imaging.live_min_level (default 0: "
+        "full resolution)",
+    )
     p.add_argument("--work", type=Path, help="folder for the temporary run folder")
 
 
@@ -664,6 +689,7 @@ def run_command(args: argparse.Namespace) -> int:
         autofocus=not args.no_autofocus,
         presum_first=args.presum_first,
         method=args.method,
+        min_level=args.min_level,
         work=args.work,
         keep=args.keep,
     )

@@ -735,7 +735,7 @@ class Focuser:
         takes first)."""
         im = cfg.imaging
         self.live = (
-            LiveLevel(im.live_budget, im.live_window_s)
+            LiveLevel(im.live_budget, im.live_window_s, im.live_min_level)
             if im.method in ("rda", "pfa") and im.live_degrade
             else None
         )

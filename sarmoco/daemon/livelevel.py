@@ -60,15 +60,21 @@ class LiveLevel:
         Focusing wall seconds per data second above which the level goes up (``B``).
     window_s : float
         Data seconds of the load's exponential average, and of the hold after a change, s.
+    floor : int
+        Lowest level (``imaging.live_min_level``): the rule starts there and never goes
+        below it.
     """
 
-    def __init__(self, budget: float, window_s: float) -> None:
+    def __init__(self, budget: float, window_s: float, floor: int = 0) -> None:
         if not (budget > 0 and window_s > 0):
             raise ConfigError(f"LiveLevel: budget {budget!r}, window {window_s!r} s not > 0")
+        if not 0 <= floor < len(LEVELS):
+            raise ConfigError(f"LiveLevel: lowest level {floor!r} not in 0..{len(LEVELS) - 1}")
         self.budget = float(budget)
         self.window_s = float(window_s)
-        self.level = 0
-        """Current level, 0 .. len(LEVELS) - 1."""
+        self.floor = floor
+        self.level = floor
+        """Current level, ``floor`` .. len(LEVELS) - 1."""
         self.load = 0.0
         """Focusing wall seconds per data second, averaged."""
         self._seen_s = 0.0
@@ -86,7 +92,7 @@ class LiveLevel:
             return self.level
         if self.load > self.budget and self.level < len(LEVELS) - 1:
             self._change(+1)
-        elif self.level > 0 and self._at(self.level - 1) < HEADROOM * self.budget:
+        elif self.level > self.floor and self._at(self.level - 1) < HEADROOM * self.budget:
             self._change(-1)
         return self.level
 

@@ -64,7 +64,11 @@ def test_bench_prints_sane_figures_and_removes_its_folder(tmp_path: Path) -> Non
 
 @pytest.mark.parametrize(
     ("args", "key"),
-    [(["--scale", "2"], "--scale"), (["--duration", "0"], "--duration")],
+    [
+        (["--scale", "2"], "--scale"),
+        (["--duration", "0"], "--duration"),
+        (["--min-level", "4"], "--min-level"),
+    ],
 )
 def test_bench_refuses_bad_arguments(
     args: list[str], key: str, capsys: pytest.CaptureFixture[str]

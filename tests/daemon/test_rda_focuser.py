@@ -24,6 +24,7 @@ from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.focuser import Focuser
 from sarmoco.daemon.livelevel import LEVEL_COST, LiveLevel, level_names
 from sarmoco.daemon.status import LIVE_PAGE
+from sarmoco.errors import ConfigError
 from sarmoco.processing.imaging.rda_tiles import LEVELS, RdaTileImager, degraded
 from sarmoco.processing.imaging.tiles import Tile, TileLayout
 from sarmoco.processing.metrics import point_target_metrics
@@ -165,6 +166,12 @@ def test_live_level_rule_steps_up_holds_and_steps_down() -> None:
     assert [stay.update(1.0, 0.55) for _ in range(5)] == [2] * 5
     top = LiveLevel(budget=0.8, window_s=1.0)
     assert max(top.update(1.0, 10.0) for _ in range(20)) == len(LEVELS) - 1
+    # a lowest level (imaging.live_min_level): the rule starts there, never goes below it
+    floor = LiveLevel(budget=0.8, window_s=1.0, floor=1)
+    assert floor.level == 1 and {floor.update(1.0, 0.01) for _ in range(10)} == {1}
+    assert max(floor.update(1.0, 10.0) for _ in range(20)) == len(LEVELS) - 1
+    with pytest.raises(ConfigError):
+        LiveLevel(budget=0.8, window_s=1.0, floor=len(LEVELS))
 
 
 def test_focuser_applies_the_level_to_the_tiles_it_forms(strip: SimRun) -> None:
