@@ -185,6 +185,28 @@ def test_focuser_applies_the_level_to_the_tiles_it_forms(strip: SimRun) -> None:
     assert steady.live is None
 
 
+def test_live_load_counts_the_pulses_focused_not_the_holes(strip: SimRun) -> None:
+    """A focuser fallen behind skips recorded pulses: the level rule's data seconds are
+    those of the pulses it focused, so that the skip does not hide the load."""
+    cfg = scenario_config(strip.scenario, imaging={"method": "rda"})
+    focuser = Focuser(cfg, int(strip.t_ns[0]), strip.vel_ned[:256].mean(axis=0))
+    seen: list[float] = []
+
+    class Spy(LiveLevel):
+        def update(self, data_s: float, busy_s: float) -> int:
+            seen.append(data_s)
+            return super().update(data_s, busy_s)
+
+    focuser.live = Spy(cfg.imaging.live_budget, cfg.imaging.live_window_s)
+    n = 32
+    for a, skipped in ((0, False), (n, False), (8 * n, True)):  # 6 blocks skipped
+        b = slice(a, a + n)
+        after = np.zeros(n, bool)
+        after[0] = skipped
+        focuser.push(strip.echo[b], strip.t_ns[b], strip.vel_ned[b], after_skip=after)
+    assert seen == pytest.approx([n / cfg.radar.prf_hz] * 3, rel=1e-12)
+
+
 def test_live_page_names_every_level() -> None:
     names = level_names()
     assert names[0] == "full" and len(names) == len(LEVELS)
