@@ -27,7 +27,7 @@ from __future__ import annotations
 from sarmoco.errors import ConfigError
 from sarmoco.processing.imaging.rda_tiles import LEVELS
 
-LEVEL_COST = (1.0, 0.83, 0.77, 0.75)
+LEVEL_COST = (1.0, 0.86, 0.85, 0.84)
 """Focusing CPU per second of data at each level of
 :data:`~sarmoco.processing.imaging.rda_tiles.LEVELS`, over level 0's: the live chain of a
 full-size ku-vehicle (pre-filter first, autofocus on, range-Doppler tiles) with the level

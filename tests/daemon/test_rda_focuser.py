@@ -22,7 +22,7 @@ import pytest
 
 from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.focuser import Focuser
-from sarmoco.daemon.livelevel import LEVEL_COST, LiveLevel, level_names
+from sarmoco.daemon.livelevel import HEADROOM, LEVEL_COST, LiveLevel, level_names
 from sarmoco.daemon.status import LIVE_PAGE
 from sarmoco.errors import ConfigError
 from sarmoco.processing.imaging.rda_tiles import LEVELS, RdaTileImager, degraded
@@ -160,10 +160,13 @@ def test_live_level_rule_steps_up_holds_and_steps_down() -> None:
     down = [rule.update(1.0, 0.3) for _ in range(20)]
     assert down[-1] == 0 and max(down) <= 2
     assert all(b - a in (-1, 0) for a, b in itertools.pairwise(down))
-    # 0.55 s per s fits at level 2 but not, with the headroom, at the levels below
+    # a load that fits at level 2 but not, with the headroom, at level 1: held at 2
+    held = 1.01 * HEADROOM * 0.8 * LEVEL_COST[2] / LEVEL_COST[1]
     stay = LiveLevel(budget=0.8, window_s=1.0)
-    stay.level, stay.load = 2, 0.55
-    assert [stay.update(1.0, 0.55) for _ in range(5)] == [2] * 5
+    stay.level, stay.load = 2, held
+    assert [stay.update(1.0, held) for _ in range(5)] == [2] * 5
+    lower = 0.98 * HEADROOM * 0.8 * LEVEL_COST[2] / LEVEL_COST[1]  # fits at level 1
+    assert stay.update(1.0, lower) == 1
     top = LiveLevel(budget=0.8, window_s=1.0)
     assert max(top.update(1.0, 10.0) for _ in range(20)) == len(LEVELS) - 1
     # a lowest level (imaging.live_min_level): the rule starts there, never goes below it
