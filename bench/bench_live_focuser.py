@@ -1,13 +1,15 @@
 """CPU of the live focusing chain per second of data: full-size pulses through ``Focuser``.
 
 Run as ``python -m bench.bench_live_focuser [--preset ku-vehicle] [--pulses 9000]
-[--warm-blocks 12] [--method rda] [--profile]``.
+[--warm-blocks 12] [--method rda] [--level 0] [--profile]``.
 
 Simulated raw echoes of the full-size preset (turbulent flight, ideal INS, the
 preset's targets) go through :class:`~sarmoco.daemon.focuser.Focuser` in blocks of
 ``imaging.block_pulses`` with their attitude, as the daemon's focusing loop gives them,
 with the pre-filter before range compression (``imaging.presum_first``), the autofocus
-on and the live level held at full resolution. Nothing else runs in the process: no
+on and the live level held (``--level``: a level of
+:data:`~sarmoco.processing.imaging.rda_tiles.LEVELS`, 0 full resolution; what
+:data:`~sarmoco.daemon.livelevel.LEVEL_COST` is measured with). Nothing else runs in the process: no
 decode, no recording. Process CPU seconds (all threads: numba's and the FFT's pools)
 are counted, not wall time, so a machine shared with other work does not skew them.
 
@@ -35,7 +37,7 @@ from sarmoco.sim.scenario import load_preset
 
 
 def focus_cpu(
-    run: SimRun, method: str, warm_blocks: int, profile: bool
+    run: SimRun, method: str, warm_blocks: int, profile: bool, level: int = 0
 ) -> tuple[float, float, float, float, int, str]:
     """CPU seconds of the whole run, of its steady part and of the segment's end
     (:meth:`Focuser.finish`), the steady part's data seconds, the tiles formed, and
@@ -55,6 +57,8 @@ def focus_cpu(
             if prof is not None:
                 prof.enable()
         b = slice(a, a + block)
+        if focuser.segment is not None:
+            focuser.segment.tiles.level = level
         quat = run.traj.quat[b]
         tiles += len(focuser.push(run.echo[b], run.t_ns[b], run.vel_ned[b], quat=quat).tiles)
     if prof is not None:
@@ -78,6 +82,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--pulses", type=int, default=9000, help="pulses to simulate and focus")
     ap.add_argument("--warm-blocks", type=int, default=12, help="blocks before the steady part")
     ap.add_argument("--method", default="rda", help="imaging.method (rda, pfa, direct, ffbp)")
+    ap.add_argument("--level", type=int, default=0, help="degraded level held (0: full)")
     ap.add_argument("--profile", action="store_true", help="top functions of the steady part")
     args = ap.parse_args(argv)
     run = simulate(
@@ -89,10 +94,11 @@ def main(argv: list[str] | None = None) -> None:
     data_s = float(run.t_ns[-1] - run.t_ns[0]) * 1e-9
     load = os.getloadavg()[0]
     total, steady, end, steady_s, tiles, text = focus_cpu(
-        run, args.method, args.warm_blocks, args.profile
+        run, args.method, args.warm_blocks, args.profile, args.level
     )
     print(f"{args.preset} full size, {run.t_ns.size} pulses ({data_s:.2f} s), {args.method}, "
-          f"presum first, autofocus on; load {load:.1f} on {os.cpu_count()} cores")  # fmt: skip
+          f"level {args.level}, presum first, autofocus on; "
+          f"load {load:.1f} on {os.cpu_count()} cores")  # fmt: skip
     print(f"whole run: {total:.2f} CPU s, {total / data_s:.3f} core-s per data second, "
           f"{tiles} tiles")  # fmt: skip
     print(f"steady (from block {args.warm_blocks}, {steady_s:.2f} s of data): {steady:.2f} CPU s, "

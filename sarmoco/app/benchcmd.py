@@ -51,7 +51,11 @@ What is measured (one JSON line with ``--json``):
     Pulse to live tile: the store's ``images`` ``committed`` counter is polled with the
     pulses'; a tile that became committed gets the poll's host GPS time, less the time of
     the first pulse that formed it (its ``t0_ns``: the longest wait of its pulses), over
-    the tiles.
+    the tiles. This includes the synthetic aperture itself.
+``tile_latency_last_p50_s``, ``tile_latency_last_p99_s``
+    The same from the last pulse that formed the tile (its ``t1_ns``): what the tile
+    waited for once its aperture was complete (the blocks of tiles formed together, the
+    stages' delays, the focus backlog, the forming and storing).
 ``peak_rss_mb``, ``rss_growth_mb_per_min``, ``rss_mb_start``, ``rss_mb_middle``, ``rss_mb_end``
     The daemon's peak VmHWM, and the slope of a line fitted to its VmRSS (sampled every
     second) after a warm-up of a third of the stream (30 s at most); VmRSS at the first
@@ -88,6 +92,7 @@ import scipy.fft
 from sarmoco.app.demo import free_udp_port, read_json_line
 from sarmoco.app.simconfig import loopback_config, scenario_config
 from sarmoco.daemon.config import live_imaging
+from sarmoco.daemon.livelevel import level_names
 from sarmoco.daemon.status import LIVE_PAGE_POLL_S
 from sarmoco.daemon.threadcpu import STAGES
 from sarmoco.drivers.clock import GPS_LEAP_SECONDS_DEFAULT
@@ -123,6 +128,8 @@ KEYS = (
     "latency_p99_s",
     "tile_latency_p50_s",
     "tile_latency_p99_s",
+    "tile_latency_last_p50_s",
+    "tile_latency_last_p99_s",
     "lost_pulses",
     "peak_rss_mb",
     "rss_growth_mb_per_min",
@@ -209,19 +216,20 @@ def latencies_s(commits: list[tuple[int, int, int]], t_ns: np.ndarray) -> np.nda
     return np.concatenate(lat) if lat else np.zeros(0)
 
 
-def tile_first_pulses_ns(store: Path, n_tiles: int) -> np.ndarray:
-    """The ``t0_ns`` attribute (first pulse, GPS ns) of the store's first ``n_tiles`` tiles."""
-    t0 = []
+def tile_pulse_times_ns(store: Path, n_tiles: int, key: str) -> np.ndarray:
+    """An attribute of the store's first ``n_tiles`` tiles: ``t0_ns`` (first pulse) or
+    ``t1_ns`` (last pulse), GPS ns."""
+    times = []
     for i in range(n_tiles):
         meta = json.loads((store / "images" / f"tile_{i:06d}" / "zarr.json").read_text())
-        t0.append(int(meta["attributes"]["t0_ns"]))
-    return np.array(t0, dtype=np.int64)
+        times.append(int(meta["attributes"][key]))
+    return np.array(times, dtype=np.int64)
 
 
-def tile_latencies_s(tiles: list[tuple[int, int, int]], t0_ns: np.ndarray) -> np.ndarray:
+def tile_latencies_s(tiles: list[tuple[int, int, int]], pulse_ns: np.ndarray) -> np.ndarray:
     """Pulse-to-tile latency of every tile committed while :func:`watch` polled: the poll's
-    time less the tile's first pulse time ``t0_ns`` (GPS ns, by tile), s."""
-    lat = [(t_poll - t0_ns[a:b]) / 1e9 for t_poll, a, b in tiles if b <= t0_ns.size]
+    time less a pulse time of the tile ``pulse_ns`` (GPS ns, by tile), s."""
+    lat = [(t_poll - pulse_ns[a:b]) / 1e9 for t_poll, a, b in tiles if b <= pulse_ns.size]
     return np.concatenate(lat) if lat else np.zeros(0)
 
 
@@ -294,6 +302,8 @@ class BenchRun:
     """Times of the recorded pulses, GPS ns."""
     tile_t0_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     """First pulse time of each tile seen committed, GPS ns."""
+    tile_t1_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    """Last pulse time of each tile seen committed, GPS ns."""
     live: dict[str, Any] = field(default_factory=dict)
     """The daemon's ``/live.json`` at the end of the stream (the live page's rendering)."""
 
@@ -428,7 +438,8 @@ def live_run(
         store=store,
         live=live,
         t_ns=open_store(store).read("pulses", ["t_ns"])["t_ns"],
-        tile_t0_ns=tile_first_pulses_ns(store, seen.tiles[-1][2] if seen.tiles else 0),
+        tile_t0_ns=tile_pulse_times_ns(store, seen.tiles[-1][2] if seen.tiles else 0, "t0_ns"),
+        tile_t1_ns=tile_pulse_times_ns(store, seen.tiles[-1][2] if seen.tiles else 0, "t1_ns"),
     )
 
 
@@ -461,9 +472,11 @@ def figures(run: BenchRun, fft_s_per_pulse: float) -> dict[str, float]:
     busy = c.get("processing_busy_seconds", 0.0)
     lat = latencies_s(run.watch.commits, run.t_ns)
     p50, p99 = np.percentile(lat, [50, 99]) if lat.size else (float("nan"), float("nan"))
-    tile_lat = tile_latencies_s(run.watch.tiles, run.tile_t0_ns)
     nan2 = (float("nan"), float("nan"))
+    tile_lat = tile_latencies_s(run.watch.tiles, run.tile_t0_ns)
     tile_p50, tile_p99 = np.percentile(tile_lat, [50, 99]) if tile_lat.size else nan2
+    last_lat = tile_latencies_s(run.watch.tiles, run.tile_t1_ns)
+    last_p50, last_p99 = np.percentile(last_lat, [50, 99]) if last_lat.size else nan2
     warmup = min(RSS_WARMUP_MAX_S, run.duration_s / 3.0)
     return {
         "realtime_ratio": focused / run.prf_hz / busy if busy > 0 else float("nan"),
@@ -472,6 +485,8 @@ def figures(run: BenchRun, fft_s_per_pulse: float) -> dict[str, float]:
         "latency_p99_s": float(p99),
         "tile_latency_p50_s": float(tile_p50),
         "tile_latency_p99_s": float(tile_p99),
+        "tile_latency_last_p50_s": float(last_p50),
+        "tile_latency_last_p99_s": float(last_p99),
         "lost_pulses": float(run.pulses_sent - run.t_ns.size),
         "peak_rss_mb": run.peak_rss_kb / 1024.0,
         "rss_growth_mb_per_min": rss_trend_mb_per_min(run.watch.rss, warmup),
@@ -508,13 +523,29 @@ def pulse_figures(run: BenchRun) -> dict[str, Any]:
     }
 
 
-def _check_arguments(preset: str, scale: float, duration_s: float) -> None:
+def _check_arguments(preset: str, scale: float, duration_s: float, min_level: int) -> None:
     if preset not in PRESETS:
         raise ConfigError(f"bench --preset: {preset!r} is not one of {', '.join(PRESETS)}")
     if not 0.0 < scale <= 1.0:
         raise ConfigError(f"bench --scale: {scale!r} is not in (0, 1]")
     if not duration_s > 0.0:
         raise ConfigError(f"bench --duration: {duration_s!r} s is not > 0")
+    if not 0 <= min_level < len(level_names()):
+        raise ConfigError(f"bench --min-level: {min_level!r} is not a level of the live image")
+
+
+def _sections(
+    record: bool, autofocus: bool, presum_first: bool, method: str | None, min_level: int
+) -> dict[str, dict[str, Any]]:
+    """The configuration keys the bench sets on top of the scenario's (see :func:`bench`)."""
+    sections: dict[str, dict[str, Any]] = {
+        "recorder": {"raw_echoes": record},
+        "imaging": {"presum_first": presum_first, "live_min_level": min_level}
+        | ({} if method is None else {"method": method, "live_method": "method"}),
+    }
+    if not autofocus:
+        sections["autofocus"] = {"enabled": False}
+    return sections
 
 
 def bench(
@@ -526,6 +557,7 @@ def bench(
     autofocus: bool = True,
     presum_first: bool = False,
     method: str | None = None,
+    min_level: int = 0,
     work: Path | None = None,
     keep: bool = False,
 ) -> dict[str, Any]:
@@ -550,6 +582,9 @@ def bench(
         Tile image formation of the live run (``imaging.method``: direct, ffbp, rda or
         pfa, with ``imaging.live_method = "method"``); default: the scenario's
         configuration (``imaging.live_method``: pfa for spotlight; else ``imaging.method``).
+    min_level : int
+        Lowest degraded level of the live image (``imaging.live_min_level``; 0: full
+        resolution).
     work : Path, optional
         Where the temporary run folder is made (default: the system's temporary folder).
     keep : bool
@@ -560,23 +595,18 @@ def bench(
     ConfigError
         For an unknown preset, a scale outside (0, 1] or a duration not > 0.
     """
-    _check_arguments(preset, scale, duration_s)
+    _check_arguments(preset, scale, duration_s, min_level)
     if work is not None:
         work.mkdir(parents=True, exist_ok=True)
     out = Path(tempfile.mkdtemp(prefix=f"sarmoco-bench-{preset}-", dir=work))
-    sections: dict[str, dict[str, Any]] = {
-        "recorder": {"raw_echoes": record},
-        "imaging": {"presum_first": presum_first}
-        | ({} if method is None else {"method": method, "live_method": "method"}),
-    }
-    if not autofocus:
-        sections["autofocus"] = {"enabled": False}
+    sections = _sections(record, autofocus, presum_first, method, min_level)
     load_start = os.getloadavg()[0]
     try:
         fft_s = fft_cpu_s_per_pulse(load_preset(preset, scale).radar.n_samples)
         run = live_run(out, preset, scale, duration_s, **sections)
         written = dir_bytes(run.store)
         counted = pulse_figures(run)
+        level = run.status.get("gauges", {}).get("live_image_level")
     finally:
         if not keep:
             shutil.rmtree(out, ignore_errors=True)
@@ -596,7 +626,9 @@ def bench(
             "method": live_imaging(
                 scenario_config(load_preset(preset, scale), **sections)
             ).imaging.method,
-            "live_image_level": run.status.get("gauges", {}).get("live_image_level"),
+            "live_min_level": min_level,
+            "live_image_level": level,
+            "live_image": None if level is None else level_names()[int(level)],
             "bytes_written": written,
             "exit_status": run.exit_status,
             "load_average": [load_start, os.getloadavg()[0]],
@@ -628,6 +660,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="tile image formation of the live run, imaging.method (default: the scenario's "
         "live imager, imaging.live_method: pfa for spotlight, direct otherwise)",
     )
+    p.add_argument(
+        "--min-level",
+        type=int,
+        default=0,
+        help="lowest degraded level of the live image, imaging.live_min_level (default 0: "
+        "full resolution)",
+    )
     p.add_argument("--work", type=Path, help="folder for the temporary run folder")
 
 
@@ -650,6 +689,7 @@ def run_command(args: argparse.Namespace) -> int:
         autofocus=not args.no_autofocus,
         presum_first=args.presum_first,
         method=args.method,
+        min_level=args.min_level,
         work=args.work,
         keep=args.keep,
     )

@@ -9,6 +9,7 @@ __all__ = [
     "camera",
     "config",
     "focuser",
+    "livelevel",
     "logging_setup",
     "pipeline",
     "resources",

@@ -26,6 +26,7 @@ from sarmoco.keys import key as _key
 from sarmoco.processing.autofocus.settings import AutofocusConfig
 from sarmoco.processing.geometry import look_angle
 from sarmoco.processing.imaging.presum import PREFILTER_OVERSAMPLING
+from sarmoco.processing.imaging.rda_tiles import LEVELS
 from sarmoco.processing.imaging.tile_pga import TilePgaConfig
 from sarmoco.processing.mocomp import DEFAULT_ENVELOPE_FRACTION
 from sarmoco.processing.types import C_MPS, RadarParams
@@ -364,10 +365,19 @@ class ImagingConfig:
     live_degrade: bool = _key(
         True,
         "With method rda or pfa in a live run: when focusing needs more than live_budget of real "
-        "time, form the live tiles at a degraded level (1: twice the pixel spacing; 2: also "
-        "half the swath; 3: four times the pixel spacing and half the swath), one level up "
-        "at a time, and back down when the level below would fit with a margin; the level "
-        "is the status gauge live_image_level. A replay never degrades",
+        "time, form the live tiles at a degraded level (1: twice the pixel spacing and, for "
+        "rda, a presum by 2: half the Doppler band, twice the azimuth resolution; 2: also "
+        "half the swath; 3: four times the pixel spacing, presum by 4, half the swath), one "
+        "level up at a time, and back down when the level below, at its measured cost, "
+        "would fit with a margin; the level is the status gauge live_image_level. A replay "
+        "never degrades",
+    )
+    live_min_level: int = _key(
+        0,
+        "With live_degrade: the lowest degraded level the live tiles are formed at (0: full "
+        "resolution); the rule moves between it and the last level",
+        ge=0,
+        le=len(LEVELS) - 1,
     )
     live_budget: float = _key(
         0.8,

@@ -735,14 +735,12 @@ class Focuser:
         takes first)."""
         im = cfg.imaging
         self.live = (
-            LiveLevel(im.live_budget, im.live_window_s)
+            LiveLevel(im.live_budget, im.live_window_s, im.live_min_level)
             if im.method in ("rda", "pfa") and im.live_degrade
             else None
         )
         """The degraded level of the live image (:mod:`sarmoco.daemon.livelevel`); None:
         tiles always at the configured pixels and swath."""
-        self._last_t_ns = t0_ns
-        """Time of the last pulse pushed, GPS ns."""
 
     @property
     def track(self) -> ReferenceTrack:
@@ -793,13 +791,13 @@ class Focuser:
         start = time.perf_counter()
         out = self._push(raw, t_ns, vel_ned, known, quat, after_skip)
         if self.live is not None and t_ns.shape[0]:
-            data_s = (int(t_ns[-1]) - self._last_t_ns) * 1e-9
+            # the data seconds of the pulses pushed: a hole the caller skipped (focusing
+            # behind) or a silence of the radar is no time spent focusing
+            data_s = t_ns.shape[0] / self.radar.prf_hz
             level = self.live.update(data_s, time.perf_counter() - start)
             for seg in (self.segment, *(tail for tail, _ in self._tails)):
                 if seg is not None and isinstance(seg.tiles, LIVE_IMAGERS):
                     seg.tiles.level = level
-        if t_ns.shape[0]:
-            self._last_t_ns = int(t_ns[-1])
         return out
 
     def _push(

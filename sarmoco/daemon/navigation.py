@@ -85,12 +85,15 @@ class NavPulses:
         """The pulses of an aligned block of recorded pulses (copies: focusing never
         writes into what the recording path holds)."""
         e = recorded(block)
+        raw = e.complex_samples()  # int16 I/Q: converted into a new array
+        if np.may_share_memory(raw, e.samples):  # complex64 samples: the ring's own
+            raw = raw.copy()
         return cls(
             t_ns=e.t_ns.copy(),
             pulse_id=e.pulse_id.copy(),
             usable=(e.flags & UNFOCUSABLE) == 0,
             flags=e.flags.copy(),
-            raw=np.array(e.complex_samples()),
+            raw=raw,
             pos_ned=block.nav.pos_ned.copy(),
             vel_ned=block.nav.vel_ned.copy(),
             quat=block.nav.quat.copy(),

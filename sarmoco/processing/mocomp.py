@@ -229,12 +229,17 @@ def shift_range(echo: ComplexArray, shift_bins: FloatArray) -> ComplexArray:
     out = np.zeros(echo.shape, dtype=echo.dtype)
     if not inside.any():
         return out
-    reach = int(np.ceil(np.abs(shift[inside]).max()))
+    every = bool(inside.all())
+    rows, shift = (echo, shift) if every else (echo[inside], shift[inside])
+    reach = int(np.ceil(np.abs(shift).max()))
     n_fft = _padded_length(n + reach + SHIFT_GUARD_BINS)
-    spec = np.ascontiguousarray(scipy.fft.fft(echo[inside], n_fft, axis=1), dtype=np.complex64)
-    apply_delay(spec, shift[inside])
+    spec = np.ascontiguousarray(scipy.fft.fft(rows, n_fft, axis=1), dtype=np.complex64)
+    apply_delay(spec, shift)
     moved = scipy.fft.ifft(spec, axis=1, overwrite_x=True)[:, :n]
-    out[inside] = moved
+    if every:
+        out[:] = moved
+    else:
+        out[inside] = moved
     return out
 
 

@@ -12,9 +12,10 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from sarmoco.app.benchcmd import KEYS
+from sarmoco.app.benchcmd import KEYS, tile_latencies_s
 from sarmoco.app.cli import main
 from sarmoco.daemon.threadcpu import STAGES
 from sarmoco.sim.scenario import load_preset
@@ -43,6 +44,8 @@ def test_bench_prints_sane_figures_and_removes_its_folder(tmp_path: Path) -> Non
     # the whole chain costs more CPU per pulse than one FFT of the pulse, but not absurdly
     assert 1.0 < r["fft_floor_ratio"] < 1e5
     assert 0.0 < r["latency_p50_s"] <= r["latency_p99_s"] < 60.0
+    # a tile waits less after its last pulse than after its first (NaN: none seen live)
+    assert not r["tile_latency_last_p99_s"] > r["tile_latency_p99_s"]
     assert 50.0 < r["peak_rss_mb"] < 4096.0
     # every stage took CPU for the pulses it saw, and one of the chain's bounds it
     assert set(r["stage_cpu_us_per_pulse"]) == set(STAGES)
@@ -61,7 +64,11 @@ def test_bench_prints_sane_figures_and_removes_its_folder(tmp_path: Path) -> Non
 
 @pytest.mark.parametrize(
     ("args", "key"),
-    [(["--scale", "2"], "--scale"), (["--duration", "0"], "--duration")],
+    [
+        (["--scale", "2"], "--scale"),
+        (["--duration", "0"], "--duration"),
+        (["--min-level", "4"], "--min-level"),
+    ],
 )
 def test_bench_refuses_bad_arguments(
     args: list[str], key: str, capsys: pytest.CaptureFixture[str]
@@ -69,3 +76,14 @@ def test_bench_refuses_bad_arguments(
     status = main(["bench", "--preset", PRESET, "--duration", "1", *args])
     assert status == 2
     assert f"bench {key}" in capsys.readouterr().err
+
+
+def test_tile_latency_counts_from_the_pulse_given() -> None:
+    # two polls saw tiles 0-1 and then tile 2 committed; each tile's first and last pulse
+    t0 = np.array([1_000, 2_000, 3_000]) * 10**6
+    t1 = t0 + 4_000 * 10**6
+    polls = [(9_000 * 10**6, 0, 2), (10_000 * 10**6, 2, 3)]
+    assert tile_latencies_s(polls, t0).tolist() == [8.0, 7.0, 7.0]
+    assert tile_latencies_s(polls, t1).tolist() == [4.0, 3.0, 3.0]
+    # a poll beyond the tiles whose times were read is left out
+    assert tile_latencies_s(polls, t1[:2]).tolist() == [4.0, 3.0]

@@ -5,8 +5,12 @@ pulses had been left out."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
+from sarmoco.daemon.aligner import AlignedBlock
+from sarmoco.daemon.backlog import RecordedBatch
 from sarmoco.daemon.navigation import GapFill, NavPulses
+from sarmoco.processing.navinterp import PulseNav
 
 PRI_NS = 1_000_000
 
@@ -63,3 +67,21 @@ def test_a_block_that_begins_in_a_hole_starts_from_the_last_pulse_with_navigatio
     share = (t[50:70] - t[39]) / (t[70] - t[39])
     np.testing.assert_allclose(second.vel_ned[:20], v39 + share[:, None] * (v70 - v39), rtol=1e-12)
     assert not np.any(first.raw[40:]) and not np.any(second.raw[:20])
+
+
+@pytest.mark.parametrize("dtype", [np.int16, np.complex64])
+def test_focused_pulses_are_never_the_recorded_ones(dtype: type) -> None:
+    # the focuser works on the raw echoes in place: they must be copies of what the
+    # recording path holds, whichever format the ring keeps (int16 I/Q or complex64)
+    n, s = 3, 5
+    rng = np.random.default_rng(2)
+    iq = rng.integers(-900, 900, (n, s, 2)).astype(np.int16)
+    samples = iq if dtype == np.int16 else iq.astype(np.float32).view(np.complex64)[..., 0]
+    t = np.arange(n) * PRI_NS
+    echoes = RecordedBatch(samples, t, np.arange(n), np.zeros(n, np.int32),
+                           np.zeros(n, np.uint32), np.arange(n))  # fmt: skip
+    nav = PulseNav(t, np.zeros((n, 3)), np.ones((n, 3)), np.ones((n, 4)), np.ones(n, bool))
+    p = NavPulses.of(AlignedBlock(echoes, nav))
+    assert p.raw.dtype == np.complex64 and p.raw.shape == (n, s)
+    assert np.array_equal(p.raw, iq[..., 0] + 1j * iq[..., 1])
+    assert not np.may_share_memory(p.raw, samples)

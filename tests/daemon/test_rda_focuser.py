@@ -22,8 +22,9 @@ import pytest
 
 from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.focuser import Focuser
-from sarmoco.daemon.livelevel import LiveLevel, level_names
+from sarmoco.daemon.livelevel import HEADROOM, LEVEL_COST, LiveLevel, level_names
 from sarmoco.daemon.status import LIVE_PAGE
+from sarmoco.errors import ConfigError
 from sarmoco.processing.imaging.rda_tiles import LEVELS, RdaTileImager, degraded
 from sarmoco.processing.imaging.tiles import Tile, TileLayout
 from sarmoco.processing.metrics import point_target_metrics
@@ -47,7 +48,8 @@ def strip() -> SimRun:
     return simulate(scn, MotionSpec(kind="turbulence", seed=1), "ideal")
 
 
-def _focus(run: SimRun, **imaging: object) -> tuple[list[Tile], Focuser]:
+def _focus(run: SimRun, level: int = 0, **imaging: object) -> tuple[list[Tile], Focuser]:
+    """Tiles of ``run`` through a focuser (``level``: a degraded level held throughout)."""
     cfg = scenario_config(
         run.scenario, autofocus={"enabled": False}, imaging={"method": "rda", **imaging}
     )
@@ -56,6 +58,8 @@ def _focus(run: SimRun, **imaging: object) -> tuple[list[Tile], Focuser]:
     for a in range(0, run.t_ns.size, cfg.imaging.block_pulses):
         b = slice(a, a + cfg.imaging.block_pulses)
         tiles += focuser.push(run.echo[b], run.t_ns[b], run.vel_ned[b]).tiles
+        if level and focuser.segment is not None:  # a segment forms no tile in its first block
+            focuser.segment.tiles.level = level
     return tiles + focuser.finish().tiles, focuser
 
 
@@ -94,13 +98,53 @@ def test_live_imager_focuses_point_targets_as_theory(strip: SimRun) -> None:
 def test_degraded_level_forms_coarser_narrower_tiles() -> None:
     layout = TileLayout(100.0, 900.0, 300.0, 10.0, 0.1, 0.06)
     assert degraded(layout, 0) is layout
-    for level, (pixel, narrow) in enumerate(LEVELS):
+    for level, (pixel, narrow, _) in enumerate(LEVELS):
         d = degraded(layout, level)
         assert d.pixel_m == pytest.approx(0.1 * pixel)
         assert d.swath_m == pytest.approx(300.0 / narrow)
         assert d.ground_range_m == layout.ground_range_m
         g = d.grid(3)
         assert g.axis0_m.size == round(10.0 / d.pixel_m)
+
+
+def test_presum_level_widens_the_azimuth_response_as_its_band(strip: SimRun) -> None:
+    """Level 1 presums by 2: the processed Doppler band, the imaged beam's at level 0
+    (wider than the real beam by the squint tolerance), is halved about the centroid. A
+    point target's azimuth IRW is then ``0.886 / B`` of that band, its PSLR still the
+    sinc's (the band stays a rectangle within the real beam's), its range response and
+    position as at level 0, its energy the share of the real beam's band kept."""
+    presum = LEVELS[1][2]
+    assert presum == 2
+    full, _ = _focus(strip)
+    half, focuser = _focus(strip, level=1)
+    scn, track = strip.scenario, focuser.track
+    lam = scn.radar.wavelength_m
+    imaged = scenario_config(scn).imaging.imaged_beam_rad()
+    sin_band = math.sin(imaged / 2.0) / presum  # half the processed band, as sin(angle)
+    irw_az = 0.886 * lam / (4.0 * sin_band)
+    kept = sin_band / math.sin(scn.integration_angle_rad / 2.0)  # of the real beam's band
+    assert 0.5 < kept < 1.0
+    for tgt in strip.targets_ned:
+        d = tgt - strip.apc_ned[0]
+        x, y = float(d @ track.x_hat), float(d @ track.y_hat)
+        m0 = point_target_metrics(_window(full, x, y), (x, y), 0.5)
+        m = point_target_metrics(_window(half, x, y), (x, y), 0.5)
+        msg = f"y {y:.1f} m: level 1 {m}, level 0 {m0}, theory az IRW {irw_az:.4f} m"
+        print(msg)
+        assert abs(m.axis0.pslr_db - SINC_PSLR_DB) <= 0.5, msg
+        assert abs(m.axis0.irw_m / irw_az - 1.0) <= 0.05, msg
+        assert abs(m.axis1.irw_m / m0.axis1.irw_m - 1.0) <= 0.05, msg
+        assert m.position_error_m is not None
+        assert math.hypot(*m.position_error_m) < 0.02
+        # peak a N (N: the pulses of the band kept), IRW 1 / B: energy a² N² / B ∝ the band
+        ratio = _energy(_window(half, x, y)) / _energy(_window(full, x, y))
+        assert abs(ratio / kept - 1.0) <= 0.05, f"energy ratio {ratio:.3f}, {msg}"
+
+
+def _energy(image: Image) -> float:
+    """Sum of |pixel|² times the pixel area: a point response's energy, whatever the pixels."""
+    area = float(np.diff(image.axis0_m)[0] * np.diff(image.axis1_m)[0])
+    return float(np.sum(np.abs(image.data) ** 2)) * area
 
 
 def test_live_level_rule_steps_up_holds_and_steps_down() -> None:
@@ -110,12 +154,27 @@ def test_live_level_rule_steps_up_holds_and_steps_down() -> None:
     assert levels[:4] == [0] * 4 and levels[4] == 1
     assert levels[5:9] == [1] * 4 and levels[9] == 2  # still over budget: up again
     assert rule.update(0.0, 5.0) == 2  # no data: nothing decided
-    # the cost halves at each level: 0.3 s per s now fits twice over with headroom
-    down = [rule.update(1.0, 0.2) for _ in range(20)]
+    # the load expected one level down is the measured cost ratio times this one's
+    assert rule.load * LEVEL_COST[1] / LEVEL_COST[2] == pytest.approx(rule._at(1))
+    # 0.3 s per s at level 2 would be 0.3 c1 / c2 at level 1: within 0.7 of the budget
+    down = [rule.update(1.0, 0.3) for _ in range(20)]
     assert down[-1] == 0 and max(down) <= 2
     assert all(b - a in (-1, 0) for a, b in itertools.pairwise(down))
+    # a load that fits at level 2 but not, with the headroom, at level 1: held at 2
+    held = 1.01 * HEADROOM * 0.8 * LEVEL_COST[2] / LEVEL_COST[1]
+    stay = LiveLevel(budget=0.8, window_s=1.0)
+    stay.level, stay.load = 2, held
+    assert [stay.update(1.0, held) for _ in range(5)] == [2] * 5
+    lower = 0.98 * HEADROOM * 0.8 * LEVEL_COST[2] / LEVEL_COST[1]  # fits at level 1
+    assert stay.update(1.0, lower) == 1
     top = LiveLevel(budget=0.8, window_s=1.0)
     assert max(top.update(1.0, 10.0) for _ in range(20)) == len(LEVELS) - 1
+    # a lowest level (imaging.live_min_level): the rule starts there, never goes below it
+    floor = LiveLevel(budget=0.8, window_s=1.0, floor=1)
+    assert floor.level == 1 and {floor.update(1.0, 0.01) for _ in range(10)} == {1}
+    assert max(floor.update(1.0, 10.0) for _ in range(20)) == len(LEVELS) - 1
+    with pytest.raises(ConfigError):
+        LiveLevel(budget=0.8, window_s=1.0, floor=len(LEVELS))
 
 
 def test_focuser_applies_the_level_to_the_tiles_it_forms(strip: SimRun) -> None:
@@ -124,14 +183,39 @@ def test_focuser_applies_the_level_to_the_tiles_it_forms(strip: SimRun) -> None:
     assert focuser.live is not None and focuser.live.level >= 1
     pixel = scenario_config(strip.scenario).imaging.pixel_m
     spacing = {round(float(np.diff(t.grid.axis0_m)[0]) / pixel) for t in tiles}
-    assert spacing - {1} and spacing <= {p for p, _ in LEVELS}
+    assert spacing - {1} and spacing <= {p for p, _, _ in LEVELS}
     _, steady = _focus(strip, live_degrade=False)
     assert steady.live is None
+
+
+def test_live_load_counts_the_pulses_focused_not_the_holes(strip: SimRun) -> None:
+    """A focuser fallen behind skips recorded pulses: the level rule's data seconds are
+    those of the pulses it focused, so that the skip does not hide the load."""
+    cfg = scenario_config(strip.scenario, imaging={"method": "rda"})
+    focuser = Focuser(cfg, int(strip.t_ns[0]), strip.vel_ned[:256].mean(axis=0))
+    seen: list[float] = []
+
+    class Spy(LiveLevel):
+        def update(self, data_s: float, busy_s: float) -> int:
+            seen.append(data_s)
+            return super().update(data_s, busy_s)
+
+    focuser.live = Spy(cfg.imaging.live_budget, cfg.imaging.live_window_s)
+    n = 32
+    for a, skipped in ((0, False), (n, False), (8 * n, True)):  # 6 blocks skipped
+        b = slice(a, a + n)
+        after = np.zeros(n, bool)
+        after[0] = skipped
+        focuser.push(strip.echo[b], strip.t_ns[b], strip.vel_ned[b], after_skip=after)
+    assert seen == pytest.approx([n / cfg.radar.prf_hz] * 3, rel=1e-12)
 
 
 def test_live_page_names_every_level() -> None:
     names = level_names()
     assert names[0] == "full" and len(names) == len(LEVELS)
+    # every level has its measured cost, each cheaper than the one before
+    assert len(LEVEL_COST) == len(LEVELS) and LEVEL_COST[0] == 1.0
+    assert all(b < a for a, b in itertools.pairwise(LEVEL_COST))
     assert json.dumps(names) in LIVE_PAGE
 
 

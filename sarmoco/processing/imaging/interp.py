@@ -45,14 +45,17 @@ def _kernel_table(taps: int) -> npt.NDArray[np.float64]:
 def _interp_rows(
     x: ComplexArray, pos: FloatArray, table: npt.NDArray[np.float64], out: ComplexArray
 ) -> None:  # pragma: no cover - compiled
-    """``out[i, j]``: row ``i`` of ``x`` at ``pos[i, j]`` with the tabulated kernel."""
+    """``out[i, j]``: row ``i`` of ``x`` at ``pos[i, j]`` (``pos[0, j]`` when ``pos`` has
+    one row: the same positions for every row) with the tabulated kernel."""
     n = x.shape[1]
     steps = table.shape[0] - 1
     taps = table.shape[1]
     half = taps // 2
+    stride = 0 if pos.shape[0] == 1 else 1  # one row of positions: shared by every row
     for i in numba.prange(x.shape[0]):
+        row = i * stride
         for j in range(pos.shape[1]):
-            p = pos[i, j]
+            p = pos[row, j]
             if not (p >= 0.0 and p <= n - 1):
                 out[i, j] = 0.0
                 continue
@@ -69,6 +72,38 @@ def _interp_rows(
             out[i, j] = re + 1j * im
 
 
+@numba.njit(parallel=True, nogil=True, cache=True)
+def _interp_columns(
+    x: ComplexArray, pos: FloatArray, table: npt.NDArray[np.float64], out: ComplexArray
+) -> None:  # pragma: no cover - compiled
+    """``out[j, k]``: column ``k`` of ``x`` at row position ``pos[j]`` with the tabulated
+    kernel (the sums of :func:`_interp_rows`, term by term, over contiguous rows)."""
+    n = x.shape[0]
+    cols = x.shape[1]
+    steps = table.shape[0] - 1
+    taps = table.shape[1]
+    half = taps // 2
+    for j in numba.prange(pos.shape[0]):
+        p = pos[j]
+        if not (p >= 0.0 and p <= n - 1):
+            out[j, :] = 0.0
+            continue
+        base = int(np.floor(p))
+        w = table[int((p - base) * steps + 0.5)]
+        re = np.zeros(cols)
+        im = np.zeros(cols)
+        for t in range(taps):
+            idx = base - half + 1 + t
+            if 0 <= idx < n:
+                wt = w[t]
+                for k in range(cols):
+                    v = x[idx, k]
+                    re[k] += v.real * wt
+                    im[k] += v.imag * wt
+        for k in range(cols):
+            out[j, k] = re[k] + 1j * im[k]
+
+
 def sinc_interp(x: ComplexArray, pos: FloatArray, taps: int = 16) -> ComplexArray:
     """Interpolate rows of ``x`` at fractional sample positions.
 
@@ -76,8 +111,9 @@ def sinc_interp(x: ComplexArray, pos: FloatArray, taps: int = 16) -> ComplexArra
     ----------
     x : ndarray of complex, shape (M, N)
         M independent rows of N uniform samples.
-    pos : ndarray of float64, shape (M, K)
-        Positions to evaluate in each row, in samples (0 = first sample).
+    pos : ndarray of float64, shape (M, K) or (1, K)
+        Positions to evaluate in each row, in samples (0 = first sample); one row: the
+        same positions in every row of ``x``.
         Taps that fall outside ``[0, N)`` count as zero; an output outside
         ``[0, N - 1]`` is set to zero.
     taps : int
@@ -90,11 +126,47 @@ def sinc_interp(x: ComplexArray, pos: FloatArray, taps: int = 16) -> ComplexArra
     """
     if taps < 2 or taps % 2:
         raise ProcessingError(f"sinc_interp: taps {taps!r} must be even and >= 2")
-    if x.ndim != 2 or pos.ndim != 2 or pos.shape[0] != x.shape[0]:
+    if x.ndim != 2 or pos.ndim != 2 or pos.shape[0] not in (1, x.shape[0]):
         raise ProcessingError(f"sinc_interp: shapes x{x.shape} pos{pos.shape} disagree")
     dtype = np.result_type(x.dtype, np.complex64)
-    out = np.empty(pos.shape, dtype=dtype)
+    out = np.empty((x.shape[0], pos.shape[1]), dtype=dtype)
     _interp_rows(
+        np.ascontiguousarray(x, dtype=dtype),
+        np.ascontiguousarray(pos, dtype=np.float64),
+        _kernel_table(taps),
+        out,
+    )
+    return out
+
+
+def sinc_interp_columns(x: ComplexArray, pos: FloatArray, taps: int = 16) -> ComplexArray:
+    """Interpolate every column of ``x`` at the same fractional row positions.
+
+    The result equals ``sinc_interp(x.T, pos[None, :], taps).T`` (the same kernel and
+    sums), computed over contiguous rows without transposing.
+
+    Parameters
+    ----------
+    x : ndarray of complex, shape (N, M)
+        N uniform samples (rows) of M independent columns.
+    pos : ndarray of float64, shape (K,)
+        Row positions to evaluate, in samples (0 = first row). Taps that fall outside
+        ``[0, N)`` count as zero; an output row outside ``[0, N - 1]`` is set to zero.
+    taps : int
+        Kernel length, even.
+
+    Returns
+    -------
+    ndarray of complex, shape (K, M)
+        Same precision as ``x`` (complex64 stays complex64).
+    """
+    if taps < 2 or taps % 2:
+        raise ProcessingError(f"sinc_interp_columns: taps {taps!r} must be even and >= 2")
+    if x.ndim != 2 or pos.ndim != 1:
+        raise ProcessingError(f"sinc_interp_columns: shapes x{x.shape} pos{pos.shape}")
+    dtype = np.result_type(x.dtype, np.complex64)
+    out = np.empty((pos.shape[0], x.shape[1]), dtype=dtype)
+    _interp_columns(
         np.ascontiguousarray(x, dtype=dtype),
         np.ascontiguousarray(pos, dtype=np.float64),
         _kernel_table(taps),
@@ -140,7 +212,8 @@ def fft_upsample(x: ComplexArray, factor: int) -> ComplexArray:
 
 
 def warm_up() -> None:
-    """Compile the kernel of :func:`sinc_interp` (or load it from numba's cache) for
-    complex64 and complex128 rows."""
+    """Compile the kernels of :func:`sinc_interp` and :func:`sinc_interp_columns` (or load
+    them from numba's cache) for complex64 and complex128 samples."""
     for dtype in (np.complex64, np.complex128):
         sinc_interp(np.ones((2, 8), dtype), np.full((2, 3), 2.5))
+        sinc_interp_columns(np.ones((8, 2), dtype), np.full(3, 2.5))

@@ -43,7 +43,7 @@ import scipy.fft
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.imaging.interp import sinc_interp
 from sarmoco.processing.phasor import phasor
-from sarmoco.processing.types import C_MPS, ComplexArray, FloatArray, Image
+from sarmoco.processing.types import C_MPS, ComplexArray, FloatArray, Image, IntArray
 
 BAND_MARGIN = 1.5
 """Default processed angle over the angle the block subtends."""
@@ -55,20 +55,37 @@ class RdaFilters:
 
     Attributes
     ----------
+    The filters hold only the ``M`` Doppler rows with a bin in the processed band: the
+    others are zero after azimuth compression, so their range steps are left out.
+
+    Attributes
+    ----------
     n_az : int
         Azimuth FFT length.
-    src : ndarray of complex, shape (n_az, S) or None
-        Secondary range compression, a range-frequency phase per Doppler row (None: off).
-    rcmc_bins : ndarray of float64, shape (n_az, S)
+    src : ndarray of complex, shape (M, N) or None
+        Secondary range compression, a range-frequency phase per Doppler row over a range
+        FFT of ``N = next_fast_len(S)`` bins (the bins zero-padded; None: off).
+    rcmc_bins : ndarray of float64, shape (M, S)
         Where each Doppler row takes the range bin of ``r0``: ``(r0 / D - r_first) / dr``.
-    azimuth : ndarray of complex, shape (n_az, S)
+    azimuth : ndarray of complex, shape (M, S)
         Azimuth compression ``exp(+j 4 pi r0 D / lambda)`` in the processed band, 0 outside.
+    rows : ndarray of int, shape (M,)
+        The bins of the ``n_az``-point azimuth FFT the rows take.
+    n_out : int
+        Inverse azimuth FFT length: ``n_az``, or fewer for a band narrower than the pulses'
+        grid holds (a presum in the Doppler domain: the image comes out on an along-track
+        grid ``n_az / n_out`` times coarser).
+    out_rows : ndarray of int, shape (M,)
+        The bins of the inverse FFT the rows go to (the others are zero).
     """
 
     n_az: int
     src: ComplexArray | None
     rcmc_bins: FloatArray
     azimuth: ComplexArray
+    rows: IntArray
+    n_out: int
+    out_rows: IntArray
 
 
 def rda_filters(
@@ -116,7 +133,7 @@ def rda_filters(
     src_filter = None
     if src:
         fc = C_MPS / wavelength_m
-        fr = np.fft.fftfreq(s, dr) * C_MPS / 2.0
+        fr = np.fft.fftfreq(scipy.fft.next_fast_len(s), dr) * C_MPS / 2.0
         a2 = (fc * sin_sq[:, None]) ** 2
         resid = np.sqrt((fc + fr[None, :]) ** 2 - a2) - fc * d[:, None] - fr[None, :] / d[:, None]
         r_ref = float(range_axis_m[s // 2])
@@ -125,23 +142,38 @@ def rda_filters(
     rcmc = (range_axis_m[None, :] / d[:, None] - range_axis_m[0]) / dr
     azimuth = phasor((4.0 * np.pi / wavelength_m) * d[:, None] * range_axis_m[None, :], dtype)
     azimuth[~band] = 0.0
-    return RdaFilters(n_az, src_filter, rcmc, azimuth)
+    rows = np.flatnonzero(band.any(axis=1))
+    return RdaFilters(
+        n_az,
+        None if src_filter is None else src_filter[rows],
+        rcmc[rows],
+        azimuth[rows],
+        rows,
+        n_az,
+        rows,
+    )
 
 
 def focus_block(rc: ComplexArray, filters: RdaFilters, taps: int = 16) -> ComplexArray:
     """Range-Doppler focus of ``rc`` (P × S, P <= ``filters.n_az``) with ``filters``.
 
-    Returns the (P × S) image in the filters' precision (complex64 filters and pulses
-    are transformed in single precision).
+    Returns the image in the filters' precision (complex64 filters and pulses are
+    transformed in single precision): P × S, or ``ceil(P n_out / n_az)`` rows of a
+    coarser grid (``filters.n_out``).
     """
-    p = rc.shape[0]
+    p, s = rc.shape
     rd = scipy.fft.fft(np.asarray(rc, dtype=filters.azimuth.dtype), n=filters.n_az, axis=0)
+    rd = rd[filters.rows]  # the rows in the band
     if filters.src is not None:
-        rd = scipy.fft.ifft(scipy.fft.fft(rd, axis=1) * filters.src, axis=1)
+        spectrum = scipy.fft.fft(rd, n=filters.src.shape[1], axis=1, overwrite_x=True)
+        spectrum *= filters.src
+        rd = scipy.fft.ifft(spectrum, axis=1, overwrite_x=True)[:, :s]
     rd = sinc_interp(rd, filters.rcmc_bins, taps)
     rd *= filters.azimuth
-    out: ComplexArray = scipy.fft.ifft(rd, axis=0)[:p]
-    return out
+    spectrum = np.zeros((filters.n_out, s), dtype=rd.dtype)
+    spectrum[filters.out_rows] = rd
+    out: ComplexArray = scipy.fft.ifft(spectrum, axis=0, overwrite_x=True)
+    return out[: -(-p * filters.n_out // filters.n_az)]
 
 
 def range_doppler(

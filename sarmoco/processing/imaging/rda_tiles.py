@@ -53,7 +53,7 @@ import scipy.fft
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.imaging.grid import PlaneGrid
-from sarmoco.processing.imaging.interp import sinc_interp
+from sarmoco.processing.imaging.interp import sinc_interp, sinc_interp_columns
 from sarmoco.processing.imaging.rda import RdaFilters, focus_block, rda_filters
 from sarmoco.processing.imaging.tiles import Tile, TileLayout
 from sarmoco.processing.phasor import phasor
@@ -71,9 +71,11 @@ GRID_DIGITS = 3
 HOLE_SPACINGS = 1.5
 """A stretch between two pulses longer than this many nominal spacings is a hole."""
 
-LEVELS = ((1, 1), (2, 1), (2, 2), (4, 2))
-"""Degraded levels of the live image: (pixel spacing factor, swath divisor) of level 0, 1,
-2, 3. Each level about halves the cost of a tile (range bins and pixels)."""
+LEVELS = ((1, 1, 1), (2, 1, 2), (2, 2, 2), (4, 2, 4))
+"""Degraded levels of the live image: (pixel spacing factor, swath divisor, presum factor) of
+level 0, 1, 2, 3. The presum narrows the processed Doppler band by its factor (azimuth
+resolution that much coarser, the block's range-Doppler steps on that many times fewer
+rows); the polar format imager takes the pixels and the swath only."""
 
 
 def degraded(layout: TileLayout, level: int) -> TileLayout:
@@ -83,22 +85,25 @@ def degraded(layout: TileLayout, level: int) -> TileLayout:
         raise ProcessingError(f"degraded: level {level!r} is not in 0..{len(LEVELS) - 1}")
     if level == 0:
         return layout
-    pixel, narrow = LEVELS[level]
+    pixel, narrow, _ = LEVELS[level]
     return replace(layout, pixel_m=layout.pixel_m * pixel, swath_m=layout.swath_m / narrow)
 
 
 def tile_range_bins(layout: TileLayout, axis: FloatArray, squint_rad: float) -> slice:
     """The bins of the uniform slant-range ``axis`` (m) that the tiles of ``layout`` need:
     their slant-range span, seen up to ``squint_rad`` (rad) off broadside at the far edge,
-    and :data:`RANGE_GUARD_BINS` each side."""
+    and :data:`RANGE_GUARD_BINS` each side (at the far end a few more, up to a fast FFT
+    length, where the axis has them)."""
     h = layout.height_m
     y_lo = layout.ground_range_m - layout.swath_m / 2.0
     y_hi = layout.ground_range_m + layout.swath_m / 2.0
     r_lo = math.hypot(h, max(y_lo, 0.0))
     r_hi = math.hypot(h, y_hi) / math.cos(squint_rad)
-    i0 = int(np.searchsorted(axis, r_lo)) - RANGE_GUARD_BINS
-    i1 = int(np.searchsorted(axis, r_hi)) + RANGE_GUARD_BINS
-    return slice(max(i0, 0), min(i1, axis.size))
+    i0 = max(int(np.searchsorted(axis, r_lo)) - RANGE_GUARD_BINS, 0)
+    i1 = min(int(np.searchsorted(axis, r_hi)) + RANGE_GUARD_BINS, axis.size)
+    # a few more guard bins, where the axis has them, for a fast FFT length in range
+    i1 = min(i0 + scipy.fft.next_fast_len(i1 - i0), axis.size)
+    return slice(i0, i1)
 
 
 def grid_spacing(dx_m: float) -> float:
@@ -110,7 +115,8 @@ def grid_spacing(dx_m: float) -> float:
     return math.floor(dx_m / scale) * scale
 
 
-@functools.lru_cache(maxsize=4)
+# the running block shape at each of the four levels, and the last blocks of segments
+@functools.lru_cache(maxsize=6)
 def block_filters(
     n_az: int,
     dx_m: float,
@@ -120,17 +126,21 @@ def block_filters(
     wavelength_m: float,
     beamwidth_rad: float,
     centroid_squint_rad: float,
+    presum: int = 1,
 ) -> RdaFilters:
     """Range-Doppler filters of one block shape, computed once for the blocks (and
     segments) that share it: circular azimuth compression over ``n_az`` rows (no zero
     padding), the imaged beam as the processed band, and the output scaled to
     backprojection's amplitude for pulses ``dx_m`` apart and basebanded in range (step 3
-    of the module).
+    of the module). With ``presum`` > 1, the processed band is ``presum`` times narrower
+    about the centroid, and only the ``n_az / presum`` Doppler bins about the centroid are
+    kept (``RdaFilters.rows``, ``n_out``): the image comes out on a grid ``presum * dx_m``
+    apart.
 
     Parameters
     ----------
     n_az : int
-        Azimuth FFT length (grid rows, padded to a fast length).
+        Azimuth FFT length (grid rows, padded to a fast length; a multiple of ``presum``).
     dx_m : float
         Along-track grid spacing, m.
     r_first_m, dr_m : float
@@ -143,15 +153,33 @@ def block_filters(
         Processed band as an angle (the imaged beam), rad.
     centroid_squint_rad : float
         Doppler centroid as a squint, rad.
+    presum : int
+        Presum factor of a degraded level (:data:`LEVELS`); 1: the pulses' band.
     """
+    if n_az % presum:
+        raise ProcessingError(f"block_filters: {n_az} rows are not a multiple of {presum}")
     r: FloatArray = r_first_m + dr_m * np.arange(n_bins, dtype=np.float64)
-    sin_max = np.full(n_bins, math.sin(beamwidth_rad / 2.0))
-    f = rda_filters(n_az, dx_m, r, wavelength_m, sin_max, True, centroid_squint_rad, np.complex64)
+    sin_max = np.full(n_bins, math.sin(beamwidth_rad / 2.0) / presum)
+    n_out, dx_out = n_az // presum, dx_m * presum
+    f = rda_filters(
+        n_out, dx_out, r, wavelength_m, sin_max, True, centroid_squint_rad, np.complex64
+    )
     # amplitude and phase of backprojection: the stationary-phase factor
-    # sqrt(lambda r / 2) / dx exp(-j pi / 4) of the azimuth chirp's spectrum divided out
+    # sqrt(lambda r / 2) / dx exp(-j pi / 4) of the azimuth chirp's spectrum divided out (on
+    # the coarser grid, 1 / dx_out; its inverse FFT over n_out rows gains presum back)
     phase = -4.0 * np.pi * r / wavelength_m + np.pi / 4.0
-    column = np.sqrt(wavelength_m * r / 2.0) / dx_m * np.exp(1j * phase)
-    return replace(f, azimuth=f.azimuth * column.astype(np.complex64))
+    column = np.sqrt(wavelength_m * r / 2.0) / dx_out * np.exp(1j * phase)
+    azimuth = f.azimuth * column.astype(np.complex64)
+    if presum == 1:
+        return replace(f, azimuth=azimuth)
+    # the Doppler bins of the coarse grid (unwrapped about the centroid as the filters'),
+    # found among the n_az bins of the pulses' grid: kx = m / (n_az dx_m)
+    kx_c = 2.0 * math.sin(centroid_squint_rad) / wavelength_m
+    span = 1.0 / dx_out
+    kx = np.fft.fftfreq(n_out, dx_out)
+    kx = kx_c + (kx - kx_c + span / 2.0) % span - span / 2.0
+    fine = np.round(kx * n_az * dx_m).astype(np.int64) % n_az
+    return replace(f, n_az=n_az, azimuth=azimuth, rows=fine[f.rows])
 
 
 class RdaTileImager:
@@ -290,7 +318,7 @@ class RdaTileImager:
             return []
         layout = degraded(self.layout, self.level)
         bins = self._range_bins(layout, self.range_axis_m)
-        image, x_u = self._focus(rc[rows, bins], x[rows], bins, lo, hi)
+        image, x_u = self._focus(rc[rows, bins], x[rows], bins, lo, hi, LEVELS[self.level][2])
         tiles = []
         for k in formed:
             grid = layout.grid(k)
@@ -300,40 +328,45 @@ class RdaTileImager:
         return self.layout.clip(tiles)
 
     def _focus(
-        self, rc: ComplexArray, x: FloatArray, bins: slice, lo: float, hi: float
+        self, rc: ComplexArray, x: FloatArray, bins: slice, lo: float, hi: float, presum: int
     ) -> tuple[ComplexArray, FloatArray]:
-        """Resample pulses (the kept range bins ``bins``) onto the uniform along-track grid
-        over ``[lo, hi]`` (m; zeros beyond the first and last pulse and in holes) and focus
-        them.
+        """Resample pulses ``rc`` (the kept range bins ``bins``; taken over and changed)
+        onto the uniform along-track grid over ``[lo, hi]`` (m; zeros beyond the first and
+        last pulse and in holes) and focus them, the band ``presum`` times narrower.
 
         Returns the image (along-track × range bins, scaled to backprojection's amplitude,
         basebanded: the range carrier ``exp(j 4 pi r / lambda)`` and the centroid's
-        along-track frequency taken off) and its along-track axis, m.
+        along-track frequency taken off) and its along-track axis (the grid's, every
+        ``presum``-th point), m.
         """
         dx = self._dx
         first = math.ceil(lo / dx)
         x_u: FloatArray = dx * np.arange(first, first + round((hi - lo) / dx) + 1, dtype=np.float64)
+        filters = self._block_filters(x_u.size, bins, presum)
         kx_c = 2.0 * math.sin(self.centroid_squint_rad) / self.wavelength_m
         if kx_c:
-            rc = rc * np.exp(-2j * np.pi * kx_c * x)[:, None].astype(np.complex64)
-        idx = np.interp(x_u, x, np.arange(x.size, dtype=np.float64))
+            rc *= phasor(-2.0 * np.pi * kx_c * x)[:, None]
+        # grid rows up to the FFT length: the rows past the grid are the FFT's zero padding
+        idx = np.full(filters.n_az, -1.0)  # -1: a zero row
+        idx[: x_u.size] = np.interp(x_u, x, np.arange(x.size, dtype=np.float64))
         nxt = np.clip(np.searchsorted(x, x_u), 1, x.size - 1)
         hole = (x[nxt] - x[nxt - 1] > HOLE_SPACINGS * dx) | (x_u < x[0]) | (x_u > x[-1])
-        idx[hole] = -1.0  # zeros
-        cols = np.ascontiguousarray(rc.T)
-        uniform = sinc_interp(cols, np.broadcast_to(idx, (cols.shape[0], x_u.size)), TAPS).T
+        idx[: x_u.size][hole] = -1.0
+        uniform = sinc_interp_columns(rc, idx, TAPS)
         if kx_c:
-            uniform = uniform * np.exp(2j * np.pi * kx_c * x_u)[:, None].astype(np.complex64)
-        img = focus_block(uniform, self._block_filters(x_u.size, bins), TAPS)
+            uniform[: x_u.size] *= phasor(2.0 * np.pi * kx_c * x_u)[:, None]
+        x_out = x_u[::presum]
+        img = focus_block(uniform, filters, TAPS)[: x_out.size]
         if kx_c:
-            img *= np.exp(-2j * np.pi * kx_c * x_u)[:, None].astype(np.complex64)
-        return img, x_u
+            img *= phasor(-2.0 * np.pi * kx_c * x_out)[:, None]
+        return img, x_out
 
-    def _block_filters(self, rows: int, bins: slice) -> RdaFilters:
-        """The filters of a block of ``rows`` grid rows and the kept bins ``bins``."""
+    def _block_filters(self, rows: int, bins: slice, presum: int = 1) -> RdaFilters:
+        """The filters of a block of ``rows`` grid rows and the kept bins ``bins``, the band
+        ``presum`` times narrower."""
         r = self.range_axis_m[bins]
         return block_filters(
-            scipy.fft.next_fast_len(rows),
+            presum * scipy.fft.next_fast_len(-(-rows // presum)),
             self._dx,
             float(r[0]),
             self._dr,
@@ -341,6 +374,7 @@ class RdaTileImager:
             self.wavelength_m,
             self.layout.beamwidth_rad,
             self.centroid_squint_rad,
+            presum,
         )
 
     def _tile(
@@ -367,12 +401,10 @@ class RdaTileImager:
             return None
         r = np.hypot(grid.axis1_m, self.layout.height_m)
         rg = (r - range_m[0]) / self._dr
-        part = sinc_interp(image[a0:a1], np.broadcast_to(rg, (a1 - a0, rg.size)), TAPS)
-        cols = np.ascontiguousarray(part.T)
-        data = sinc_interp(cols, np.broadcast_to(az - a0, (cols.shape[0], az.size)), TAPS).T
+        part = sinc_interp(image[a0:a1], rg[None, :], TAPS)
+        data = sinc_interp_columns(part, az - a0, TAPS)
         # remodulation exp(j 2 pi (kx_c x + 2 r / lambda)), one factor per axis
         kx_c = 2.0 * math.sin(self.centroid_squint_rad) / self.wavelength_m
-        data = np.ascontiguousarray(data, dtype=np.complex64)
         data *= phasor(2.0 * np.pi * kx_c * grid.axis0_m)[:, None]
         data *= (self._gain * phasor(4.0 * np.pi / self.wavelength_m * r))[None, :]
         return Tile(

@@ -12,7 +12,7 @@ from sarmoco.processing.imaging import (
     facing_heading,
     phase_history_from_compressed,
 )
-from sarmoco.processing.imaging.interp import fft_upsample, sinc_interp
+from sarmoco.processing.imaging.interp import fft_upsample, sinc_interp, sinc_interp_columns
 from sarmoco.processing.types import C_MPS
 
 
@@ -26,6 +26,24 @@ def test_sinc_interp_band_limited_tones() -> None:
     pos = np.tile(np.linspace(20.0, 230.0, 97), (freqs.size, 1))
     got = sinc_interp(x, pos, taps=16)
     assert np.max(np.abs(got - _tones(256, freqs, pos[0]))) < 4e-3
+
+
+def test_shared_positions_give_the_per_row_sums() -> None:
+    # positions shared by every row (one row of them), or by every column (along axis 0):
+    # the same kernel and sums as the positions repeated for each row, to the last bit
+    freqs = np.array([-0.3, 0.05, 0.37])
+    x = _tones(200, freqs, np.arange(200.0)).astype(np.complex64)
+    pos = np.concatenate([[-1.0, 0.0], np.linspace(3.3, 196.7, 61), [199.0, 199.5]])
+    full = sinc_interp(x, np.tile(pos, (freqs.size, 1)))
+    assert np.array_equal(sinc_interp(x, pos[None, :]), full)
+    columns = sinc_interp_columns(np.ascontiguousarray(x.T), pos)
+    assert columns.dtype == np.complex64 and columns.shape == (pos.size, freqs.size)
+    assert np.array_equal(columns, full.T)
+    assert np.all(columns[[0, -1]] == 0)  # outside [0, N - 1]
+    inside = (pos >= 8.0) & (pos <= 191.0)  # the kernel's taps all within the samples
+    assert np.max(np.abs(columns[inside].T - _tones(200, freqs, pos[inside]))) < 4e-3
+    with pytest.raises(ProcessingError):
+        sinc_interp(x, np.zeros((2, 4)))  # neither one row nor one per row
 
 
 def test_sinc_interp_outside_is_zero_and_rejects_odd_taps() -> None:
