@@ -17,6 +17,7 @@ import time
 
 import pytest
 
+from sarmoco.app.simconfig import autofocus_table
 from sarmoco.processing import rangecomp
 from sarmoco.processing.autofocus import (
     AutofocusConfig,
@@ -46,7 +47,7 @@ def measure(seconds: float) -> dict[str, float]:
         scn.radar.wavelength_m, track.v0_mps, -float(track.origin_ned[2]), scn.center_slant_range_m
     )
     data_s = n / scn.radar.prf_hz
-    cfg = AutofocusConfig()
+    cfg = AutofocusConfig(**autofocus_table(scn))  # the scene's, as the simulator writes it
     warm = round(0.5 * scn.radar.prf_hz)
     autofocus_offline(rc[:warm], run.t_ns[:warm], range_m, geom, cfg)[0].apply(rc[:warm], range_m)
     t0 = time.process_time()

@@ -33,6 +33,7 @@ from typing import Any
 
 import numpy as np
 
+from sarmoco.app.simconfig import MAX_SUBAPERTURE_S
 from sarmoco.errors import ProcessingError
 from sarmoco.processing import rangecomp
 from sarmoco.processing.autofocus import (
@@ -78,6 +79,12 @@ class Case:
     seed: int = 0
     ins_grade: str = "gps"
     preset_overrides: tuple[tuple[str, Any], ...] = ()
+
+
+def scene_config(**settings: float) -> AutofocusConfig:
+    """Autofocus settings of the simulator's ku-vehicle scenes: their subaperture
+    (:data:`~sarmoco.app.simconfig.MAX_SUBAPERTURE_S`), the rest as given or the defaults."""
+    return AutofocusConfig(**({"subaperture_s": MAX_SUBAPERTURE_S} | settings))
 
 
 def scenario(case: Case) -> Scenario:
@@ -322,7 +329,7 @@ def range_orders(case: Case, config: AutofocusConfig | None = None) -> dict[int,
     :func:`expected_position`: GPS leaves the fitted track a LOS slope that no autofocus can
     see, which moves the targets along track by up to 5 m here (range-proportional).
     """
-    cfg = config or AutofocusConfig()
+    cfg = config or scene_config()
     p = prepare(case)
     out: dict[int, Any] = {}
     for order in (0, 1, 2):
@@ -369,7 +376,7 @@ def streaming_vs_offline(
     streaming and over the whole aperture offline).
     """
     p = prepare(case)
-    cfg = AutofocusConfig(pin_window_s=pin_window_s)
+    cfg = scene_config(pin_window_s=pin_window_s)
     offline, _ = autofocus_offline(p.rc, p.run.t_ns, p.range_m, p.geom, cfg)
     engine = SlidingSubapertureAutofocus(p.geom, p.range_m, cfg)
     parts = [engine.push(p.rc[i : i + block], p.run.t_ns[i : i + block])[1]
@@ -397,7 +404,7 @@ def streaming_vs_offline(
 
 def run_case(case: Case, config: AutofocusConfig | None = None) -> dict[str, Any]:
     """Simulate, focus every row, and measure; returns a JSON-able result dictionary."""
-    cfg = config or AutofocusConfig()
+    cfg = config or scene_config()
     p = prepare(case)
     run, rc, range_m, track, geom, theory = p.run, p.rc, p.range_m, p.track, p.geom, p.theory
     radar = run.scenario.radar

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sarmoco.processing.autofocus.settings import AutofocusConfig
 from sarmoco.processing.types import ComplexArray, FloatArray
 
 WAVELENGTH_M = 0.02  # Ku, 15 GHz
@@ -19,6 +20,16 @@ DEPTH_M = 300.0
 RES_M = 0.2  # range resolution c / 2B, m
 BIN_M = 0.1  # range bin spacing, m
 PRF_HZ = 250.0
+SUBAPERTURE_S = 0.4
+"""Autofocus subaperture the synthetic scenes (2 s and longer at PRF_HZ) are sized for, s:
+their startup and release latency leave steady pulses with it (the key's default is
+chosen on the independent acceptance flight)."""
+
+
+def af_config(**settings: float) -> AutofocusConfig:
+    """Autofocus settings for the synthetic scenes: :data:`SUBAPERTURE_S`, the rest as
+    given or the defaults."""
+    return AutofocusConfig(**({"subaperture_s": SUBAPERTURE_S} | settings))
 
 
 @dataclass(frozen=True)

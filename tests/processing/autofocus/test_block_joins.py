@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from sarmoco.processing.autofocus import (
-    AutofocusConfig,
     AutofocusGeometry,
     SlidingSubapertureAutofocus,
 )
@@ -38,7 +37,7 @@ def test_an_uncorrected_block_joins_its_neighbours_in_value_and_slope() -> None:
     xr = [(0, 1000), (4, 920), (-5, 1080), (8, 960), (-10, 1040), (10, 1050)]
     syn = S.make(dur, [S.ground_target(x, r) for x, r in xr], d, a, snr_db=10.0)
     geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0)
-    af = _RejectsOne(geo, syn.range_m, AutofocusConfig(pin_window_s=0.5))
+    af = _RejectsOne(geo, syn.range_m, S.af_config(pin_window_s=0.5))
     t_ns = np.round(syn.t_s * 1e9).astype(np.int64) + 10**18
     blocks = []
     for i in range(0, t_ns.size, 50):

@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from sarmoco.processing.autofocus import AutofocusConfig, AutofocusGeometry
+from sarmoco.processing.autofocus import AutofocusGeometry
 from sarmoco.processing.autofocus import doppler_rate as dr
 from sarmoco.processing.autofocus.lines import (
     fit_accel,
@@ -150,13 +150,13 @@ def test_a_line_lit_for_part_of_the_subaperture_weighs_little() -> None:
     whole = S.make(0.4, [S.ground_target(0.0, 950.0)], snr_db=10.0)
     late = S.make(0.4, [S.ground_target(1.0, 1050.0)]).rc
     late[: int(0.3 * late.shape[0])] = 0.0
-    bands = select_bands(whole.rc + late, whole.range_m, AutofocusConfig())
+    bands = select_bands(whole.rc + late, whole.range_m, S.af_config())
     assert bands.bins.size == 2
     near_first = np.argsort(whole.range_m[bands.bins])
     balance = bands.balance[near_first]
     assert balance[0] > 0.8 and balance[1] < 0.05, balance
     geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0)
-    rates = measure_line_rates(bands, whole.t_s, whole.range_m, geo, AutofocusConfig(min_lines=1))
+    rates = measure_line_rates(bands, whole.t_s, whole.range_m, geo, S.af_config(min_lines=1))
     weight = rates.weight[near_first]
     assert rates.quality[near_first][1] > 0.5  # the quality floor would let it through
     assert weight[0] > 0 and weight[1] <= 0.01 * weight[0], weight
@@ -175,14 +175,14 @@ def test_a_line_lit_in_one_look_only_gets_no_weight() -> None:
     entering[: m // 4] = 0.0
     late = 10.0 * S.make(0.4, [S.ground_target(1.0, 1050.0)]).rc
     late[: 4 * m // 5] = 0.0
-    config = AutofocusConfig()
+    config = S.af_config()
     bands = select_bands(syn.rc + entering + late, syn.range_m, config)
     lines = [int(np.argmin(np.abs(syn.range_m[bands.bins] - r))) for r in (950.0, 1050.0)]
     assert np.all(bands.balance[lines] < 0.05), bands.balance
     halves = bands.halves[lines]
     assert halves[0] > 0.4 and halves[1] < 0.05, halves
     geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0)
-    rates = measure_line_rates(bands, syn.t_s, syn.range_m, geo, AutofocusConfig(min_lines=1))
+    rates = measure_line_rates(bands, syn.t_s, syn.range_m, geo, S.af_config(min_lines=1))
     assert np.all(rates.peak_db[lines] >= config.min_peak_db), rates.peak_db
     assert np.all(rates.quality[lines] >= config.min_quality), rates.quality
     weight = rates.weight[lines]

@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from sarmoco.processing.autofocus import AutofocusConfig, autofocus_offline
+from sarmoco.processing.autofocus import autofocus_offline
 from sarmoco.processing.geometry import look_angle
 from sarmoco.processing.imaging.backprojection import backproject
 from sarmoco.processing.imaging.grid import PlaneGrid
@@ -25,6 +25,7 @@ from tests.workloads.ku_vehicle import (
     prepare,
     range_orders,
     run_case,
+    scene_config,
     streaming_vs_offline,
     wide_low_case,
 )
@@ -103,7 +104,7 @@ def test_focused_targets_sit_where_the_truth_puts_them() -> None:
     peak lies within half an azimuth IRW of the position the simulator's truth predicts (the
     unobservable constant and linear terms moved them by 1.1 to 3.2 m)."""
     p = prepare(wide_low_case(0.2))
-    corr, report = autofocus_offline(p.rc, p.run.t_ns, p.range_m, p.geom, AutofocusConfig())
+    corr, report = autofocus_offline(p.rc, p.run.t_ns, p.range_m, p.geom, scene_config())
     centres = report.series()["t_center_s"]
     focused = corr.apply(p.rc, p.range_m)
     apc = p.track.position_ned(p.run.t_ns)

@@ -13,7 +13,6 @@ from __future__ import annotations
 import numpy as np
 
 from sarmoco.processing.autofocus import (
-    AutofocusConfig,
     AutofocusGeometry,
     SlidingSubapertureAutofocus,
 )
@@ -25,7 +24,7 @@ TARGETS = [(0, 1000), (4, 920), (-5, 1080), (8, 960), (-10, 1040), (10, 1050)]
 
 def _stream(syn: S.Synthetic) -> tuple[np.ndarray, SlidingSubapertureAutofocus, list[bool]]:
     geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0)
-    af = SlidingSubapertureAutofocus(geo, syn.range_m, AutofocusConfig(pin_window_s=1.0))
+    af = SlidingSubapertureAutofocus(geo, syn.range_m, S.af_config(pin_window_s=1.0))
     t_ns = np.round(syn.t_s * 1e9).astype(np.int64) + 10**18
     out, applied = [], []
     for i in range(0, t_ns.size, 50):

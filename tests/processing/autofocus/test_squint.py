@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from sarmoco.processing.autofocus import AutofocusConfig, AutofocusGeometry, autofocus_offline
+from sarmoco.processing.autofocus import AutofocusGeometry, autofocus_offline
 from sarmoco.processing.autofocus.splice import remove_phase
 from sarmoco.processing.imaging.backprojection import backproject
 from sarmoco.processing.imaging.grid import PlaneGrid
@@ -63,7 +63,7 @@ def _focus(syn: S.Synthetic) -> np.ndarray:
     """The scene autofocused (offline, the daemon's defaults) on the squinted geometry."""
     geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0, SQUINT_RAD)
     t_ns = np.round(syn.t_s * 1e9).astype(np.int64) + 10**18
-    corr, _ = autofocus_offline(syn.rc, t_ns, syn.range_m, geo, AutofocusConfig())
+    corr, _ = autofocus_offline(syn.rc, t_ns, syn.range_m, geo, S.af_config())
     return remove_phase(syn.rc, corr.phase_cycles, syn.range_m - corr.ref_range_m)
 
 

@@ -62,7 +62,7 @@ def test_streaming_matches_offline_up_to_a_line() -> None:
     and offline estimates agree up to the unobservable line; the release delay is bounded."""
     syn = _scene()
     geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0)
-    cfg = AutofocusConfig(pin_window_s=0.5)
+    cfg = S.af_config(pin_window_s=0.5)
     t_ns = np.round(syn.t_s * 1e9).astype(np.int64) + 10**18
     offline, _ = autofocus_offline(syn.rc, t_ns, syn.range_m, geo, cfg)
     af = SlidingSubapertureAutofocus(geo, syn.range_m, cfg)
@@ -91,7 +91,7 @@ def test_run_shorter_than_a_subaperture_is_released_uncorrected() -> None:
     """A run too short for one estimate is flushed whole, unchanged (no correction)."""
     syn = _scene(0.2)
     geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0)
-    af = SlidingSubapertureAutofocus(geo, syn.range_m, AutofocusConfig())
+    af = SlidingSubapertureAutofocus(geo, syn.range_m, S.af_config())
     t_ns = np.round(syn.t_s * 1e9).astype(np.int64) + 10**18
     released, _ = af.push(syn.rc, t_ns)
     assert released.shape[0] == 0
@@ -106,7 +106,7 @@ def test_streaming_state_is_bounded_on_a_long_run() -> None:
     (about latency / hop + 8), and the report is what the caller has not yet taken."""
     syn = _scene(30.0)
     geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0)
-    cfg = AutofocusConfig(pin_window_s=0.5)
+    cfg = S.af_config(pin_window_s=0.5)
     af = SlidingSubapertureAutofocus(geo, syn.range_m, cfg)
     t_ns = np.round(syn.t_s * 1e9).astype(np.int64) + 10**18
     bound = (af.startup_s + af.latency_s) / cfg.hop_s + 8
@@ -129,7 +129,7 @@ def test_streaming_places_targets_where_the_navigation_is_right_on_average() -> 
     streaming (zero value and slope at the first pulse, passes extrapolated ahead) left them
     up to 0.86 m off and unfocused (azimuth PSLR -4.9 to +0.1 dB) on this scene."""
     dur = 3.0
-    cfg = AutofocusConfig(pin_window_s=1.0)
+    cfg = S.af_config(pin_window_s=1.0)
     t = np.arange(round(dur * S.PRF_HZ)) / S.PRF_HZ - dur / 2
     t_mid = t[0] + 0.5 * cfg.subaperture_s + 0.5 * cfg.pin_window_s  # centre of the window
     w = np.pi / cfg.pin_window_s  # half a period over the window: zero trend over it
@@ -158,7 +158,7 @@ def test_offline_recovers_los_and_focus_phase() -> None:
     syn = _scene()
     geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0)
     t_ns = np.round(syn.t_s * 1e9).astype(np.int64)
-    corr, report = autofocus_offline(syn.rc, t_ns, syn.range_m, geo, AutofocusConfig())
+    corr, report = autofocus_offline(syn.rc, t_ns, syn.range_m, geo, S.af_config())
     beta = np.arccos(S.DEPTH_M / 1000.0)
     truth = syn.d_yz_m @ np.array([np.sin(beta), np.cos(beta)])
     # The constant and linear terms are pinned between the first and last subaperture
@@ -216,7 +216,7 @@ def test_few_targets_in_noise_do_not_lose_focus() -> None:
     d, a = S.sine_motion(t, (0.0006, 0.0003), (0.4, 0.7))
     tg = [S.ground_target(0.0, r) for r in (950.0, 1000.0, 1050.0)]
     syn = S.make(dur, tg, d, a, range_span_m=(930.0, 1070.0), snr_db=0.0, seed=3)
-    focused, af = _stream(syn, AutofocusConfig())
+    focused, af = _stream(syn, S.af_config())
     before = _azimuth_pslr(syn, syn.rc)
     after = _azimuth_pslr(syn, focused)
     print("azimuth PSLR before", np.round(before, 2), "after", np.round(after, 2))
@@ -238,7 +238,7 @@ def test_range_sidelobe_lines_of_a_sparse_scene_get_no_weight() -> None:
     d, a = S.sine_motion(t, (0.0006, 0.0003), (0.4, 0.7))
     tg = [S.ground_target(0.0, r) for r in (950.0, 1000.0, 1050.0)]
     syn = S.make(dur, tg, d, a, range_span_m=(930.0, 1070.0), snr_db=None)
-    focused, af = _stream(syn, AutofocusConfig())
+    focused, af = _stream(syn, S.af_config())
     assert _lines_used(af) == {3}
     before = _azimuth_pslr(syn, syn.rc)
     after = _azimuth_pslr(syn, focused)
@@ -256,12 +256,12 @@ def test_a_stretch_without_lines_is_bridged_not_taken_as_no_error() -> None:
     syn = _scene()
     geo = AutofocusGeometry(S.WAVELENGTH_M, S.SPEED_MPS, S.DEPTH_M, 1000.0)
     t_ns = np.round(syn.t_s * 1e9).astype(np.int64) + 10**18
-    whole, _ = autofocus_offline(syn.rc, t_ns, syn.range_m, geo, AutofocusConfig())
+    whole, _ = autofocus_offline(syn.rc, t_ns, syn.range_m, geo, S.af_config())
     rc = syn.rc.copy()
     blank = np.abs(syn.t_s) < 0.1
     noise = np.random.default_rng(1).standard_normal((2, int(blank.sum()), rc.shape[1]))
     rc[blank] = ((noise[0] + 1j * noise[1]) * np.sqrt(0.5)).astype(np.complex64)
-    cut, report = autofocus_offline(rc, t_ns, syn.range_m, geo, AutofocusConfig())
+    cut, report = autofocus_offline(rc, t_ns, syn.range_m, geo, S.af_config())
     assert any(s.phase_lines is not None and s.phase_lines.n_used == 0 for s in report.subapertures)
     r = np.array([1000.0])
     diff = _detrended(syn.t_s, (cut.phase_rad(r) - whole.phase_rad(r))[:, 0])
@@ -282,7 +282,7 @@ def test_a_long_stretch_without_lines_is_not_extrapolated_into() -> None:
     blank = syn.t_s < -0.3
     noise = np.random.default_rng(1).standard_normal((2, int(blank.sum()), rc.shape[1]))
     rc[blank] = ((noise[0] + 1j * noise[1]) * np.sqrt(0.5)).astype(np.complex64)
-    config = AutofocusConfig()
+    config = S.af_config()
     _, report = autofocus_offline(rc, t_ns, syn.range_m, geo, config)
     subs = report.subapertures
     lit = np.array([s.phase_lines is not None and s.phase_lines.n_used > 0 for s in subs])
