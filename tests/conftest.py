@@ -178,12 +178,22 @@ LONGEST_FIRST: tuple[str, ...] = (
     "tests/processing/imaging/test_rda_tiles.py",
     "tests/daemon/test_segments.py",
     "tests/products/test_motion_estimates.py",
+    # the realtime phase's (its tests only; 25-60 s each)
+    "tests/daemon/test_array_live.py",
+    "tests/daemon/test_daemon_files.py",
+    "tests/daemon/test_faults_ins_link.py",
+    "tests/daemon/test_end_to_end.py",
+    "tests/daemon/test_camera_daemon.py",
+    "tests/sim/test_emit_cli.py",
+    "tests/daemon/test_daemon_process.py",
+    "tests/daemon/test_faults_radar.py",
+    "tests/daemon/test_faults_radar_loss.py",
 )
 """The modules whose tests take longest, longest first (pytest's ``--durations``, summed
-per module, on a 2-core machine). They are collected first, the rest in pytest's order:
-`make test`'s first phase hands the scopes out in collection order
-(``--no-loadscope-reorder``), so its two workers end together instead of one running a
-long scope alone at the end."""
+per module, on a 2-core machine): those of the first phase of `make test`, then those of
+the realtime phase. They are collected first, the rest in pytest's order: the first two
+phases hand the scopes out in collection order (``--no-loadscope-reorder``), so their two
+workers end together instead of one running a long scope alone at the end."""
 
 
 def _collection_rank(item: pytest.Item) -> int:

@@ -19,10 +19,12 @@ import json
 import socket
 import subprocess
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pytest
 from pymavlink.dialects.v20 import ardupilotmega as mav
 
 from sarmoco.app.cli import main
@@ -57,11 +59,28 @@ def _heard(gcs: Any, kinds: set[str]) -> dict[str, Any]:
     return heard
 
 
-def _files_replay(root: Path) -> dict[str, Any]:
-    """The scene written as files by the simulator and replayed: its DEM's report."""
-    sim = root / "files"
-    _run(["sim", "--preset", "mimo-array", "--scale", str(SCALE), "--out", str(sim)])
-    config = _config(sim, sim / "sarmoco.toml", {})
+@pytest.fixture(scope="module")
+def array_files(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Callable[[], Path]]:
+    """The scene written as files by the simulator, once for the module's tests (read only):
+    a call waits for the simulator, which runs beside the test that first needs it."""
+    sim = tmp_path_factory.mktemp("array-files")
+    proc = subprocess.Popen(
+        [*PY, "sim", "--preset", "mimo-array", "--scale", str(SCALE), "--out", str(sim)],
+        stdout=subprocess.DEVNULL,
+    )
+
+    def written() -> Path:
+        assert proc.wait(timeout=300) == 0, "sarmoco sim --out failed"
+        return sim
+
+    yield written
+    proc.kill()
+    proc.wait()
+
+
+def _files_replay(sim: Path, root: Path) -> dict[str, Any]:
+    """The scene's files (:func:`array_files`) replayed: its DEM's report."""
+    config = _config(sim, root / "files.toml", {})
     _run(["replay", "--config", str(config), "--radar", str(sim / "radar.vrt"),
           "--nav", str(sim / "nav.tlog"), "--out", str(root / "files.zarr")])  # fmt: skip
     return _report(root / "files.zarr", sim / "truth.json")
@@ -79,7 +98,7 @@ def _config(out: Path, path: Path, over: dict[str, dict[str, Any]]) -> Path:
 
 
 def test_live_array_run_records_every_stream_and_forms_the_dem_replay_forms(
-    tmp_path: Path,
+    array_files: Callable[[], Path], tmp_path: Path
 ) -> None:
     radar_url = f"udp://127.0.0.1:{free_port(socket.SOCK_DGRAM)}"
     ins_port, gcs_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
@@ -94,7 +113,7 @@ def test_live_array_run_records_every_stream_and_forms_the_dem_replay_forms(
     daemon: Daemon | None = None
     store = tmp_path / "live.zarr"
     try:
-        files = _files_replay(tmp_path)  # while the simulator synthesises the live run's echoes
+        files = _files_replay(array_files(), tmp_path)  # while the live run's echoes are made
         hello = read_json_line(sim_proc, "the simulator", 60.0)
         config = _config(tmp_path, tmp_path / "live.toml", {
             "radar": {"link": hello["radar"]["connect"]},
@@ -156,12 +175,13 @@ def _packets(vrt: bytes) -> list[bytes]:
     return out
 
 
-def test_each_capture_of_an_array_run_is_a_strip_with_its_dem(tmp_path: Path) -> None:
+def test_each_capture_of_an_array_run_is_a_strip_with_its_dem(
+    array_files: Callable[[], Path], tmp_path: Path
+) -> None:
     """``camera.store_per_capture`` in array mode: the simulator's packets sent over UDP in
     two halves, each within a start and a stop capture of the ground station, give two
     strip stores, each closed with the DEM of its own pulses and announced."""
-    sim = tmp_path / "sim"
-    _run(["sim", "--preset", "mimo-array", "--scale", str(SCALE), "--out", str(sim)])
+    sim = array_files()
     packets = _packets((sim / "radar.vrt").read_bytes())
     radar_port, gcs_port = free_port(socket.SOCK_DGRAM), free_port(socket.SOCK_DGRAM)
     http_port = free_port(socket.SOCK_STREAM)

@@ -13,6 +13,7 @@ difference is 0.77.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -74,7 +75,11 @@ def test_rda_tiles_focus_as_backprojection(
     case = _case(preset, scale, prf_hz, [(dn, f * sw) for dn, f in offsets], 0.0)
     layout = _layout(case, pixel_m)
     tiles = _rda_tiles(case, layout)
-    bp = TileImager(layout, case.axis_m, case.scn.radar.wavelength_m)
+    # which tiles a backprojection imager hands out follows from the track and the strip
+    # (no ``keep``), not from the pixels: its tiles here are two pixels long and wide
+    assert not layout.keep
+    coarse = dataclasses.replace(layout, pixel_m=layout.tile_length_m)
+    bp = TileImager(coarse, case.axis_m, case.scn.radar.wavelength_m)
     want = [t.index for t in bp.add(case.rc, case.t_ns, case.apc_img) + bp.close()]
     assert [t.index for t in tiles] == want
     lam = case.scn.radar.wavelength_m

@@ -69,7 +69,7 @@ def _focus(crab_deg: float, side: float, squinted: bool):
         looks = np.arctan2(yg + np.array([-8.0, 8.0]), H)
         lo, hi = squint_interval_rad(axis, BEAM / 2 + TOL, looks)
         beam = np.tile([lo, hi], (n, 1))
-    imager = TileImager(layout, r_axis, LAM)
+    imager = TileImager(layout, r_axis, LAM, only=range(1, 2))  # the target's tile alone
     tiles = imager.add(rc, np.round(t * 1e9).astype(np.int64), apc, None, beam) + imager.close()
     tile = next((k for k in tiles if k.index == 1), None)
     return lit.sum(), tile, (30.0, yg)
