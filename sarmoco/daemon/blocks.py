@@ -68,7 +68,7 @@ class BlockFocusing:
         self.cfg = cfg
         self.tables = tables
         self.sink = sink
-        self._window_ns = round(cfg.mocomp.heading_window_s * 1e9) if hold_course else 0
+        self._window_ns = course_window_ns(cfg) if hold_course else 0
         """Flight the first reference track's course is taken over, GPS ns (0: one block)."""
         self.focuser: Focuser | None = None
         """The focusing chain, from the first pulse with navigation on (None before)."""
@@ -178,6 +178,19 @@ class BlockFocusing:
         self.tables.reference_track(self.focuser.track)
         self._gaps = GapFill(t0, p.vel_ned[0], p.quat[0])
         return p
+
+
+HOLD_MAX_BYTES = 512 * 2**20
+"""Most echo bytes held for the first reference track's course (complex64 samples): at
+high pulse rates the window is shortened to what this holds (thz-spotlight: 0.8 s)."""
+
+
+def course_window_ns(cfg: Config) -> int:
+    """``mocomp.heading_window_s`` in ns, shortened to the pulses :data:`HOLD_MAX_BYTES`
+    holds at the nominal PRF."""
+    pulse_bytes = cfg.radar.n_samples * cfg.radar.channels * np.dtype(np.complex64).itemsize
+    held_s = HOLD_MAX_BYTES / (pulse_bytes * cfg.radar.prf_hz)
+    return round(min(cfg.mocomp.heading_window_s, held_s) * 1e9)
 
 
 def strictly_increasing(t_ns: IntArray, after_ns: int | None) -> BoolArray:

@@ -29,6 +29,7 @@ import numpy as np
 import pytest
 
 from sarmoco.app.simconfig import scenario_config
+from sarmoco.daemon.blocks import HOLD_MAX_BYTES, course_window_ns
 from sarmoco.processing.geometry import fit_reference_track
 from sarmoco.processing.metrics import PointTargetMetrics
 from sarmoco.sim.motionspec import MotionSpec
@@ -128,3 +129,17 @@ def test_the_image_grid_follows_the_course_not_the_first_block(
     error -= np.median(error, axis=0)
     print(f"relative position errors (along, range), m: {error.round(3).tolist()}")
     assert np.hypot(*error.T).max() <= MAX_RELATIVE_POSITION_M, error
+
+
+def test_a_replay_holds_no_more_than_its_bound_for_the_course() -> None:
+    """The pulses a replay holds for the first track's course fit :data:`HOLD_MAX_BYTES`:
+    the whole 4 s at ku-vehicle's 1 kHz, a shorter window at thz-spotlight's 20 kHz."""
+    for preset, window_s in (("ku-vehicle", HEADING_WINDOW_S), ("thz-spotlight", None)):
+        cfg = scenario_config(load_preset(preset, 1.0))
+        held_ns = course_window_ns(cfg)
+        pulse_bytes = cfg.radar.n_samples * np.dtype(np.complex64).itemsize
+        assert held_ns * 1e-9 * cfg.radar.prf_hz * pulse_bytes <= HOLD_MAX_BYTES
+        if window_s is not None:
+            assert held_ns == round(window_s * 1e9)
+        else:
+            assert 0.5e9 < held_ns < round(cfg.mocomp.heading_window_s * 1e9)
