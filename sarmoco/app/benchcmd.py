@@ -216,14 +216,14 @@ def latencies_s(commits: list[tuple[int, int, int]], t_ns: np.ndarray) -> np.nda
     return np.concatenate(lat) if lat else np.zeros(0)
 
 
-def tile_pulse_times_ns(store: Path, n_tiles: int, key: str) -> np.ndarray:
-    """An attribute of the store's first ``n_tiles`` tiles: ``t0_ns`` (first pulse) or
-    ``t1_ns`` (last pulse), GPS ns."""
+def tile_pulse_times_ns(store: Path, n_tiles: int) -> np.ndarray:
+    """The ``t0_ns`` and ``t1_ns`` attributes (first and last pulse, GPS ns) of the store's
+    first ``n_tiles`` tiles, shape (n_tiles, 2)."""
     times = []
     for i in range(n_tiles):
         meta = json.loads((store / "images" / f"tile_{i:06d}" / "zarr.json").read_text())
-        times.append(int(meta["attributes"][key]))
-    return np.array(times, dtype=np.int64)
+        times.append((int(meta["attributes"]["t0_ns"]), int(meta["attributes"]["t1_ns"])))
+    return np.array(times, dtype=np.int64).reshape(-1, 2)
 
 
 def tile_latencies_s(tiles: list[tuple[int, int, int]], pulse_ns: np.ndarray) -> np.ndarray:
@@ -300,10 +300,8 @@ class BenchRun:
     store: Path
     t_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     """Times of the recorded pulses, GPS ns."""
-    tile_t0_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    """First pulse time of each tile seen committed, GPS ns."""
-    tile_t1_ns: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    """Last pulse time of each tile seen committed, GPS ns."""
+    tile_pulse_ns: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    """First and last pulse time of each tile seen committed, GPS ns, shape (tiles, 2)."""
     live: dict[str, Any] = field(default_factory=dict)
     """The daemon's ``/live.json`` at the end of the stream (the live page's rendering)."""
 
@@ -438,8 +436,7 @@ def live_run(
         store=store,
         live=live,
         t_ns=open_store(store).read("pulses", ["t_ns"])["t_ns"],
-        tile_t0_ns=tile_pulse_times_ns(store, seen.tiles[-1][2] if seen.tiles else 0, "t0_ns"),
-        tile_t1_ns=tile_pulse_times_ns(store, seen.tiles[-1][2] if seen.tiles else 0, "t1_ns"),
+        tile_pulse_ns=tile_pulse_times_ns(store, seen.tiles[-1][2] if seen.tiles else 0),
     )
 
 
@@ -473,9 +470,9 @@ def figures(run: BenchRun, fft_s_per_pulse: float) -> dict[str, float]:
     lat = latencies_s(run.watch.commits, run.t_ns)
     p50, p99 = np.percentile(lat, [50, 99]) if lat.size else (float("nan"), float("nan"))
     nan2 = (float("nan"), float("nan"))
-    tile_lat = tile_latencies_s(run.watch.tiles, run.tile_t0_ns)
+    tile_lat = tile_latencies_s(run.watch.tiles, run.tile_pulse_ns[:, 0])
     tile_p50, tile_p99 = np.percentile(tile_lat, [50, 99]) if tile_lat.size else nan2
-    last_lat = tile_latencies_s(run.watch.tiles, run.tile_t1_ns)
+    last_lat = tile_latencies_s(run.watch.tiles, run.tile_pulse_ns[:, 1])
     last_p50, last_p99 = np.percentile(last_lat, [50, 99]) if last_lat.size else nan2
     warmup = min(RSS_WARMUP_MAX_S, run.duration_s / 3.0)
     return {

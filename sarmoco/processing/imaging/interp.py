@@ -41,6 +41,13 @@ def _kernel_table(taps: int) -> npt.NDArray[np.float64]:
     return table
 
 
+def _checked_table(caller: str, taps: int) -> npt.NDArray[np.float64]:
+    """:func:`_kernel_table` of ``taps``, refused unless it is even and at least 2."""
+    if taps < 2 or taps % 2:
+        raise ProcessingError(f"{caller}: taps {taps!r} must be even and >= 2")
+    return _kernel_table(taps)
+
+
 @numba.njit(parallel=True, nogil=True, cache=True)
 def _interp_rows(
     x: ComplexArray, pos: FloatArray, table: npt.NDArray[np.float64], out: ComplexArray
@@ -124,8 +131,7 @@ def sinc_interp(x: ComplexArray, pos: FloatArray, taps: int = 16) -> ComplexArra
     ndarray of complex, shape (M, K)
         Same precision as ``x`` (complex64 stays complex64).
     """
-    if taps < 2 or taps % 2:
-        raise ProcessingError(f"sinc_interp: taps {taps!r} must be even and >= 2")
+    table = _checked_table("sinc_interp", taps)
     if x.ndim != 2 or pos.ndim != 2 or pos.shape[0] not in (1, x.shape[0]):
         raise ProcessingError(f"sinc_interp: shapes x{x.shape} pos{pos.shape} disagree")
     dtype = np.result_type(x.dtype, np.complex64)
@@ -133,7 +139,7 @@ def sinc_interp(x: ComplexArray, pos: FloatArray, taps: int = 16) -> ComplexArra
     _interp_rows(
         np.ascontiguousarray(x, dtype=dtype),
         np.ascontiguousarray(pos, dtype=np.float64),
-        _kernel_table(taps),
+        table,
         out,
     )
     return out
@@ -160,8 +166,7 @@ def sinc_interp_columns(x: ComplexArray, pos: FloatArray, taps: int = 16) -> Com
     ndarray of complex, shape (K, M)
         Same precision as ``x`` (complex64 stays complex64).
     """
-    if taps < 2 or taps % 2:
-        raise ProcessingError(f"sinc_interp_columns: taps {taps!r} must be even and >= 2")
+    table = _checked_table("sinc_interp_columns", taps)
     if x.ndim != 2 or pos.ndim != 1:
         raise ProcessingError(f"sinc_interp_columns: shapes x{x.shape} pos{pos.shape}")
     dtype = np.result_type(x.dtype, np.complex64)
@@ -169,7 +174,7 @@ def sinc_interp_columns(x: ComplexArray, pos: FloatArray, taps: int = 16) -> Com
     _interp_columns(
         np.ascontiguousarray(x, dtype=dtype),
         np.ascontiguousarray(pos, dtype=np.float64),
-        _kernel_table(taps),
+        table,
         out,
     )
     return out

@@ -53,8 +53,6 @@ BAND_MARGIN = 1.5
 class RdaFilters:
     """The range-Doppler filters of one block shape (see the module's steps).
 
-    Attributes
-    ----------
     The filters hold only the ``M`` Doppler rows with a bin in the processed band: the
     others are zero after azimuth compression, so their range steps are left out.
 
