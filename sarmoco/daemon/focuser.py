@@ -481,7 +481,8 @@ class _Segment:
         """Finished tiles through tile PGA when configured (``last``: hand out all it holds)."""
         if self.tile_pga is None:
             return tiles
-        return self.tile_pga.push(tiles) + (self.tile_pga.flush() if last else [])
+        span = self.beam.span_rad
+        return self.tile_pga.push(tiles, span) + (self.tile_pga.flush(span) if last else [])
 
 
 MIN_COHERENCE = 0.1
@@ -529,6 +530,8 @@ class _Beam:
         self._changes_ns = np.zeros(1, np.int64)
         self._intervals = np.array([[-self._half_rad, self._half_rad]])
         """Times (GPS ns) from which each squint interval (rad) holds, and the intervals."""
+        self._span = (math.inf, -math.inf)
+        """Union of the squint intervals handed out by :meth:`interval_at`, rad."""
         self._attitude_interval = self._intervals[-1].copy()
         self._attitude_squint_rad = 0.0
         """The latest block's squint interval and beam-centre squint at the scene centre
@@ -549,6 +552,13 @@ class _Beam:
         if self._echo_squint_rad is not None:
             return self._echo_squint_rad
         return float(centre_squint_rad(self.axis, self._scene_look_rad))
+
+    @property
+    def span_rad(self) -> tuple[float, float]:
+        """Union of the squint intervals the segment's pixels took pulses over so far, rad
+        (lo, hi): the beam's band tile PGA keeps (broadside before any pulse is imaged)."""
+        lo, hi = self._span
+        return (lo, hi) if lo < hi else (-self._half_rad, self._half_rad)
 
     def point(self, quat: FloatArray, t_ns: int) -> None:
         """Point the beam by the mean attitude ``quat`` (P, 4) of the pulses from ``t_ns``
@@ -597,7 +607,11 @@ class _Beam:
         k = np.clip(np.searchsorted(self._changes_ns, t_ns, side="right") - 1, 0, None)
         first = int(k[0]) if k.size else 0
         self._changes_ns, self._intervals = self._changes_ns[first:], self._intervals[first:]
-        return self._intervals[k - first]
+        out = self._intervals[k - first]
+        if out.size:
+            lo, hi = self._span
+            self._span = (min(lo, float(out[:, 0].min())), max(hi, float(out[:, 1].max())))
+        return out
 
     def measure(self, rc: ComplexArray, t_ns: IntArray, rate_hz: float) -> None:
         """Measure the Doppler centroid of compensated, range-compressed pulses at

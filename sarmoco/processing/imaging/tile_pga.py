@@ -5,13 +5,17 @@ along a straight reference track, axis 1 = ground range y, backprojected from pu
 whose APCs lie on the track at ``x_p = v0 (t - t0)``. At a fixed ground range, the slant
 range to the track is ``R = sqrt(y² + H²)`` and backprojection is a convolution in x of
 the pulses' echo phase history ``d(x_p)`` with the kernel ``c(u) = exp(+j 2k sqrt(u² + R²))``
-(``k = 2π/λ``, ``|u| <= R tan(θ/2)`` with beam culling). Its spectrum has, by stationary
-phase, the phase ``Ψ(k_x) = R sqrt(4k² - k_x²)`` (constants dropped) and a flat magnitude
-in the band, so one column's phase history is recovered from the image as
-``d = IFFT(FFT(I) exp(-j Ψ))``, sampled at the pixel spacing on the same x axis. A phase
-error ``φ(x_p)`` common to all ranges (an LOS error the INS and the sliding-subaperture
-autofocus left) multiplies ``d``; it is removed by ``exp(-j φ)`` and the column is
-recompressed with ``exp(+j Ψ)`` within the beam's band ``|k_x| <= 2k sin(θ/2)``.
+(``k = 2π/λ``, ``R tan ψ_lo <= u <= R tan ψ_hi`` with beam culling, ``[ψ_lo, ψ_hi]`` the
+squint interval of the beam from the plane normal to the track: ``±θ/2`` broadside,
+shifted by the crab of a platform in a crosswind). Its spectrum has, by stationary phase,
+the phase ``Ψ(k_x) = R sqrt(4k² - k_x²)`` (constants dropped) and a flat magnitude in the
+band ``2k sin ψ_lo <= k_x <= 2k sin ψ_hi``, so one column's phase history is recovered
+from the image as ``d = IFFT(FFT(I) exp(-j Ψ))``, sampled at the pixel spacing on the
+same x axis. The pixel spacing need only sample the band's width: the FFT's wavenumbers
+are taken about the band's centre (a squinted band beyond the pixel's Nyquist wavenumber
+is aliased in the image, not lost). A phase error ``φ(x_p)`` common to all ranges (an LOS
+error the INS and the sliding-subaperture autofocus left) multiplies ``d``; it is removed
+by ``exp(-j φ)`` and the column is recompressed with ``exp(+j Ψ)`` within the band.
 
 Estimation (stripmap PGA, after Callow, Hayes & Gough, IEEE JOE 2003, in this
 decompression form), per iteration: the peak column of each bright target (one column per
@@ -33,7 +37,10 @@ slowly against the azimuth chirp); one carrier wavenumber for the whole range ba
 one phase error for all ranges of the tile; columns processed independently, although
 the response of a pulse near the aperture ends runs across range columns (range
 migration over the window: with 1 rad rms errors of 10 Hz bandwidth, correcting the
-true phase this way still leaves -13.0 dB azimuth PSLR, not -13.26); the APCs on the
+true phase this way still leaves -13.0 dB azimuth PSLR, not -13.26; under a squinted beam
+``ψ`` the range walk moves the paired echoes of an error of ``f`` Hz ``λ R f sin ψ / (2 v)``
+off the column, so only errors slow enough to leave them within a range cell are
+estimated); the APCs on the
 straight track at the pixel spacing (the daemon's along-track time map puts them there).
 Phase linear over the whole estimation support is removed (it would shift the image).
 """
@@ -92,7 +99,8 @@ class StripPga:
     wavelength_m : float
         Carrier wavelength, m.
     half_beam_rad : float
-        Half the azimuth angle the pixels took pulses over (beam culling), rad.
+        Half the azimuth angle the pixels took pulses over (beam culling), rad: the
+        broadside squint interval ``±half_beam_rad`` that :meth:`focus` takes by default.
     settings : TilePgaConfig
         ``pga_window_m``: along-track width of the first iteration's window around each
         target, m; it must hold the paired echoes of the fastest phase error to be
@@ -126,7 +134,11 @@ class StripPga:
                 )
 
     def focus(
-        self, data: ComplexArray, pixel_m: float, ground_range_m: FloatArray
+        self,
+        data: ComplexArray,
+        pixel_m: float,
+        ground_range_m: FloatArray,
+        squint_rad: tuple[float, float] | None = None,
     ) -> tuple[ComplexArray, FloatArray]:
         """Estimate and remove the azimuth phase error of an image strip.
 
@@ -139,6 +151,10 @@ class StripPga:
             Along-track pixel spacing, m.
         ground_range_m : ndarray, shape (N1,)
             Ground range y of each column, m.
+        squint_rad : (float, float), optional
+            Squint interval ``(ψ_lo, ψ_hi)`` the pixels took pulses over, from the plane
+            normal to the track, rad (positive: ahead); the union over the strip's pulses.
+            Default: broadside, ``±half_beam_rad``.
 
         Returns
         -------
@@ -151,19 +167,21 @@ class StripPga:
         """
         n0 = data.shape[0]
         k0 = 4.0 * math.pi / self.wavelength_m
-        kx_max = k0 * math.sin(self.half_beam_rad)
-        if kx_max * pixel_m > math.pi:
+        lo, hi = (-self.half_beam_rad, self.half_beam_rad) if squint_rad is None else squint_rad
+        if not -math.pi / 2 < lo < hi < math.pi / 2:
+            raise ProcessingError(f"tile PGA: squint interval ({lo}, {hi}) rad is not ordered")
+        width = k0 * (math.sin(hi) - math.sin(lo))
+        if width * pixel_m > 2.0 * math.pi:
             raise ProcessingError(
                 f"tile PGA: pixel {pixel_m} m is coarser than the azimuth band needs "
-                f"({math.pi / kx_max:.3g} m for λ = {self.wavelength_m} m and a half beam "
-                f"of {self.half_beam_rad:.4g} rad)"
+                f"({2.0 * math.pi / width:.3g} m for λ = {self.wavelength_m} m and a beam "
+                f"over squints {lo:.4g} to {hi:.4g} rad)"
             )
         y = np.asarray(ground_range_m, dtype=np.float64)
         slant = np.hypot(y, self.height_m)
-        pad = math.ceil(float(slant.max()) * math.tan(self.half_beam_rad) / pixel_m) + 8
-        axis = _PaddedAxis(
-            pad, n0, sfft.next_fast_len(n0 + 2 * pad), pixel_m, k0, self.half_beam_rad
-        )
+        reach = float(slant.max()) * max(abs(math.tan(lo)), abs(math.tan(hi)))
+        pad = math.ceil(reach / pixel_m) + 8
+        axis = _PaddedAxis(pad, n0, sfft.next_fast_len(n0 + 2 * pad), pixel_m, k0, (lo, hi))
         guard = round(self.guard_m / abs(float(y[1] - y[0])))
         cols = _bright_columns(np.abs(data) ** 2, self.n_lines, guard)
         if cols.size == 0:
@@ -242,12 +260,17 @@ class _PaddedAxis:
     pixel_m: float
     wavenum: float
     """Two-way carrier wavenumber K = 4π/λ, rad/m."""
-    half_beam_rad: float
+    squint_rad: tuple[float, float]
+    """Squint interval (lo, hi) the pixels took pulses over, rad (positive: ahead)."""
 
     @property
     def kx(self) -> FloatArray:
-        """Along-track wavenumber of each FFT bin, rad/m."""
-        return np.asarray(2.0 * math.pi * np.fft.fftfreq(self.n_fft, self.pixel_m), np.float64)
+        """Along-track wavenumber of each FFT bin, rad/m: the one of its aliases within a
+        sampling band (``2π / pixel_m`` wide) centred on the beam's band."""
+        centre = self.wavenum * float(np.mean(np.sin(self.squint_rad)))
+        span = 2.0 * math.pi / self.pixel_m
+        kx = 2.0 * math.pi * np.fft.fftfreq(self.n_fft, self.pixel_m)
+        return np.asarray(centre + (kx - centre + span / 2.0) % span - span / 2.0, np.float64)
 
     def _kernel(self, rho: FloatArray, sign: int) -> ComplexArray:
         """``exp(sign j R (sqrt(K² - k_x²) - K))`` per line (lines on axis 1, slant R)."""
@@ -265,7 +288,7 @@ class _PaddedAxis:
     def recompress(self, hist: ComplexArray, rho: FloatArray) -> ComplexArray:
         """Image lines (padded rows) of phase histories, limited to the beam's band.
 
-        Backprojection passes only ``|k_x| <= K sin(θ/2)`` (beam culling); a phase
+        Backprojection passes only the beam's band (beam culling); a phase
         correction spreads the band of a phase history, so the band is cut again
         (without this cut, a 1 rad rms phase error corrected with its true value still
         left targets at -12.6 dB azimuth PSLR).
@@ -276,21 +299,23 @@ class _PaddedAxis:
     def kernel(self, rho: FloatArray) -> ComplexArray:
         """Spectrum ``C(k_x)`` of the backprojection kernel of each line (slant ``rho``).
 
-        ``c(u) = exp(j K (sqrt(u² + R²) - R))`` for ``|u| <= R tan(θ/2)`` (beam culling),
-        sampled at the pixel spacing on the circular padded axis: the exact kernel, with
+        ``c(u) = exp(j K (sqrt(u² + R²) - R))`` for ``R tan ψ_lo <= u <= R tan ψ_hi`` (beam
+        culling), sampled at the pixel spacing on the circular padded axis: the exact kernel, with
         the Fresnel ripple at its band edges that the stationary-phase form lacks.
         """
         n = np.arange(self.n_fft)
         u = np.where(n < (self.n_fft + 1) // 2, n, n - self.n_fft)[:, None] * self.pixel_m
         r = rho[None, :]
         c = np.exp(1j * self.wavenum * (u**2 / (np.sqrt(u**2 + r**2) + r)))
-        c *= np.abs(u) <= r * math.tan(self.half_beam_rad)
+        lo, hi = np.tan(self.squint_rad)
+        c *= (u >= r * lo) & (u <= r * hi)
         return np.asarray(sfft.fft(c, axis=0))
 
     @property
     def band(self) -> BoolArray:
-        """FFT bins inside the beam's band ``|k_x| <= K sin(θ/2)``."""
-        return np.asarray(np.abs(self.kx) <= self.wavenum * math.sin(self.half_beam_rad))
+        """FFT bins inside the beam's band ``K sin ψ_lo <= k_x <= K sin ψ_hi``."""
+        lo, hi = self.wavenum * np.sin(self.squint_rad)
+        return np.asarray((self.kx >= lo) & (self.kx <= hi))
 
 
 def _bright_columns(power: FloatArray, n_lines: int, guard: int) -> IntArray:
@@ -370,32 +395,40 @@ class TilePga:
     _prev: Tile | None = field(default=None, init=False)
     _held: Tile | None = field(default=None, init=False)
 
-    def push(self, tiles: list[Tile]) -> list[Tile]:
-        """Take finished tiles (in index order); return the tiles now focused."""
+    def push(
+        self, tiles: list[Tile], squint_rad: tuple[float, float] | None = None
+    ) -> list[Tile]:
+        """Take finished tiles (in index order); return the tiles now focused.
+
+        ``squint_rad``: the squint interval the tiles' pixels took pulses over (rad,
+        :meth:`StripPga.focus`); default broadside.
+        """
         out: list[Tile] = []
         for tile in tiles:
             held = self._held
             if held is not None:
                 nxt = tile if tile.index == held.index + 1 else None
-                out.append(self._focus(held, nxt))
+                out.append(self._focus(held, nxt, squint_rad))
                 self._prev = held if nxt is not None else None
             self._held = tile
         return out
 
-    def flush(self) -> list[Tile]:
+    def flush(self, squint_rad: tuple[float, float] | None = None) -> list[Tile]:
         """Focus and hand out the tile still held (end of the segment or run)."""
         if self._held is None:
             return []
-        tile = self._focus(self._held, None)
+        tile = self._focus(self._held, None, squint_rad)
         self._prev = self._held = None
         return [tile]
 
-    def _focus(self, tile: Tile, nxt: Tile | None) -> Tile:
+    def _focus(
+        self, tile: Tile, nxt: Tile | None, squint_rad: tuple[float, float] | None
+    ) -> Tile:
         prev = self._prev if self._prev is not None and self._prev.index == tile.index - 1 else None
         parts = [t for t in (prev, tile, nxt) if t is not None]
         strip = np.concatenate([t.data for t in parts], axis=0)
         axis0 = tile.grid.axis0_m
         pixel = float(axis0[1] - axis0[0])
-        focused, _ = self.pga.focus(strip, pixel, tile.grid.axis1_m)
+        focused, _ = self.pga.focus(strip, pixel, tile.grid.axis1_m, squint_rad)
         first = 0 if prev is None else prev.data.shape[0]
         return replace(tile, data=focused[first : first + tile.data.shape[0]])
