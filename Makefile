@@ -19,20 +19,26 @@ demo: $(STAMP)
 # worker (its fixtures built once; test_install's two in-tree pip builds never overlap);
 # then the realtime tests, a module at a time on two workers (each mostly waits on the
 # clock); then the exclusive ones alone, one after the other. The first two phases hand
-# the longest modules out first (tests/conftest.py LONGEST_FIRST); the last two collect
-# only the modules REALTIME names. Every phase runs; the target fails when any does
-# (pytest's 5, no test collected, included). The -m options replace pyproject's, so they
-# name bench and fuzz_long again.
+# the longest modules out first (tests/conftest.py LONGEST_FIRST); the realtime phase
+# collects only the modules REALTIME names, the exclusive phase those EXCLUSIVE names.
+# Every phase runs; the target fails when any does (pytest's 5, no test collected,
+# included). The -m options replace pyproject's, so they name bench and fuzz_long again.
+# The suite's processes share the checkout's bytecode (the package's modules, pytest's
+# rewritten test modules): where the environment turns writing it off
+# (PYTHONDONTWRITEBYTECODE), every `sarmoco` process and every phase's collection would
+# compile them again.
 NOT_SLOW := not bench and not fuzz_long
+test: export PYTHONDONTWRITEBYTECODE :=
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadscope --no-loadscope-reorder \
 	  --durations=15 \
 	  -m "not realtime and $(NOT_SLOW)"; s1=$$?; \
 	live=$$($(BIN)/python -c 'from tests.conftest import REALTIME; print(*REALTIME)') || exit 1; \
+	alone=$$($(BIN)/python -c 'from tests.conftest import EXCLUSIVE; print(*EXCLUSIVE)') || exit 1; \
 	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadfile --no-loadscope-reorder \
 	  --durations=15 -m "realtime and not exclusive and $(NOT_SLOW)" $$live; s2=$$?; \
 	$(BIN)/python -m pytest -q -p no:cacheprovider --durations=15 \
-	  -m "exclusive and $(NOT_SLOW)" $$live && exit $$(( s1 || s2 ))
+	  -m "exclusive and $(NOT_SLOW)" $$alone && exit $$(( s1 || s2 ))
 
 # The documentation site (docs/, mkdocs.yml) into site/: the generated reference pages
 # first, then a strict build (a broken link or anchor fails). The test suite checks both.

@@ -304,7 +304,9 @@ def test_planted_cycle_long_function_and_missing_all_are_found(tmp_path: Path) -
 
 def test_daemon_process_never_loads_the_simulator() -> None:
     """Every daemon module and the command line for ``sarmoco run`` leave ``sarmoco.sim`` out,
-    and the ground products with their plotting library."""
+    and the ground products with their plotting library; and ``scipy.signal``, whose import
+    (with the SciPy packages it pulls in) costs more CPU than the rest of a daemon's start,
+    in every ``sarmoco`` process."""
     code = (
         "import pkgutil, sys, importlib\n"
         "import sarmoco.daemon\n"
@@ -313,7 +315,7 @@ def test_daemon_process_never_loads_the_simulator() -> None:
         "from sarmoco.app.cli import build_parser\n"
         "build_parser().parse_args(['run', '--config', 'sarmoco.toml'])\n"
         "sim = ('sarmoco.sim', 'sarmoco.app.sim', 'sarmoco.app.demo', 'sarmoco.products',"
-        " 'matplotlib')\n"
+        " 'matplotlib', 'scipy.signal')\n"
         "print(sorted(m for m in sys.modules if m.startswith(sim)))\n"
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)

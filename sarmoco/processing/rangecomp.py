@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.fft
-from scipy.signal import get_window
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.types import C_MPS, ComplexArray, FloatArray, RadarParams
@@ -56,6 +55,10 @@ def reference_chirp(radar: RadarParams) -> ComplexArray:
 
 
 def _window_values(window: Window, m: int) -> FloatArray:
+    # scipy.signal here, not at the module's top: a daemon that weights no range spectrum
+    # starts without it (its import is the largest part of a daemon process's start)
+    from scipy.signal import get_window
+
     try:
         return np.asarray(get_window(window, m, fftbins=False), dtype=np.float64)
     except (ValueError, TypeError) as exc:

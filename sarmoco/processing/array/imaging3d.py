@@ -42,7 +42,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.fft
 from scipy.ndimage import median_filter
-from scipy.signal import get_window
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.array.geometry import ArrayLayout
@@ -279,7 +278,11 @@ def _surface_ranges(
     kr = 4.0 * math.pi * (radar.carrier_hz + scipy.fft.fftfreq(n_s, 1.0 / radar.sample_rate_hz))
     kr /= C_MPS
     window = opt.cross_window
-    w = np.ones(n_c) if window is None else get_window(window, n_c + 2, fftbins=False)[1:-1]
+    w = np.ones(n_c)
+    if window is not None:  # scipy.signal only then: its import is most of a daemon's start
+        from scipy.signal import get_window
+
+        w = get_window(window, n_c + 2, fftbins=False)[1:-1]
     order = np.argsort(y)
     weights = np.empty(n_c)
     weights[order] = w

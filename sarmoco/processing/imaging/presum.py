@@ -38,7 +38,6 @@ import math
 import numba
 import numpy as np
 import numpy.typing as npt
-from scipy import signal
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.types import ComplexArray, IntArray
@@ -97,6 +96,53 @@ def _fir_decimate(
                 out[m, b0 + b] = acc[m, b]
 
 
+def kaiser_lowpass(
+    rate_hz: float, pass_hz: float, stop_hz: float, attenuation_db: float
+) -> npt.NDArray[np.float64]:
+    """Taps of a linear-phase FIR low-pass by the Kaiser window method, odd in number.
+
+    Kaiser's estimates (J. F. Kaiser, "Nonrecursive digital filter design using the
+    I0-sinh window function", 1974) give the window's shape ``beta`` and the length for
+    ``attenuation_db`` over the transition band ``[pass_hz, stop_hz]``; the length is made
+    odd, and the ideal low-pass cut at the middle of the transition band is windowed:
+    the taps of ``scipy.signal.firwin(n, cutoff, window=("kaiser", beta), fs=rate_hz)``
+    with ``n, beta`` from ``scipy.signal.kaiserord``, without importing ``scipy.signal``:
+    that import is the largest part of a daemon process's start.
+
+    Parameters
+    ----------
+    rate_hz : float
+        Sample rate, Hz.
+    pass_hz, stop_hz : float
+        Passband and stopband edges, Hz, ``0 < pass_hz < stop_hz <= rate_hz / 2``.
+    attenuation_db : float
+        Stopband attenuation, dB (>= 8).
+
+    Returns
+    -------
+    ndarray of float64, shape (2 M + 1,)
+        Symmetric taps, DC gain 1.
+
+    Raises
+    ------
+    ProcessingError
+        An attenuation below 8 dB.
+    """
+    a = float(attenuation_db)
+    if a < 8.0:
+        raise ProcessingError(f"kaiser_lowpass: attenuation {a!r} dB below the design's 8 dB")
+    beta = 0.1102 * (a - 8.7) if a > 50.0 else 0.0
+    if 21.0 < a <= 50.0:
+        beta = 0.5842 * (a - 21.0) ** 0.4 + 0.07886 * (a - 21.0)
+    width = (stop_hz - pass_hz) / (rate_hz / 2.0)
+    n_taps = math.ceil((a - 7.95) / 2.285 / (math.pi * width) + 1.0)
+    n_taps += 1 - n_taps % 2
+    cutoff = (pass_hz + stop_hz) / rate_hz  # of the Nyquist frequency
+    m = np.arange(n_taps) - (n_taps - 1) / 2.0
+    taps = cutoff * np.sinc(cutoff * m) * np.kaiser(n_taps, beta)
+    return taps / taps.sum()
+
+
 class AzimuthPrefilter:
     """Low-pass filter and decimate pulses along slow time, streaming (see the module).
 
@@ -137,10 +183,7 @@ class AzimuthPrefilter:
         taps = np.ones(1)
         if self.decimation > 1:
             stop_hz = prf_hz / self.decimation - band_hz
-            n_taps, beta = signal.kaiserord(attenuation_db, (stop_hz - band_hz) / (prf_hz / 2.0))
-            n_taps += 1 - n_taps % 2
-            cutoff = 0.5 * (band_hz + stop_hz)
-            taps = signal.firwin(n_taps, cutoff, window=("kaiser", beta), fs=prf_hz)
+            taps = kaiser_lowpass(prf_hz, band_hz, stop_hz, attenuation_db)
             taps *= self.decimation / taps.sum()
         self.taps = taps.astype(np.float32)
         """FIR taps, odd length 2 M + 1, symmetric, sum D."""

@@ -6,9 +6,10 @@ import itertools
 
 import numpy as np
 import pytest
+from scipy import signal
 
 from sarmoco.errors import ProcessingError
-from sarmoco.processing.imaging.presum import ATTENUATION_DB, AzimuthPrefilter
+from sarmoco.processing.imaging.presum import ATTENUATION_DB, AzimuthPrefilter, kaiser_lowpass
 from sarmoco.processing.types import ComplexArray, IntArray
 
 PRF = 20_000.0
@@ -49,6 +50,26 @@ def test_design_passband_stopband() -> None:
     stopband = freq >= PRF / d - BAND  # what folds onto the passband after decimation
     assert np.all(np.abs(gain[passband] - 1.0) <= 3e-3)  # 0.026 dB
     assert np.all(gain[stopband] <= 10 ** (-ATTENUATION_DB / 20))
+
+
+@pytest.mark.parametrize(
+    ("rate_hz", "pass_hz", "stop_hz", "attenuation_db"),
+    [(PRF, BAND, PRF / 24 - BAND, ATTENUATION_DB), (200.0, 36.0, 64.0, 60.0),
+     (1000.0, 100.0, 180.0, 40.0), (1000.0, 100.0, 150.0, 15.0)],
+)  # fmt: skip
+def test_kaiser_design_is_scipys(
+    rate_hz: float, pass_hz: float, stop_hz: float, attenuation_db: float
+) -> None:
+    """The taps are those of ``scipy.signal.kaiserord`` and ``firwin`` (length made odd), in
+    each of the three regimes of Kaiser's ``beta``."""
+    n, beta = signal.kaiserord(attenuation_db, (stop_hz - pass_hz) / (rate_hz / 2))
+    n += 1 - n % 2
+    want = signal.firwin(n, (pass_hz + stop_hz) / 2, window=("kaiser", beta), fs=rate_hz)
+    got = kaiser_lowpass(rate_hz, pass_hz, stop_hz, attenuation_db)
+    assert got.shape == want.shape
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12 * np.abs(want).max())
+    with pytest.raises(ProcessingError, match="below the design's 8 dB"):
+        kaiser_lowpass(rate_hz, pass_hz, stop_hz, 7.9)
 
 
 def test_tones_in_and_out_of_band() -> None:
