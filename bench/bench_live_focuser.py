@@ -1,15 +1,16 @@
 """CPU of the live focusing chain per second of data: full-size pulses through ``Focuser``.
 
 Run as ``python -m bench.bench_live_focuser [--preset ku-vehicle] [--pulses 9000]
-[--warm-blocks 12] [--method rda] [--level 0] [--profile]``.
+[--warm-blocks 12] [--method rda] [--level 0] [--prompt] [--profile]``.
 
 Simulated raw echoes of the full-size preset (turbulent flight, ideal INS, the
 preset's targets) go through :class:`~sarmoco.daemon.focuser.Focuser` in blocks of
 ``imaging.block_pulses`` with their attitude, as the daemon's focusing loop gives them,
 with the pre-filter before range compression (``imaging.presum_first``), the autofocus
 on and the live level held (``--level``: a level of
-:data:`~sarmoco.processing.imaging.rda_tiles.LEVELS`, 0 full resolution; what
-:data:`~sarmoco.daemon.livelevel.LEVEL_COST` is measured with). Nothing else runs in the process: no
+:data:`~sarmoco.processing.imaging.rda_tiles.LEVELS`, 0 full resolution; ``--prompt``: each
+range-Doppler tile formed alone; what :data:`~sarmoco.daemon.livelevel.LEVEL_COST` and
+:data:`~sarmoco.daemon.livelevel.PROMPT_COST` are measured with). Nothing else runs in the process: no
 decode, no recording. Process CPU seconds (all threads: numba's and the FFT's pools)
 are counted, not wall time, so a machine shared with other work does not skew them.
 
@@ -31,17 +32,19 @@ import time
 
 from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.focuser import Focuser
+from sarmoco.processing.imaging.rda_tiles import RdaTileImager
 from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
 
 
 def focus_cpu(
-    run: SimRun, method: str, warm_blocks: int, profile: bool, level: int = 0
+    run: SimRun, method: str, warm_blocks: int, profile: bool, level: int = 0, prompt: bool = False
 ) -> tuple[float, float, float, float, int, str]:
     """CPU seconds of the whole run, of its steady part and of the segment's end
     (:meth:`Focuser.finish`), the steady part's data seconds, the tiles formed, and
-    (``profile``) the steady part's top functions."""
+    (``profile``) the steady part's top functions; ``prompt``: range-Doppler tiles formed
+    alone."""
     cfg = scenario_config(
         run.scenario,
         imaging={"method": method, "presum_first": True, "live_degrade": False},
@@ -59,6 +62,8 @@ def focus_cpu(
         b = slice(a, a + block)
         if focuser.segment is not None:
             focuser.segment.tiles.level = level
+            if isinstance(focuser.segment.tiles, RdaTileImager):
+                focuser.segment.tiles.prompt = prompt
         quat = run.traj.quat[b]
         tiles += len(focuser.push(run.echo[b], run.t_ns[b], run.vel_ned[b], quat=quat).tiles)
     if prof is not None:
@@ -83,6 +88,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--warm-blocks", type=int, default=12, help="blocks before the steady part")
     ap.add_argument("--method", default="rda", help="imaging.method (rda, pfa, direct, ffbp)")
     ap.add_argument("--level", type=int, default=0, help="degraded level held (0: full)")
+    ap.add_argument("--prompt", action="store_true", help="range-Doppler tiles formed alone")
     ap.add_argument("--profile", action="store_true", help="top functions of the steady part")
     args = ap.parse_args(argv)
     run = simulate(
@@ -94,10 +100,10 @@ def main(argv: list[str] | None = None) -> None:
     data_s = float(run.t_ns[-1] - run.t_ns[0]) * 1e-9
     load = os.getloadavg()[0]
     total, steady, end, steady_s, tiles, text = focus_cpu(
-        run, args.method, args.warm_blocks, args.profile, args.level
+        run, args.method, args.warm_blocks, args.profile, args.level, args.prompt
     )
     print(f"{args.preset} full size, {run.t_ns.size} pulses ({data_s:.2f} s), {args.method}, "
-          f"level {args.level}, presum first, autofocus on; "
+          f"level {args.level}{', prompt' if args.prompt else ''}, presum first, autofocus on; "
           f"load {load:.1f} on {os.cpu_count()} cores")  # fmt: skip
     print(f"whole run: {total:.2f} CPU s, {total / data_s:.3f} core-s per data second, "
           f"{tiles} tiles")  # fmt: skip

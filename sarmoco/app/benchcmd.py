@@ -604,6 +604,7 @@ def bench(
         written = dir_bytes(run.store)
         counted = pulse_figures(run)
         level = run.status.get("gauges", {}).get("live_image_level")
+        prompt = run.status.get("gauges", {}).get("live_image_prompt")
     finally:
         if not keep:
             shutil.rmtree(out, ignore_errors=True)
@@ -626,6 +627,7 @@ def bench(
             "live_min_level": min_level,
             "live_image_level": level,
             "live_image": None if level is None else level_names()[int(level)],
+            "live_image_prompt": None if prompt is None else bool(prompt),
             "bytes_written": written,
             "exit_status": run.exit_status,
             "load_average": [load_start, os.getloadavg()[0]],
