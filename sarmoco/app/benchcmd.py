@@ -532,13 +532,19 @@ def _check_arguments(preset: str, scale: float, duration_s: float, min_level: in
 
 
 def _sections(
-    record: bool, autofocus: bool, presum_first: bool, method: str | None, min_level: int
+    record: bool,
+    autofocus: bool,
+    presum_first: bool,
+    method: str | None,
+    min_level: int,
+    live_budget: float | None = None,
 ) -> dict[str, dict[str, Any]]:
     """The configuration keys the bench sets on top of the scenario's (see :func:`bench`)."""
     sections: dict[str, dict[str, Any]] = {
         "recorder": {"raw_echoes": record},
         "imaging": {"presum_first": presum_first, "live_min_level": min_level}
-        | ({} if method is None else {"method": method, "live_method": "method"}),
+        | ({} if method is None else {"method": method, "live_method": "method"})
+        | ({} if live_budget is None else {"live_budget": live_budget}),
     }
     if not autofocus:
         sections["autofocus"] = {"enabled": False}
@@ -555,6 +561,7 @@ def bench(
     presum_first: bool = False,
     method: str | None = None,
     min_level: int = 0,
+    live_budget: float | None = None,
     work: Path | None = None,
     keep: bool = False,
 ) -> dict[str, Any]:
@@ -582,6 +589,10 @@ def bench(
     min_level : int
         Lowest degraded level of the live image (``imaging.live_min_level``; 0: full
         resolution).
+    live_budget : float, optional
+        Share of real time the live imager may spend focusing before it steps up
+        (``imaging.live_budget``; default the configuration's): a large one holds the
+        lowest rung, prompt tiles at ``min_level`` 0.
     work : Path, optional
         Where the temporary run folder is made (default: the system's temporary folder).
     keep : bool
@@ -596,7 +607,7 @@ def bench(
     if work is not None:
         work.mkdir(parents=True, exist_ok=True)
     out = Path(tempfile.mkdtemp(prefix=f"sarmoco-bench-{preset}-", dir=work))
-    sections = _sections(record, autofocus, presum_first, method, min_level)
+    sections = _sections(record, autofocus, presum_first, method, min_level, live_budget)
     load_start = os.getloadavg()[0]
     try:
         fft_s = fft_cpu_s_per_pulse(load_preset(preset, scale).radar.n_samples)
@@ -666,6 +677,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="lowest degraded level of the live image, imaging.live_min_level (default 0: "
         "full resolution)",
     )
+    p.add_argument(
+        "--live-budget",
+        type=float,
+        metavar="B",
+        help="share of real time the live imager may spend focusing before it forms its tiles "
+        "in blocks, then degrades, imaging.live_budget (default the configuration's 0.8; a "
+        "large one holds prompt tiles)",
+    )
     p.add_argument("--work", type=Path, help="folder for the temporary run folder")
 
 
@@ -689,6 +708,7 @@ def run_command(args: argparse.Namespace) -> int:
         presum_first=args.presum_first,
         method=args.method,
         min_level=args.min_level,
+        live_budget=args.live_budget,
         work=args.work,
         keep=args.keep,
     )

@@ -44,7 +44,7 @@ full-size ku-vehicle (pre-filter first, autofocus on, range-Doppler tiles) with 
 held, ``python -m bench.bench_live_focuser --level N`` (steady part, median of three runs;
 the figures in ``docs/measurements/live-imager.md``)."""
 
-PROMPT_COST = 1.35
+PROMPT_COST = 1.3
 """Focusing CPU per second of data with prompt tiles at level 0, over level 0's in blocks
 (the same chain and measurement as :data:`LEVEL_COST`, ``--prompt``)."""
 
