@@ -378,14 +378,16 @@ class ImagingConfig:
     live_min_level: int = _key(
         0,
         "With live_degrade: the lowest degraded level the live tiles are formed at (0: full "
-        "resolution); the rule moves between it and the last level",
+        "resolution, prompt tiles first; above 0: in blocks); the rule moves between it and "
+        "the last level",
         ge=0,
         le=len(LEVELS) - 1,
     )
     live_budget: float = _key(
         0.8,
-        "Share of real time the live imager may spend focusing before it degrades "
-        "(focusing CPU seconds per second of data, averaged over live_window_s)",
+        "Share of real time the live imager may spend focusing before it steps up (tiles in "
+        "blocks, then degraded levels; focusing CPU seconds per second of data, averaged "
+        "over live_window_s)",
         gt=0,
     )
     live_window_s: float = _key(

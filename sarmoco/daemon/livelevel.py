@@ -45,8 +45,11 @@ held, ``python -m bench.bench_live_focuser --level N`` (steady part, median of t
 the figures in ``docs/measurements/live-imager.md``)."""
 
 PROMPT_COST = 1.3
-"""Focusing CPU per second of data with prompt tiles at level 0, over level 0's in blocks
-(the same chain and measurement as :data:`LEVEL_COST`, ``--prompt``)."""
+"""Focusing CPU per second of data with prompt tiles at level 0, over level 0's in blocks:
+the same chain as :data:`LEVEL_COST`, ``python -m bench.bench_live_focuser --pulses 12000
+[--prompt]``, the steady part's cost taken as the tile imager's CPU per tile times the tiles
+per data second plus the rest of the chain (a steady part holds a whole number of blocks of
+tiles, not of tiles); median of four pairs (1.17-1.66 on a loaded machine)."""
 
 HEADROOM = 0.7
 """Share of the budget the level below must fit in before the rule steps down."""

@@ -323,15 +323,14 @@ def test_prompt_tiles_wait_for_no_later_tile(strip: SimRun) -> None:
     wait up to ``block_tiles - 1`` tile lengths. The two give the same image (the point
     targets of both: :func:`test_live_imager_focuses_point_targets_as_theory`)."""
     cfg = scenario_config(strip.scenario, imaging={"method": "rda"})
-    tile_pulses = cfg.imaging.tile_length_m / float(np.linalg.norm(strip.vel_ned[0])) * (
-        cfg.radar.prf_hz
-    )
+    speed = float(np.linalg.norm(strip.vel_ned[0]))
+    tile_pulses = cfg.imaging.tile_length_m / speed * cfg.radar.prf_hz
     push = 16
     prompt, waits = _waits(strip, push, live_budget=1e6)  # never over budget: prompt
     blocked, block_waits = _waits(strip, push, live_degrade=False)
     print(f"tile {tile_pulses:.0f} pulses; waits prompt {waits}, in blocks {block_waits}")
     assert len(waits) >= 4 and max(waits) < tile_pulses
-    assert max(block_waits) > 2 * tile_pulses  # red: the first tile of each block waits
+    assert max(block_waits) > 2 * tile_pulses  # a block's first tile waits for the others
     # the same tiles: the blocks' ends fall elsewhere, which moves only what the partial
     # apertures there wrap into the block (at most -59 dB of the strongest pixel)
     ends = {t.index: t for t in blocked}
