@@ -520,7 +520,9 @@ def pulse_figures(run: BenchRun) -> dict[str, Any]:
     }
 
 
-def _check_arguments(preset: str, scale: float, duration_s: float, min_level: int) -> None:
+def _check_arguments(
+    preset: str, scale: float, duration_s: float, min_level: int, live_budget: float | None
+) -> None:
     if preset not in PRESETS:
         raise ConfigError(f"bench --preset: {preset!r} is not one of {', '.join(PRESETS)}")
     if not 0.0 < scale <= 1.0:
@@ -529,6 +531,8 @@ def _check_arguments(preset: str, scale: float, duration_s: float, min_level: in
         raise ConfigError(f"bench --duration: {duration_s!r} s is not > 0")
     if not 0 <= min_level < len(level_names()):
         raise ConfigError(f"bench --min-level: {min_level!r} is not a level of the live image")
+    if live_budget is not None and not live_budget > 0.0:
+        raise ConfigError(f"bench --live-budget: {live_budget!r} is not > 0")
 
 
 def _sections(
@@ -603,7 +607,7 @@ def bench(
     ConfigError
         For an unknown preset, a scale outside (0, 1] or a duration not > 0.
     """
-    _check_arguments(preset, scale, duration_s, min_level)
+    _check_arguments(preset, scale, duration_s, min_level, live_budget)
     if work is not None:
         work.mkdir(parents=True, exist_ok=True)
     out = Path(tempfile.mkdtemp(prefix=f"sarmoco-bench-{preset}-", dir=work))
