@@ -520,6 +520,18 @@ def pulse_figures(run: BenchRun) -> dict[str, Any]:
     }
 
 
+def live_image_figures(run: BenchRun) -> dict[str, Any]:
+    """The live image at the end of the stream: its level (a number and in words) and
+    whether its tiles were prompt (None each without a live imager's level rule)."""
+    gauges = run.status.get("gauges", {})
+    level, prompt = gauges.get("live_image_level"), gauges.get("live_image_prompt")
+    return {
+        "live_image_level": level,
+        "live_image": None if level is None else level_names()[int(level)],
+        "live_image_prompt": None if prompt is None else bool(prompt),
+    }
+
+
 def _check_arguments(
     preset: str, scale: float, duration_s: float, min_level: int, live_budget: float | None
 ) -> None:
@@ -617,9 +629,7 @@ def bench(
         fft_s = fft_cpu_s_per_pulse(load_preset(preset, scale).radar.n_samples)
         run = live_run(out, preset, scale, duration_s, **sections)
         written = dir_bytes(run.store)
-        counted = pulse_figures(run)
-        level = run.status.get("gauges", {}).get("live_image_level")
-        prompt = run.status.get("gauges", {}).get("live_image_prompt")
+        counted = pulse_figures(run) | live_image_figures(run)
     finally:
         if not keep:
             shutil.rmtree(out, ignore_errors=True)
@@ -640,9 +650,6 @@ def bench(
                 scenario_config(load_preset(preset, scale), **sections)
             ).imaging.method,
             "live_min_level": min_level,
-            "live_image_level": level,
-            "live_image": None if level is None else level_names()[int(level)],
-            "live_image_prompt": None if prompt is None else bool(prompt),
             "bytes_written": written,
             "exit_status": run.exit_status,
             "load_average": [load_start, os.getloadavg()[0]],
