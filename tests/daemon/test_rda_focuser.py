@@ -334,7 +334,10 @@ def test_prompt_tiles_wait_for_no_later_tile(strip: SimRun) -> None:
     # the same tiles: the blocks' ends fall elsewhere, which moves only what the partial
     # apertures there wrap into the block (at most -59 dB of the strongest pixel)
     ends = {t.index: t for t in blocked}
-    assert {t.index for t in prompt} == set(ends)
+    assert [t.index for t in prompt] == [t.index for t in blocked]
+    # over budget after 2 s of data: prompt tiles, then blocks; every tile once, in order
+    stepped, _ = _waits(strip, push, live_budget=1e-6, live_window_s=2.0)
+    assert [t.index for t in stepped] == [t.index for t in blocked]
     peak = max(float(np.abs(t.data).max()) for t in blocked)
     for t in prompt:
         diff = float(np.abs(t.data - ends[t.index].data).max()) / peak
