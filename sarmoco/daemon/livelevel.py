@@ -26,8 +26,11 @@ modelled: the levels make the tiles cheaper, not the stages before them):
 - after a change, no other change until another window of data has been focused (the
   average then reflects the new rung).
 
-The rule starts at its lowest rung: prompt tiles, or with ``imaging.live_min_level`` above
-0 that level in blocks. The level, whether tiles are prompt and the load are served as the
+The rule starts at level ``imaging.live_min_level`` in blocks and reaches prompt tiles (at
+level 0) only by stepping down, when their cost fits with the headroom: a focuser that
+cannot keep up then climbs the levels from where it did before prompt tiles existed (one
+that started at the costlier prompt rung fell further behind on a loaded machine, skipping
+more pulses while the rule held it a window at each rung). The level, whether tiles are prompt and the load are served as the
 status gauges ``live_image_level``, ``live_image_prompt`` and ``live_image_load``; the live
 page shows the level in words (:func:`level_names`).
 """
@@ -78,8 +81,8 @@ class LiveLevel:
     window_s : float
         Data seconds of the load's exponential average, and of the hold after a change, s.
     floor : int
-        Lowest level (``imaging.live_min_level``): the rule starts there (0: with prompt
-        tiles) and never goes below it.
+        Lowest level (``imaging.live_min_level``): the rule starts there in blocks and never
+        goes below it (0: prompt tiles are its lowest rung).
     """
 
     def __init__(self, budget: float, window_s: float, floor: int = 0) -> None:
@@ -93,7 +96,7 @@ class LiveLevel:
         self._costs = (PROMPT_COST, *LEVEL_COST)
         """Cost of each rung: prompt tiles, then levels 0 .. 3 in blocks."""
         self._lowest = floor + 1 if floor else 0
-        self.rung = self._lowest
+        self.rung = floor + 1
         """Current rung: 0 prompt tiles at level 0, ``l + 1`` level ``l`` in blocks."""
         self.load = 0.0
         """Focusing wall seconds per data second, averaged."""

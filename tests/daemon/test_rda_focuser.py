@@ -82,7 +82,7 @@ def _window(tiles: list[Tile], x: float, y: float, half_m: float = 1.5) -> Image
 
 @pytest.mark.parametrize(
     ("imaging", "prompt"),
-    [({"live_budget": 1e6}, True), ({"live_degrade": False}, False)],
+    [({"live_budget": 1e6, "live_window_s": 0.01}, True), ({"live_degrade": False}, False)],
     ids=["prompt", "blocks"],
 )
 def test_live_imager_focuses_point_targets_as_theory(
@@ -175,13 +175,11 @@ def _rungs(rule: LiveLevel, data_s: float, busy_s: float, n: int) -> list[tuple[
 
 def test_live_level_rule_steps_up_holds_and_steps_down() -> None:
     rule = LiveLevel(budget=0.8, window_s=5.0)
-    assert rule.level == 0 and rule.prompt  # the lowest rung: prompt tiles
-    # 1.2 s of focusing per s of data: up after one window (tiles in blocks first, at the
-    # same level), then held for another
-    rungs = _rungs(rule, 1.0, 1.2, 17)
-    assert rungs[:4] == [(0, True)] * 4 and rungs[4] == (0, False)
-    assert rungs[5:9] == [(0, False)] * 4 and rungs[9] == (1, False)  # over budget: up
-    assert rungs[10:14] == [(1, False)] * 4 and rungs[14] == (2, False)
+    assert rule.level == 0 and not rule.prompt  # starts at level 0 in blocks
+    # 1.2 s of focusing per s of data: up after one window, then held for another
+    rungs = _rungs(rule, 1.0, 1.2, 12)
+    assert rungs[:4] == [(0, False)] * 4 and rungs[4] == (1, False)
+    assert rungs[5:9] == [(1, False)] * 4 and rungs[9] == (2, False)  # over budget: up
     assert rule.update(0.0, 5.0) == 2  # no data: nothing decided
     # the load expected one level down is the measured cost ratio times this one's
     assert rule.load * LEVEL_COST[1] / LEVEL_COST[2] == pytest.approx(rule._at(rule.rung - 1))
@@ -317,16 +315,17 @@ def _waits(run: SimRun, push: int, **imaging: object) -> tuple[list[Tile], list[
 
 
 def test_prompt_tiles_wait_for_no_later_tile(strip: SimRun) -> None:
-    """A live focuser with room forms each range-Doppler tile as soon as the pulses reach
-    the interpolation guard and the pre-filter's delay past its last pulse: none waits a
-    tile length of flight, where tiles formed in blocks (the rung above, and a replay)
-    wait up to ``block_tiles - 1`` tile lengths. The two give the same image (the point
+    """A live focuser with room steps down to prompt tiles: it forms each range-Doppler
+    tile as soon as the pulses reach the interpolation guard and the pre-filter's delay
+    past its last pulse: none waits a tile length of flight, where tiles formed in blocks
+    (the rung above, and a replay) wait up to ``block_tiles - 1`` tile lengths. The two give the same image (the point
     targets of both: :func:`test_live_imager_focuses_point_targets_as_theory`)."""
     cfg = scenario_config(strip.scenario, imaging={"method": "rda"})
     speed = float(np.linalg.norm(strip.vel_ned[0]))
     tile_pulses = cfg.imaging.tile_length_m / speed * cfg.radar.prf_hz
     push = 16
-    prompt, waits = _waits(strip, push, live_budget=1e6)  # never over budget: prompt
+    # never over budget: from blocks down to prompt tiles after the first push
+    prompt, waits = _waits(strip, push, live_budget=1e6, live_window_s=0.01)
     blocked, block_waits = _waits(strip, push, live_degrade=False)
     print(f"tile {tile_pulses:.0f} pulses; waits prompt {waits}, in blocks {block_waits}")
     assert len(waits) >= 4 and max(waits) < tile_pulses
@@ -335,8 +334,8 @@ def test_prompt_tiles_wait_for_no_later_tile(strip: SimRun) -> None:
     # apertures there wrap into the block (at most -59 dB of the strongest pixel)
     ends = {t.index: t for t in blocked}
     assert [t.index for t in prompt] == [t.index for t in blocked]
-    # over budget after 2 s of data: prompt tiles, then blocks; every tile once, in order
-    stepped, _ = _waits(strip, push, live_budget=1e-6, live_window_s=2.0)
+    # blocks for the first 2 s of data, then prompt tiles: every tile once, in order
+    stepped, _ = _waits(strip, push, live_budget=1e6, live_window_s=2.0)
     assert [t.index for t in stepped] == [t.index for t in blocked]
     peak = max(float(np.abs(t.data).max()) for t in blocked)
     for t in prompt:
