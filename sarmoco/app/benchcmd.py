@@ -607,8 +607,8 @@ def bench(
         resolution).
     live_budget : float, optional
         Share of real time the live imager may spend focusing before it steps up
-        (``imaging.live_budget``; default the configuration's): a large one holds the
-        lowest rung, prompt tiles at ``min_level`` 0.
+        (``imaging.live_budget``; default the configuration's): a large one brings the
+        rule down to prompt tiles (at ``min_level`` 0) after its first window.
     work : Path, optional
         Where the temporary run folder is made (default: the system's temporary folder).
     keep : bool
@@ -694,7 +694,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         metavar="B",
         help="share of real time the live imager may spend focusing before it forms its tiles "
         "in blocks, then degrades, imaging.live_budget (default the configuration's 0.8; a "
-        "large one holds prompt tiles)",
+        "large one steps down to prompt tiles after the first window)",
     )
     p.add_argument("--work", type=Path, help="folder for the temporary run folder")
 

@@ -365,21 +365,22 @@ class ImagingConfig:
     )
     live_degrade: bool = _key(
         True,
-        "With method rda or pfa in a live run: while focusing has room, form each rda tile "
-        "alone as soon as its pulses are in (prompt, the status gauge live_image_prompt); "
-        "when focusing needs more than live_budget of real time, form them in blocks of "
-        "tiles (the same image, cheaper per tile, up to three tile lengths of flight later), "
-        "then at a degraded level (1: twice the pixel spacing and, for rda, a presum by 2: "
-        "half the Doppler band, twice the azimuth resolution; 2: also half the swath; 3: four "
-        "times the pixel spacing, presum by 4, half the swath), one step up at a time, and "
+        "With method rda or pfa in a live run: the rda tiles start in blocks of tiles; "
+        "when focusing has room for it, form each alone as soon as its pulses are in (the "
+        "same image, up to three tile lengths of flight sooner, costlier per tile; the status "
+        "gauge live_image_prompt); when focusing needs more than live_budget of real time, "
+        "form them in blocks again, then at a degraded level (1: twice the pixel spacing "
+        "and, for rda, a presum by 2: half the Doppler band, twice the azimuth resolution; 2: "
+        "also half the swath; 3: four times the pixel spacing, presum by 4, half the "
+        "swath), one step up at a time, and "
         "back down when the step below, at its measured cost, would fit with a margin; the "
         "level is the status gauge live_image_level. A replay never degrades",
     )
     live_min_level: int = _key(
         0,
         "With live_degrade: the lowest degraded level the live tiles are formed at (0: full "
-        "resolution, prompt tiles first; above 0: in blocks); the rule moves between it and "
-        "the last level",
+        "resolution, tiles in blocks or, with room, prompt; above 0: in blocks); the rule "
+        "moves between it and the last level",
         ge=0,
         le=len(LEVELS) - 1,
     )

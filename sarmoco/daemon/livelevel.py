@@ -28,11 +28,12 @@ modelled: the levels make the tiles cheaper, not the stages before them):
 
 The rule starts at level ``imaging.live_min_level`` in blocks and reaches prompt tiles (at
 level 0) only by stepping down, when their cost fits with the headroom: a focuser that
-cannot keep up then climbs the levels from where it did before prompt tiles existed (one
-that started at the costlier prompt rung fell further behind on a loaded machine, skipping
-more pulses while the rule held it a window at each rung). The level, whether tiles are prompt and the load are served as the
-status gauges ``live_image_level``, ``live_image_prompt`` and ``live_image_load``; the live
-page shows the level in words (:func:`level_names`).
+cannot keep up climbs the levels from level 0 in blocks (started at the costlier prompt
+rung, one on a loaded machine fell further behind, skipping more pulses, while the rule
+held it a window at each rung). The level, whether tiles are
+prompt and the load are served as the status gauges ``live_image_level``,
+``live_image_prompt`` and ``live_image_load``; the live page shows the level in words
+(:func:`level_names`).
 """
 
 from __future__ import annotations
