@@ -318,8 +318,9 @@ def test_prompt_tiles_wait_for_no_later_tile(strip: SimRun) -> None:
     """A live focuser with room steps down to prompt tiles: it forms each range-Doppler
     tile as soon as the pulses reach the interpolation guard and the pre-filter's delay
     past its last pulse: none waits a tile length of flight, where tiles formed in blocks
-    (the rung above, and a replay) wait up to ``block_tiles - 1`` tile lengths. The two give the same image (the point
-    targets of both: :func:`test_live_imager_focuses_point_targets_as_theory`)."""
+    (the rung above, and a replay) wait up to ``block_tiles - 1`` tile lengths. The two
+    give the same image (the point targets of both:
+    :func:`test_live_imager_focuses_point_targets_as_theory`)."""
     cfg = scenario_config(strip.scenario, imaging={"method": "rda"})
     speed = float(np.linalg.norm(strip.vel_ned[0]))
     tile_pulses = cfg.imaging.tile_length_m / speed * cfg.radar.prf_hz
