@@ -319,6 +319,8 @@ class _LiveRun:
         """The radar link is a network link (not a file)."""
         self._write_failure_reported = False
         """The recorder's writer thread failed and that was counted and logged."""
+        self._failure_lock = threading.Lock()
+        """Held while a failure is checked against the one reported (two threads report)."""
         self._record_lock = threading.Lock()
         """Held by the recording thread through a pass, and to change :attr:`pipe`."""
         self._nav_lock = threading.Lock()
@@ -808,12 +810,22 @@ class _LiveRun:
         return released
 
     def _processing_failed(self, exc: SarmocoError) -> None:
-        """Count, log and report unhealthy a failed pass (or writer thread)."""
-        self.counters.inc("processing_errors")
+        """Count, log and report unhealthy a failed pass (or writer thread).
+
+        With ``recorder.writer_queue``, the writer thread's failure stands: every later
+        call to the recorder raises it again, from the focusing loop and from the
+        recording thread. Once reported, it is not counted or logged again.
+        """
         self.health.set("processing", False, str(exc))
-        log.error("processing error, block skipped", extra={"error": str(exc)})
         pipe = self.pipe
-        self._write_failure_reported = pipe is not None and pipe.recorder.write_failure is not None
+        standing = None if pipe is None else pipe.recorder.write_failure
+        queued = self.cfg.recorder.writer_queue > 0
+        with self._failure_lock:
+            if queued and self._write_failure_reported and str(exc) == str(standing):
+                return
+            self._write_failure_reported = standing is not None
+        self.counters.inc("processing_errors")
+        log.error("processing error, block skipped", extra={"error": str(exc)})
 
     def _block_done(self) -> None:
         """A block was focused within a pass: :meth:`_keepalive`. A pass through a backlog
