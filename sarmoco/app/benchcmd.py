@@ -520,7 +520,21 @@ def pulse_figures(run: BenchRun) -> dict[str, Any]:
     }
 
 
-def _check_arguments(preset: str, scale: float, duration_s: float, min_level: int) -> None:
+def live_image_figures(run: BenchRun) -> dict[str, Any]:
+    """The live image at the end of the stream: its level (a number and in words) and
+    whether its tiles were prompt (None each without a live imager's level rule)."""
+    gauges = run.status.get("gauges", {})
+    level, prompt = gauges.get("live_image_level"), gauges.get("live_image_prompt")
+    return {
+        "live_image_level": level,
+        "live_image": None if level is None else level_names()[int(level)],
+        "live_image_prompt": None if prompt is None else bool(prompt),
+    }
+
+
+def _check_arguments(
+    preset: str, scale: float, duration_s: float, min_level: int, live_budget: float | None
+) -> None:
     if preset not in PRESETS:
         raise ConfigError(f"bench --preset: {preset!r} is not one of {', '.join(PRESETS)}")
     if not 0.0 < scale <= 1.0:
@@ -529,16 +543,24 @@ def _check_arguments(preset: str, scale: float, duration_s: float, min_level: in
         raise ConfigError(f"bench --duration: {duration_s!r} s is not > 0")
     if not 0 <= min_level < len(level_names()):
         raise ConfigError(f"bench --min-level: {min_level!r} is not a level of the live image")
+    if live_budget is not None and not live_budget > 0.0:
+        raise ConfigError(f"bench --live-budget: {live_budget!r} is not > 0")
 
 
 def _sections(
-    record: bool, autofocus: bool, presum_first: bool, method: str | None, min_level: int
+    record: bool,
+    autofocus: bool,
+    presum_first: bool,
+    method: str | None,
+    min_level: int,
+    live_budget: float | None = None,
 ) -> dict[str, dict[str, Any]]:
     """The configuration keys the bench sets on top of the scenario's (see :func:`bench`)."""
     sections: dict[str, dict[str, Any]] = {
         "recorder": {"raw_echoes": record},
         "imaging": {"presum_first": presum_first, "live_min_level": min_level}
-        | ({} if method is None else {"method": method, "live_method": "method"}),
+        | ({} if method is None else {"method": method, "live_method": "method"})
+        | ({} if live_budget is None else {"live_budget": live_budget}),
     }
     if not autofocus:
         sections["autofocus"] = {"enabled": False}
@@ -555,6 +577,7 @@ def bench(
     presum_first: bool = False,
     method: str | None = None,
     min_level: int = 0,
+    live_budget: float | None = None,
     work: Path | None = None,
     keep: bool = False,
 ) -> dict[str, Any]:
@@ -582,6 +605,10 @@ def bench(
     min_level : int
         Lowest degraded level of the live image (``imaging.live_min_level``; 0: full
         resolution).
+    live_budget : float, optional
+        Share of real time the live imager may spend focusing before it steps up
+        (``imaging.live_budget``; default the configuration's): a large one brings the
+        rule down to prompt tiles (at ``min_level`` 0) after its first window.
     work : Path, optional
         Where the temporary run folder is made (default: the system's temporary folder).
     keep : bool
@@ -592,18 +619,17 @@ def bench(
     ConfigError
         For an unknown preset, a scale outside (0, 1] or a duration not > 0.
     """
-    _check_arguments(preset, scale, duration_s, min_level)
+    _check_arguments(preset, scale, duration_s, min_level, live_budget)
     if work is not None:
         work.mkdir(parents=True, exist_ok=True)
     out = Path(tempfile.mkdtemp(prefix=f"sarmoco-bench-{preset}-", dir=work))
-    sections = _sections(record, autofocus, presum_first, method, min_level)
+    sections = _sections(record, autofocus, presum_first, method, min_level, live_budget)
     load_start = os.getloadavg()[0]
     try:
         fft_s = fft_cpu_s_per_pulse(load_preset(preset, scale).radar.n_samples)
         run = live_run(out, preset, scale, duration_s, **sections)
         written = dir_bytes(run.store)
-        counted = pulse_figures(run)
-        level = run.status.get("gauges", {}).get("live_image_level")
+        counted = pulse_figures(run) | live_image_figures(run)
     finally:
         if not keep:
             shutil.rmtree(out, ignore_errors=True)
@@ -624,8 +650,6 @@ def bench(
                 scenario_config(load_preset(preset, scale), **sections)
             ).imaging.method,
             "live_min_level": min_level,
-            "live_image_level": level,
-            "live_image": None if level is None else level_names()[int(level)],
             "bytes_written": written,
             "exit_status": run.exit_status,
             "load_average": [load_start, os.getloadavg()[0]],
@@ -664,6 +688,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         help="lowest degraded level of the live image, imaging.live_min_level (default 0: "
         "full resolution)",
     )
+    p.add_argument(
+        "--live-budget",
+        type=float,
+        metavar="B",
+        help="share of real time the live imager may spend focusing before it forms its tiles "
+        "in blocks, then degrades, imaging.live_budget (default the configuration's 0.8; a "
+        "large one steps down to prompt tiles after the first window)",
+    )
     p.add_argument("--work", type=Path, help="folder for the temporary run folder")
 
 
@@ -687,6 +719,7 @@ def run_command(args: argparse.Namespace) -> int:
         presum_first=args.presum_first,
         method=args.method,
         min_level=args.min_level,
+        live_budget=args.live_budget,
         work=args.work,
         keep=args.keep,
     )

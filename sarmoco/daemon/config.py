@@ -365,25 +365,30 @@ class ImagingConfig:
     )
     live_degrade: bool = _key(
         True,
-        "With method rda or pfa in a live run: when focusing needs more than live_budget of real "
-        "time, form the live tiles at a degraded level (1: twice the pixel spacing and, for "
-        "rda, a presum by 2: half the Doppler band, twice the azimuth resolution; 2: also "
-        "half the swath; 3: four times the pixel spacing, presum by 4, half the swath), one "
-        "level up at a time, and back down when the level below, at its measured cost, "
-        "would fit with a margin; the level is the status gauge live_image_level. A replay "
-        "never degrades",
+        "With method rda or pfa in a live run: the rda tiles start in blocks of tiles; "
+        "when focusing has room for it, form each alone as soon as its pulses are in (the "
+        "same image, up to three tile lengths of flight sooner, costlier per tile; the status "
+        "gauge live_image_prompt); when focusing needs more than live_budget of real time, "
+        "form them in blocks again, then at a degraded level (1: twice the pixel spacing "
+        "and, for rda, a presum by 2: half the Doppler band, twice the azimuth resolution; 2: "
+        "also half the swath; 3: four times the pixel spacing, presum by 4, half the "
+        "swath), one step up at a time, and "
+        "back down when the step below, at its measured cost, would fit with a margin; the "
+        "level is the status gauge live_image_level. A replay never degrades",
     )
     live_min_level: int = _key(
         0,
         "With live_degrade: the lowest degraded level the live tiles are formed at (0: full "
-        "resolution); the rule moves between it and the last level",
+        "resolution, tiles in blocks or, with room, prompt; above 0: in blocks); the rule "
+        "moves between it and the last level",
         ge=0,
         le=len(LEVELS) - 1,
     )
     live_budget: float = _key(
         0.8,
-        "Share of real time the live imager may spend focusing before it degrades "
-        "(focusing CPU seconds per second of data, averaged over live_window_s)",
+        "Share of real time the live imager may spend focusing before it steps up (tiles in "
+        "blocks, then degraded levels; focusing CPU seconds per second of data, averaged "
+        "over live_window_s)",
         gt=0,
     )
     live_window_s: float = _key(

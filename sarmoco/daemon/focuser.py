@@ -753,8 +753,9 @@ class Focuser:
             if im.method in ("rda", "pfa") and im.live_degrade
             else None
         )
-        """The degraded level of the live image (:mod:`sarmoco.daemon.livelevel`); None:
-        tiles always at the configured pixels and swath."""
+        """The degraded level of the live image, and whether its range-Doppler tiles are
+        prompt (:mod:`sarmoco.daemon.livelevel`); None: tiles always at the configured
+        pixels and swath, in blocks."""
 
     @property
     def track(self) -> ReferenceTrack:
@@ -812,6 +813,8 @@ class Focuser:
             for seg in (self.segment, *(tail for tail, _ in self._tails)):
                 if seg is not None and isinstance(seg.tiles, LIVE_IMAGERS):
                     seg.tiles.level = level
+                if seg is not None and isinstance(seg.tiles, RdaTileImager):
+                    seg.tiles.prompt = self.live.prompt
         return out
 
     def _push(

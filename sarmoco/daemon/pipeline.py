@@ -302,7 +302,8 @@ class Pipeline:
     def _update_counters(self) -> None:
         """The gauges of the focusing part: ``focus_backlog_pulses`` (recorded pulses
         waiting to be focused), ``focus_lag_seconds`` (the newest pulse recorded less
-        the newest taken by focusing, s) and the live image's degraded level and load."""
+        the newest taken by focusing, s) and the live image's degraded level, whether its
+        tiles are prompt, and its load."""
         self.counters.set("focus_backlog_pulses", len(self.backlog))
         recorded_ns, taken = self.tables.recorded_ns, self._taken_ns
         lag = 0.0 if recorded_ns is None or taken is None else max(recorded_ns - taken, 0) * 1e-9
@@ -310,6 +311,7 @@ class Pipeline:
         live = self.focuser.live if self.focuser is not None else None
         if live is not None:  # the live image's degraded level (sarmoco.daemon.livelevel)
             self.counters.set("live_image_level", live.level)
+            self.counters.set("live_image_prompt", float(live.prompt))
             self.counters.set("live_image_load", live.load)
 
 

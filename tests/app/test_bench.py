@@ -68,6 +68,7 @@ def test_bench_prints_sane_figures_and_removes_its_folder(tmp_path: Path) -> Non
         (["--scale", "2"], "--scale"),
         (["--duration", "0"], "--duration"),
         (["--min-level", "4"], "--min-level"),
+        (["--live-budget", "0"], "--live-budget"),
     ],
 )
 def test_bench_refuses_bad_arguments(

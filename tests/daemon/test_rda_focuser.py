@@ -22,7 +22,13 @@ import pytest
 
 from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.focuser import Focuser
-from sarmoco.daemon.livelevel import HEADROOM, LEVEL_COST, LiveLevel, level_names
+from sarmoco.daemon.livelevel import (
+    HEADROOM,
+    LEVEL_COST,
+    PROMPT_COST,
+    LiveLevel,
+    level_names,
+)
 from sarmoco.daemon.status import LIVE_PAGE
 from sarmoco.errors import ConfigError
 from sarmoco.processing.imaging.rda_tiles import LEVELS, RdaTileImager, degraded
@@ -74,9 +80,19 @@ def _window(tiles: list[Tile], x: float, y: float, half_m: float = 1.5) -> Image
     return Image(data[i[0] : i[-1] + 1, j[0] : j[-1] + 1], a0[i], a1[j], "ground")
 
 
-def test_live_imager_focuses_point_targets_as_theory(strip: SimRun) -> None:
-    tiles, focuser = _focus(strip)
+@pytest.mark.parametrize(
+    ("imaging", "prompt"),
+    [({"live_budget": 1e6, "live_window_s": 0.01}, True), ({"live_degrade": False}, False)],
+    ids=["prompt", "blocks"],
+)
+def test_live_imager_focuses_point_targets_as_theory(
+    strip: SimRun, imaging: dict[str, object], prompt: bool
+) -> None:
+    """Tiles formed alone as soon as their pulses are in (a live focuser with room), and in
+    blocks of tiles (one over its budget, and a replay)."""
+    tiles, focuser = _focus(strip, **imaging)
     assert isinstance(focuser._last.tiles, RdaTileImager)
+    assert focuser._last.tiles.prompt is prompt
     scn, track = strip.scenario, focuser.track
     lam = scn.radar.wavelength_m
     irw_az = 0.886 * lam / (4.0 * math.sin(scn.integration_angle_rad / 2.0))
@@ -147,31 +163,50 @@ def _energy(image: Image) -> float:
     return float(np.sum(np.abs(image.data) ** 2)) * area
 
 
+def rule_rung(level: int, prompt: bool) -> int:
+    """The rung of :class:`LiveLevel` of a level with tiles prompt or in blocks."""
+    return 0 if prompt else level + 1
+
+
+def _rungs(rule: LiveLevel, data_s: float, busy_s: float, n: int) -> list[tuple[int, bool]]:
+    """(level, prompt) after each of ``n`` updates of ``rule`` with the same load."""
+    return [(rule.update(data_s, busy_s), rule.prompt) for _ in range(n)]
+
+
 def test_live_level_rule_steps_up_holds_and_steps_down() -> None:
     rule = LiveLevel(budget=0.8, window_s=5.0)
+    assert rule.level == 0 and not rule.prompt  # starts at level 0 in blocks
     # 1.2 s of focusing per s of data: up after one window, then held for another
-    levels = [rule.update(1.0, 1.2) for _ in range(12)]
-    assert levels[:4] == [0] * 4 and levels[4] == 1
-    assert levels[5:9] == [1] * 4 and levels[9] == 2  # still over budget: up again
+    rungs = _rungs(rule, 1.0, 1.2, 12)
+    assert rungs[:4] == [(0, False)] * 4 and rungs[4] == (1, False)
+    assert rungs[5:9] == [(1, False)] * 4 and rungs[9] == (2, False)  # over budget: up
     assert rule.update(0.0, 5.0) == 2  # no data: nothing decided
     # the load expected one level down is the measured cost ratio times this one's
-    assert rule.load * LEVEL_COST[1] / LEVEL_COST[2] == pytest.approx(rule._at(1))
-    # 0.3 s per s at level 2 would be 0.3 c1 / c2 at level 1: within 0.7 of the budget
-    down = [rule.update(1.0, 0.3) for _ in range(20)]
-    assert down[-1] == 0 and max(down) <= 2
-    assert all(b - a in (-1, 0) for a, b in itertools.pairwise(down))
+    assert rule.load * LEVEL_COST[1] / LEVEL_COST[2] == pytest.approx(rule._at(rule.rung - 1))
+    # 0.3 s per s at level 2 would be 0.3 c1 / c2 at level 1: within 0.7 of the budget;
+    # and down to prompt tiles, one rung at a time
+    down = _rungs(rule, 1.0, 0.3, 25)
+    assert down[-1] == (0, True) and max(level for level, _ in down) <= 2
+    steps = [rule_rung(level, prompt) for level, prompt in down]
+    assert all(b - a in (-1, 0) for a, b in itertools.pairwise(steps))
     # a load that fits at level 2 but not, with the headroom, at level 1: held at 2
     held = 1.01 * HEADROOM * 0.8 * LEVEL_COST[2] / LEVEL_COST[1]
     stay = LiveLevel(budget=0.8, window_s=1.0)
-    stay.level, stay.load = 2, held
+    stay.rung, stay.load = rule_rung(2, False), held
     assert [stay.update(1.0, held) for _ in range(5)] == [2] * 5
     lower = 0.98 * HEADROOM * 0.8 * LEVEL_COST[2] / LEVEL_COST[1]  # fits at level 1
     assert stay.update(1.0, lower) == 1
+    # level 0 in blocks steps down to prompt tiles only where their cost fits
+    blocks = LiveLevel(budget=0.8, window_s=1.0)
+    blocks.rung, blocks.load = rule_rung(0, False), 1.01 * HEADROOM * 0.8 / PROMPT_COST
+    assert _rungs(blocks, 1.0, blocks.load, 5) == [(0, False)] * 5
+    assert _rungs(blocks, 1.0, 0.98 * HEADROOM * 0.8 / PROMPT_COST, 1) == [(0, True)]
     top = LiveLevel(budget=0.8, window_s=1.0)
     assert max(top.update(1.0, 10.0) for _ in range(20)) == len(LEVELS) - 1
-    # a lowest level (imaging.live_min_level): the rule starts there, never goes below it
+    # a lowest level (imaging.live_min_level): the rule starts there, in blocks, and never
+    # goes below it
     floor = LiveLevel(budget=0.8, window_s=1.0, floor=1)
-    assert floor.level == 1 and {floor.update(1.0, 0.01) for _ in range(10)} == {1}
+    assert _rungs(floor, 1.0, 0.01, 10) == [(1, False)] * 10
     assert max(floor.update(1.0, 10.0) for _ in range(20)) == len(LEVELS) - 1
     with pytest.raises(ConfigError):
         LiveLevel(budget=0.8, window_s=1.0, floor=len(LEVELS))
@@ -259,3 +294,51 @@ def test_a_skip_carries_the_segment_across_the_hole() -> None:
     assert any(t.t1_ns < int(run.t_ns[hole.start]) for t in tiles)
     focuser, _, imagers = _push_with_hole(run, hole, tell=False)
     assert focuser.segments == 2 and imagers == 2
+
+
+def _waits(run: SimRun, push: int, **imaging: object) -> tuple[list[Tile], list[int]]:
+    """Tiles of ``run`` through a live focuser fed ``push`` pulses at a time, and for each
+    tile formed before the end the pulses pushed after its last one before it came out."""
+    cfg = scenario_config(
+        run.scenario, autofocus={"enabled": False}, imaging={"method": "rda", **imaging}
+    )
+    focuser = Focuser(cfg, int(run.t_ns[0]), run.vel_ned[:256].mean(axis=0))
+    tiles: list[Tile] = []
+    waits: list[int] = []
+    for a in range(0, run.t_ns.size, push):
+        b = slice(a, a + push)
+        out = focuser.push(run.echo[b], run.t_ns[b], run.vel_ned[b]).tiles
+        tiles += out
+        last = int(run.t_ns[b][-1])
+        waits += [int(np.count_nonzero((run.t_ns > t.t1_ns) & (run.t_ns <= last))) for t in out]
+    return tiles + focuser.finish().tiles, waits
+
+
+def test_prompt_tiles_wait_for_no_later_tile(strip: SimRun) -> None:
+    """A live focuser with room steps down to prompt tiles: it forms each range-Doppler
+    tile as soon as the pulses reach the interpolation guard and the pre-filter's delay
+    past its last pulse: none waits a tile length of flight, where tiles formed in blocks
+    (the rung above, and a replay) wait up to ``block_tiles - 1`` tile lengths. The two
+    give the same image (the point targets of both:
+    :func:`test_live_imager_focuses_point_targets_as_theory`)."""
+    cfg = scenario_config(strip.scenario, imaging={"method": "rda"})
+    speed = float(np.linalg.norm(strip.vel_ned[0]))
+    tile_pulses = cfg.imaging.tile_length_m / speed * cfg.radar.prf_hz
+    push = 16
+    # never over budget: from blocks down to prompt tiles after the first push
+    prompt, waits = _waits(strip, push, live_budget=1e6, live_window_s=0.01)
+    blocked, block_waits = _waits(strip, push, live_degrade=False)
+    print(f"tile {tile_pulses:.0f} pulses; waits prompt {waits}, in blocks {block_waits}")
+    assert len(waits) >= 4 and max(waits) < tile_pulses
+    assert max(block_waits) > 2 * tile_pulses  # a block's first tile waits for the others
+    # the same tiles: the blocks' ends fall elsewhere, which moves only what the partial
+    # apertures there wrap into the block (at most -59 dB of the strongest pixel)
+    ends = {t.index: t for t in blocked}
+    assert [t.index for t in prompt] == [t.index for t in blocked]
+    # blocks for the first 2 s of data, then prompt tiles: every tile once, in order
+    stepped, _ = _waits(strip, push, live_budget=1e6, live_window_s=2.0)
+    assert [t.index for t in stepped] == [t.index for t in blocked]
+    peak = max(float(np.abs(t.data).max()) for t in blocked)
+    for t in prompt:
+        diff = float(np.abs(t.data - ends[t.index].data).max()) / peak
+        assert diff < 2e-3, f"tile {t.index}: difference {diff:.2e} of the strongest pixel"

@@ -14,7 +14,13 @@ Tiles are formed ``block_tiles`` at a time. Tile ``k`` takes the pulses whose
 along-track position is within a half beam footprint of it (as backprojection's beam
 culling); a block of tiles ``k .. k + m - 1`` is formed once the pulses reach a half
 footprint past its end, from the pulses of ``[k L - h, (k + m) L + h]`` (``h`` the half
-footprint at far range plus the interpolation guard):
+footprint at far range plus the interpolation guard). A block's first tile thus waits
+``m - 1`` tile lengths of flight past its own last pulse; a *prompt* imager forms every
+tile alone (``m = 1``), as soon as the pulses reach a half footprint and the guard past
+it, at about 2.5 times the range-Doppler work per tile (the block's two half footprints
+are then shared by one tile instead of ``m``: the live image's quickest rung,
+:mod:`sarmoco.daemon.livelevel`). Either way a tile's pixels lie a half footprint from both
+ends of its block, so it is the same image:
 
 1. the range bins of the tiles' slant-range span (plus the range cell migration and a
    guard) are kept when a pulse arrives;
@@ -115,8 +121,9 @@ def grid_spacing(dx_m: float) -> float:
     return math.floor(dx_m / scale) * scale
 
 
-# the running block shape at each of the four levels, and the last blocks of segments
-@functools.lru_cache(maxsize=6)
+# the running block shape at each of the four levels and of prompt tiles, and the last
+# blocks of segments
+@functools.lru_cache(maxsize=8)
 def block_filters(
     n_az: int,
     dx_m: float,
@@ -243,6 +250,9 @@ class RdaTileImager:
         """Degraded level (:data:`LEVELS`) of the tiles formed from now on."""
         self.only: range | None = None
         """Form only these tiles (a block of a batch); None: every tile."""
+        self.prompt = False
+        """Form each tile alone as soon as the pulses reach a half footprint and the
+        interpolation guard past it, instead of :attr:`block_tiles` at a time."""
 
     def _range_bins(self, layout: TileLayout, axis: FloatArray) -> slice:
         """The bins of ``axis`` that the tiles of ``layout`` need (:func:`tile_range_bins`)."""
@@ -288,8 +298,9 @@ class RdaTileImager:
             self._gain = self._dx / spacing
         tiles: list[Tile] = []
         reach = half + TAPS * self._dx
-        while float(x[-1]) >= (self._next + self.block_tiles) * length + reach:
-            tiles += self._form(range(self._next, self._next + self.block_tiles))
+        m = 1 if self.prompt else self.block_tiles
+        while float(x[-1]) >= (self._next + m) * length + reach:
+            tiles += self._form(range(self._next, self._next + m))
         return tiles
 
     def close(self) -> list[Tile]:
