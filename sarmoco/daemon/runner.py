@@ -96,6 +96,11 @@ REOPEN_S = 1.0
 """Pause between attempts to reopen a failed live link, s."""
 
 
+FAILURE_LOCK = threading.Lock()
+"""Held while a run checks a failure against the one it reported and records it (its
+focusing loop and its recording thread both report)."""
+
+
 @dataclass
 class Capture:
     """One capture interval of a live run (the store's ``captures`` attribute).
@@ -319,8 +324,6 @@ class _LiveRun:
         """The radar link is a network link (not a file)."""
         self._write_failure_reported = False
         """The recorder's writer thread failed and that was counted and logged."""
-        self._failure_lock = threading.Lock()
-        """Held while a failure is checked against the one reported (two threads report)."""
         self._record_lock = threading.Lock()
         """Held by the recording thread through a pass, and to change :attr:`pipe`."""
         self._nav_lock = threading.Lock()
@@ -820,7 +823,7 @@ class _LiveRun:
         pipe = self.pipe
         standing = None if pipe is None else pipe.recorder.write_failure
         queued = self.cfg.recorder.writer_queue > 0
-        with self._failure_lock:
+        with FAILURE_LOCK:
             if queued and self._write_failure_reported and str(exc) == str(standing):
                 return
             self._write_failure_reported = standing is not None
