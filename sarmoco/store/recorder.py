@@ -107,6 +107,9 @@ class _SyncingStore(LocalStore):
         root.mkdir(parents=True, exist_ok=True)
         super().__init__(root)
         self._root = root
+        self._root_id = self._identity()
+        """The store directory's (device, inode): a directory of the same name made later
+        (a write racing ``mv``/``rm -rf`` of the store recreates it) is another one."""
         self._dirty: set[str] = set()
         self._dirty_lock = threading.Lock()
         self._rooted = False
@@ -116,9 +119,19 @@ class _SyncingStore(LocalStore):
         self._buffers = threading.local()
         """Each writing thread's aligned buffer for O_DIRECT writes."""
 
+    def _identity(self) -> tuple[int, int] | None:
+        """The store directory's (device, inode); None where there is none."""
+        try:
+            st = self._root.stat()
+        except FileNotFoundError:
+            return None
+        return st.st_dev, st.st_ino
+
     def _removed(self) -> RecorderError | None:
-        """The error of a store whose directory is gone (its root ``zarr.json`` missing)."""
-        if (self._root / "zarr.json").is_file():
+        """The error of a store whose directory is gone: its root ``zarr.json`` missing, or
+        the directory not the one the store made (a write that raced the removal had zarr
+        make the folders again, the root's metadata with them)."""
+        if (self._root / "zarr.json").is_file() and self._identity() == self._root_id:
             return None
         return RecorderError(f"recorder: {self._root}: the store's directory was removed")
 

@@ -235,6 +235,26 @@ def test_a_root_attribute_after_the_store_was_removed_does_not_recreate_it(
     assert not path.exists()
 
 
+@pytest.mark.parametrize("writer_queue", [0, 4])
+def test_a_store_made_again_by_a_write_that_raced_its_removal_is_not_taken_for_it(
+    tmp_path: Path, writer_queue: int
+) -> None:
+    """A write checked just before ``mv`` of the store lets zarr make its folders again, the
+    root's metadata with them (a root attribute update); the writes after it went on into
+    that new skeleton unreported (test_faults_host in a loaded CI run: healthy 60 s after)."""
+    path = tmp_path / "gone.zarr"
+    rec = Recorder(path, cw.N_SAMPLES, "int16", writer_queue=writer_queue)
+    cw.write_rounds(rec, 60.0, rounds=1)
+    rec.sync()
+    path.rename(tmp_path / "trash")
+    path.mkdir()  # what the racing write left: the name, and the root's metadata
+    shutil.copy(tmp_path / "trash" / "zarr.json", path / "zarr.json")
+    with pytest.raises(RecorderError, match="directory was removed"):
+        cw.write_rounds(rec, 60.0, rounds=1)
+        rec.sync()
+        rec.close()
+
+
 def test_without_the_thread_a_failure_stands_until_a_write_succeeds() -> None:
     """The caller's call raises it; the caller's health reads it until a write succeeds
     (a pass of the daemon with nothing to write must not report the store healthy)."""
