@@ -151,6 +151,25 @@ class TestCrab:
         PSLR -13.05 dB (T1), IRW within 1.01 x theory."""
         run_case(tmp_path, "--crab", "6")
 
+    def test_a_crab_where_the_attitude_misplaces_the_beam(self, tmp_path: Path) -> None:
+        """A -3° crab looking left, 25 s into the flight: the attitude puts the beam 1.5 to
+        2.3° behind where the echoes show it over the first two blocks (-131 to -141 Hz
+        against -71 Hz), and those blocks' echoes, one target entering the beam, do not
+        correlate enough to say so. With the attitude's beam alone the first target lit
+        lost a quarter of its aperture: azimuth IRW 1.20 x (T1). The pixels now take the
+        pointing uncertainty's wider beam until the echoes show where the beam is."""
+        run_case(tmp_path, "--log-start", "25", "--crab", "-3", "--look-side", "left",
+                 "--seed", "14")  # fmt: skip
+
+    @pytest.mark.bench  # a minute of CPU: docs/measurements/acceptance.md
+    def test_gusts_that_swing_the_course_under_a_crab(self, tmp_path: Path) -> None:
+        """Twice the motion and INS error at 6° of crab: the course swings 2.26° between
+        the last two apertures (beam 1.91°) while the body's heading turns 0.98°. Taken for
+        a turn, the last 0.59 s went unimaged and the farthest target kept two thirds of
+        its aperture: azimuth IRW 1.37 x (T4)."""
+        run_case(tmp_path, "--pp-cross", "0.8", "--pp-vert", "0.48", "--ins-error-scale", "2",
+                 "--crab", "6", "--seed", "15")  # fmt: skip
+
     @pytest.mark.bench  # a minute of CPU: docs/measurements/acceptance.md
     def test_crab_minus_8_deg_left(self, tmp_path: Path) -> None:
         """Worst azimuth PSLR -12.89 dB (T6), IRW within 1.02 x theory (-12.44 dB on the

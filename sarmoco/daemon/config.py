@@ -331,6 +331,16 @@ class ImagingConfig:
         ge=0,
         lt=45,
     )
+    pointing_uncertainty_deg: float = _key(
+        2.0,
+        "How far the beam may lie from where the attitude points it, on each side, until "
+        "the segment's echoes show where it is: the pixels take the pulses of that much "
+        "more squint (an INS heading still converging, a mount or a stabilised antenna that "
+        "does not follow the body); 0 trusts the attitude from the first pulse",
+        unit="deg",
+        ge=0,
+        lt=45,
+    )
     prefilter: bool = _key(
         True,
         "Low-pass filter and decimate the pulses in slow time to the Doppler band of "

@@ -69,7 +69,12 @@ from sarmoco.processing.beam import (
     squint_interval_rad,
     within_band,
 )
-from sarmoco.processing.geometry import ReferenceTrack, look_angle, vector_to_imaging
+from sarmoco.processing.geometry import (
+    ReferenceTrack,
+    body_heading_rad,
+    look_angle,
+    vector_to_imaging,
+)
 from sarmoco.processing.imaging.pfa_tiles import PfaTileImager
 from sarmoco.processing.imaging.presum import AzimuthPrefilter, fill_slots, slot_steps
 from sarmoco.processing.imaging.rda_tiles import RdaTileImager
@@ -518,6 +523,8 @@ class _Beam:
         self._axis_body = array_axis_body(math.radians(geo.antenna_squint_deg), geo.look_side)
         self._track = track
         self._half_rad = cfg.imaging.imaged_beam_rad() / 2.0
+        self._unsure_rad = math.radians(cfg.imaging.pointing_uncertainty_deg)
+        """Widening of each side of a block's interval until the echoes give a centroid."""
         edges = layout.ground_range_m + np.array([-0.5, 0.5]) * layout.swath_m
         self._swath_look_rad = np.arctan2(edges, layout.height_m)
         self._scene_look_rad = float(look_angle(geo.center_slant_range_m, geo.height_m))
@@ -573,6 +580,8 @@ class _Beam:
         lo_m, hi_m = squint_interval_rad(mean, self._half_rad, self._swath_look_rad)
         self._attitude_interval = np.array([lo, hi])
         lo, hi = min(lo, lo_m), max(hi, hi_m)
+        if self._echo_squint_rad is None:  # the echoes have not shown where the beam is
+            lo, hi = lo - self._unsure_rad, hi + self._unsure_rad
         keep = self._changes_ns < t_ns
         self._changes_ns = np.append(self._changes_ns[keep], t_ns)
         self._intervals = np.vstack([self._intervals[keep], [lo, hi]])
@@ -837,7 +846,7 @@ class Focuser:
             out.motion, tiles = self.segment.push(rc, t_ns, vel_ned, q)
             self._emit(out, self.segment, tiles)
             return out
-        plan = self.segmenter.plan(t_ns, vel_ned, known, after_skip)
+        plan = self.segmenter.plan(t_ns, vel_ned, known, after_skip, body_heading_rad(q))
         out.turn = plan.turn
         begun = zip(plan.tracks, plan.cut_x_m, plan.offset_m, strict=True)
         new = dict(zip(plan.starts.tolist(), begun, strict=True))

@@ -250,6 +250,18 @@ def quat_to_matrix(quat: FloatArray) -> FloatArray:
     return np.stack([np.stack(r, axis=-1) for r in rows], axis=-2)
 
 
+def body_heading_rad(quat: FloatArray) -> FloatArray:
+    """Heading of the body's x axis of scalar-first body-to-NED quaternions (P, 4), rad from
+    north toward east (P,); NaN where the quaternion is not finite or is zero."""
+    q = np.asarray(quat, dtype=np.float64).reshape(-1, 4)
+    ok = np.all(np.isfinite(q), axis=1) & (np.linalg.norm(q, axis=1) > 0.0)
+    out = np.full(q.shape[0], np.nan)
+    if ok.any():
+        x_ned = quat_to_matrix(q[ok])[:, :, 0]
+        out[ok] = np.arctan2(x_ned[:, 1], x_ned[:, 0])
+    return out
+
+
 def lever_arm_ned(quat: FloatArray, lever_body_m: FloatArray) -> FloatArray:
     """IMU-to-APC lever arm rotated into NED by the attitude, (..., 3), m.
 

@@ -212,3 +212,33 @@ def test_a_deviation_cut_reaches_back_by_the_overlap_and_not_after_a_turn() -> N
     plan = Segmenter(limits, first, "right").plan(t_ns, vel)
     assert plan.starts.size == 1 and np.isnan(plan.cut_x_m).all()
     assert plan.tracks[0].t0_ns == t_ns[plan.starts[0]]
+
+
+def test_a_course_swing_the_body_does_not_make_is_no_turn() -> None:
+    """Gusts swing the course by 2.5° between aperture windows (a 0.29 Hz cross-track
+    velocity of 0.6 m/s at 17.5 m/s, 0.66 m peak to peak: about the acceptance flight's
+    with twice its motion)
+    while the body holds its heading: without the body's heading the course alone flags
+    it a turn; with it, no pulse is. A turn the body makes with the course (the racetrack,
+    the body's heading along the velocity) is flagged as before, block by block alike."""
+    t = np.arange(0.0, 20.0, 1.0 / PRF_HZ)
+    gust = 0.6 * np.sin(2 * np.pi * 0.29 * t)
+    vel = np.stack([np.full(t.size, SPEED_MPS), gust, 0 * t], axis=1)
+    t_ns = (10**18 + np.round(t * 1e9)).astype(np.int64)
+    north = ReferenceTrack.from_velocity(np.zeros(3), np.array([SPEED_MPS, 0.0, 0.0]), t_ns[0])
+    limits = replace(LIMITS, turn_rad=np.radians(1.91), window_s=1.71)
+    assert Segmenter(limits, north, "right").plan(t_ns, vel).turn.any()
+    held = np.radians(6.0) + np.zeros(t.size)  # crabbed 6°, the body's heading held
+    held[::7] = np.nan  # pulses without attitude leave the rest to decide
+    for block in (t.size, 256, 97):
+        seg = Segmenter(limits, north, "right")
+        for a in range(0, t.size, block):
+            s = slice(a, a + block)
+            assert not seg.plan(t_ns[s], vel[s], body_heading_rad=held[s]).turn.any()
+    t, vel, t_in, _ = _racetrack()
+    t_ns = (10**18 + np.round(t * 1e9)).astype(np.int64)
+    first = ReferenceTrack.from_velocity(np.zeros(3), vel[0], int(t_ns[0]))
+    body = np.arctan2(vel[:, 1], vel[:, 0]) + np.radians(6.0)
+    with_body = Segmenter(LIMITS, first, "right").plan(t_ns, vel, body_heading_rad=body).turn
+    np.testing.assert_array_equal(with_body, Segmenter(LIMITS, first, "right").plan(t_ns, vel).turn)
+    assert t_in < t[np.argmax(with_body)] < t_in + 1.0

@@ -395,9 +395,7 @@ class TilePga:
     _prev: Tile | None = field(default=None, init=False)
     _held: Tile | None = field(default=None, init=False)
 
-    def push(
-        self, tiles: list[Tile], squint_rad: tuple[float, float] | None = None
-    ) -> list[Tile]:
+    def push(self, tiles: list[Tile], squint_rad: tuple[float, float] | None = None) -> list[Tile]:
         """Take finished tiles (in index order); return the tiles now focused.
 
         ``squint_rad``: the squint interval the tiles' pixels took pulses over (rad,
@@ -421,9 +419,7 @@ class TilePga:
         self._prev = self._held = None
         return [tile]
 
-    def _focus(
-        self, tile: Tile, nxt: Tile | None, squint_rad: tuple[float, float] | None
-    ) -> Tile:
+    def _focus(self, tile: Tile, nxt: Tile | None, squint_rad: tuple[float, float] | None) -> Tile:
         prev = self._prev if self._prev is not None and self._prev.index == tile.index - 1 else None
         parts = [t for t in (prev, tile, nxt) if t is not None]
         strip = np.concatenate([t.data for t in parts], axis=0)
