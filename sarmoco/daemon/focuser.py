@@ -508,8 +508,10 @@ class _Beam:
     degree about a steady crab). Once the segment's echoes have given a Doppler centroid,
     the block's interval also covers the beam about it (an INS heading a degree off, an
     antenna that does not follow the body's every motion: the echoes show where the beam
-    is; the attitude resolves its ambiguity). The interval holds from the block's first pulse, for
-    the pulses imaged later. The pre-filter keeps the Doppler band of the attitude's
+    is; the attitude resolves its ambiguity). Until then, the interval is widened by
+    ``imaging.pointing_uncertainty_deg`` on each side (the echoes of the first blocks,
+    before the scene fills the beam, often correlate too little to say where it is). The
+    interval holds from the block's first pulse, for the pulses imaged later. The pre-filter keeps the Doppler band of the attitude's
     interval, centred on the echoes' centroid once measured; the autofocus's lines take
     the echoes' squint (else the attitude's). Each block's centroid from the
     attitude (at the reference look angle) and from its echoes go to the store
@@ -525,6 +527,7 @@ class _Beam:
         self._half_rad = cfg.imaging.imaged_beam_rad() / 2.0
         self._unsure_rad = math.radians(cfg.imaging.pointing_uncertainty_deg)
         """Widening of each side of a block's interval until the echoes give a centroid."""
+        self._prf_hz = radar.prf_hz
         edges = layout.ground_range_m + np.array([-0.5, 0.5]) * layout.swath_m
         self._swath_look_rad = np.arctan2(edges, layout.height_m)
         self._scene_look_rad = float(look_angle(geo.center_slant_range_m, geo.height_m))
@@ -581,7 +584,7 @@ class _Beam:
         self._attitude_interval = np.array([lo, hi])
         lo, hi = min(lo, lo_m), max(hi, hi_m)
         if self._echo_squint_rad is None:  # the echoes have not shown where the beam is
-            lo, hi = lo - self._unsure_rad, hi + self._unsure_rad
+            lo, hi = self._widened(lo, hi)
         keep = self._changes_ns < t_ns
         self._changes_ns = np.append(self._changes_ns[keep], t_ns)
         self._intervals = np.vstack([self._intervals[keep], [lo, hi]])
@@ -589,6 +592,17 @@ class _Beam:
         self._attitude_squint_rad = float(centre_squint_rad(self.axis, self._scene_look_rad))
         f_dc = float(doppler_hz(self._speed_mps, self._wavelength_m, squint))
         self._pending = DopplerCentroid(t_ns, squint, f_dc, math.nan)
+
+    def _widened(self, lo: float, hi: float) -> tuple[float, float]:
+        """The squint interval ``(lo, hi)`` (rad) widened by the pointing uncertainty on
+        each side, as far as its Doppler band stays within the pulse rate: a wider band
+        would take a target lit at its low edge again, aliased, at its high edge (a ghost
+        a pulse rate's worth of Doppler away)."""
+        per_sine = 2.0 * self._speed_mps / self._wavelength_m  # Hz per unit of sin ψ
+        room = max(0.0, (self._prf_hz / per_sine - (math.sin(hi) - math.sin(lo))) / 2.0)
+        low = max(lo - self._unsure_rad, math.asin(max(-1.0, math.sin(lo) - room)))
+        high = min(hi + self._unsure_rad, math.asin(min(1.0, math.sin(hi) + room)))
+        return low, high
 
     def band_hz(self) -> tuple[float, float]:
         """Doppler band of the latest block's beam from the attitude, Hz: (low, high)."""
