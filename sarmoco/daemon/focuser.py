@@ -511,9 +511,10 @@ class _Beam:
     is; the attitude resolves its ambiguity). Until then, the interval is widened by
     ``imaging.pointing_uncertainty_deg`` on each side (the echoes of the first blocks,
     before the scene fills the beam, often correlate too little to say where it is). The
-    interval holds from the block's first pulse, for the pulses imaged later. The pre-filter keeps the Doppler band of the attitude's
-    interval, centred on the echoes' centroid once measured; the autofocus's lines take
-    the echoes' squint (else the attitude's). Each block's centroid from the
+    interval holds from the block's first pulse, for the pulses imaged later. The
+    pre-filter keeps the Doppler band of the attitude's interval, centred on the echoes'
+    centroid once measured; the autofocus's lines take the echoes' squint (else the
+    attitude's). Each block's centroid from the
     attitude (at the reference look angle) and from its echoes go to the store
     (:attr:`centroids`). Before any attitude (and without one) the beam is broadside.
     """
