@@ -167,6 +167,32 @@ def _wrap(angle: FloatArray) -> FloatArray:
     return np.asarray(np.angle(np.exp(1j * angle)), dtype=np.float64)
 
 
+def _inputs(
+    t_ns: IntArray,
+    vel_ned: FloatArray,
+    known: BoolArray | None,
+    after_skip: BoolArray | None,
+    body_heading_rad: FloatArray | None,
+) -> tuple[IntArray, FloatArray, BoolArray, BoolArray, FloatArray]:
+    """:meth:`Segmenter.plan`'s arguments as arrays, the optional ones filled in (all
+    known, no skip, no attitude); raises :class:`ProcessingError` where shapes disagree."""
+    t = np.asarray(t_ns, dtype=np.int64)
+    v = np.asarray(vel_ned, dtype=np.float64)
+    ok = np.ones(t.shape[0], dtype=bool) if known is None else np.asarray(known, dtype=bool)
+    skip = np.zeros(t.shape, bool) if after_skip is None else np.asarray(after_skip, bool)
+    body = (
+        np.full(t.shape, np.nan)
+        if body_heading_rad is None
+        else np.asarray(body_heading_rad, dtype=np.float64)
+    )
+    if v.shape != (t.shape[0], 3) or not ok.shape == skip.shape == body.shape == t.shape:
+        raise ProcessingError(
+            f"Segmenter: t_ns {t.shape}, vel_ned {v.shape}, known {ok.shape}, "
+            f"after_skip {skip.shape} and body_heading_rad {body.shape} disagree"
+        )
+    return t, v, ok, skip, body
+
+
 class Segmenter:
     """Streaming segmentation of a strip (see the module docstring).
 
@@ -237,20 +263,7 @@ class Segmenter:
             did; where it is not known (None, or a window without attitude), the course
             alone decides.
         """
-        t = np.asarray(t_ns, dtype=np.int64)
-        v = np.asarray(vel_ned, dtype=np.float64)
-        ok = np.ones(t.shape[0], dtype=bool) if known is None else np.asarray(known, dtype=bool)
-        body = (
-            np.full(t.shape, np.nan)
-            if body_heading_rad is None
-            else np.asarray(body_heading_rad, dtype=np.float64)
-        )
-        skip = np.zeros(t.shape, bool) if after_skip is None else np.asarray(after_skip, bool)
-        if v.shape != (t.shape[0], 3) or not ok.shape == skip.shape == body.shape == t.shape:
-            raise ProcessingError(
-                f"Segmenter: t_ns {t.shape}, vel_ned {v.shape}, known {ok.shape}, "
-                f"after_skip {skip.shape} and body_heading_rad {body.shape} disagree"
-            )
+        t, v, ok, skip, body = _inputs(t_ns, vel_ned, known, after_skip, body_heading_rad)
         if t.size == 0:
             return SegmentPlan(
                 np.zeros(0, bool), np.zeros(0, np.int64), (), np.zeros(0), np.zeros((0, 3))
