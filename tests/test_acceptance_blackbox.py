@@ -137,6 +137,26 @@ class TestCrab:
         centroid (-106 Hz) aliased at 200 Hz PRF. Worst PSLR -13.04 dB (T3 range)."""
         run_case(tmp_path, "--crab", "4")
 
+    def test_crab_6_deg(self, tmp_path: Path) -> None:
+        """A 6° crab: the run is three times the reference's length (1495 pulses), and its
+        real flight's heading wanders up to 1.15° between apertures (no turn). Worst azimuth
+        PSLR -13.05 dB (T1), IRW within 1.01 x theory."""
+        run_case(tmp_path, "--crab", "6")
+
+    @pytest.mark.bench  # a minute of CPU: docs/measurements/acceptance.md
+    def test_gusts_that_swing_the_course_under_a_crab(self, tmp_path: Path) -> None:
+        """Twice the motion and INS error at 6° of crab: the course swings 2.26° between
+        the last two apertures (beam 1.91°) while the body's heading turns 0.98°. Taken for
+        a turn, the last 0.59 s went unimaged and the farthest target kept two thirds of
+        its aperture: azimuth IRW 1.37 x (T4)."""
+        run_case(tmp_path, "--pp-cross", "0.8", "--pp-vert", "0.48", "--ins-error-scale", "2",
+                 "--crab", "6", "--seed", "15")  # fmt: skip
+
+
+class TestCrabLeft:
+    """A crosswind from the other side, looking left: a class of its own so that the two
+    workers share the crab cases (each class is one worker's scope)."""
+
     def test_crab_minus_4_deg_left(self, tmp_path: Path) -> None:
         """The same crab looking left (body yawed toward the scene): worst azimuth PSLR
         -12.73 dB (T3); -12.47 dB with 0.4 s autofocus subapertures. Replayed again with
@@ -144,12 +164,6 @@ class TestCrab:
         broadside band it found 5 of 7 targets, the best at -0.84 dB; -12.95 dB with it."""
         run_case(tmp_path, "--crab", "-4", "--look-side", "left")
         replay_with(tmp_path, "autofocus", "pga", True)
-
-    def test_crab_6_deg(self, tmp_path: Path) -> None:
-        """A 6° crab: the run is three times the reference's length (1495 pulses), and its
-        real flight's heading wanders up to 1.15° between apertures (no turn). Worst azimuth
-        PSLR -13.05 dB (T1), IRW within 1.01 x theory."""
-        run_case(tmp_path, "--crab", "6")
 
     def test_a_crab_where_the_attitude_misplaces_the_beam(self, tmp_path: Path) -> None:
         """A -3° crab looking left, 25 s into the flight: the attitude puts the beam 1.5 to
@@ -160,15 +174,6 @@ class TestCrab:
         pointing uncertainty's wider beam until the echoes show where the beam is."""
         run_case(tmp_path, "--log-start", "25", "--crab", "-3", "--look-side", "left",
                  "--seed", "14")  # fmt: skip
-
-    @pytest.mark.bench  # a minute of CPU: docs/measurements/acceptance.md
-    def test_gusts_that_swing_the_course_under_a_crab(self, tmp_path: Path) -> None:
-        """Twice the motion and INS error at 6° of crab: the course swings 2.26° between
-        the last two apertures (beam 1.91°) while the body's heading turns 0.98°. Taken for
-        a turn, the last 0.59 s went unimaged and the farthest target kept two thirds of
-        its aperture: azimuth IRW 1.37 x (T4)."""
-        run_case(tmp_path, "--pp-cross", "0.8", "--pp-vert", "0.48", "--ins-error-scale", "2",
-                 "--crab", "6", "--seed", "15")  # fmt: skip
 
     @pytest.mark.bench  # a minute of CPU: docs/measurements/acceptance.md
     def test_crab_minus_8_deg_left(self, tmp_path: Path) -> None:
