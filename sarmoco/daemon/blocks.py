@@ -175,8 +175,10 @@ class BlockFocusing:
             window = held.usable & (held.t_ns >= t0) & (held.t_ns < t0 + self._window_ns)
             start_vel = held.vel_ned[window].mean(axis=0)
         self.focuser = Focuser(self.cfg, t0, start_vel, self.sink, quat=p.quat[p.usable][first])
-        self.tables.reference_track(self.focuser.track)
         self._gaps = GapFill(t0, p.vel_ned[0], p.quat[0])
+        # a store that refuses the track (RecorderError) leaves the state whole for the next
+        # block; zarr keeps the attribute and writes it with the root's next attributes
+        self.tables.reference_track(self.focuser.track)
         return p
 
 

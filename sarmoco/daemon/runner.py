@@ -238,6 +238,9 @@ def run_live(cfg: Config, store: Path | None = None, idle_exit_s: float | None =
     run = _LiveRun(cfg, store or new_store_path(cfg.recorder.directory, "run"), stop)
     try:
         run.supervise(idle_exit_s)
+    except Exception:  # logged here: an error while shutting down would hide it
+        log.exception("sarmoco stopping on an unexpected error")
+        raise
     finally:
         run.shut_down()
     return 0

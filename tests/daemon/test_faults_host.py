@@ -240,22 +240,7 @@ def test_disk_full_keeps_the_daemon_up_and_the_store_readable(
         print(f"disk full: {n} of {N_PULSES} pulses committed; /status: {status['components']}")
 
 
-@pytest.mark.parametrize(
-    "writer_queue",
-    [
-        pytest.param(
-            0,
-            marks=pytest.mark.xfail(
-                strict=False,
-                reason="open: in a fresh-clone CI run (2026-12-04) the daemon, unhealthy and "
-                "still up, exited on its own as /metrics was asked (connection reset), its last "
-                "word the refused write of 'pulses/echo/c/1/0/0' logged nowhere before: a store "
-                "error that escaped the focusing loop's handling once the INS log had ended",
-            ),
-        ),
-        8,
-    ],
-)
+@WRITER_QUEUES
 def test_read_only_store_mid_run_is_reported_and_committed_pulses_stay(
     sim_files: SimFiles, tmp_path: Path, writer_queue: int
 ) -> None:

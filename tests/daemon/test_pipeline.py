@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import socket
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,7 @@ from sarmoco.daemon.tables import tile_metrics
 from sarmoco.drivers.radar import RadarUdpSource
 from sarmoco.drivers.samples import AttitudeSample, EchoPackets, Validity, VelocitySample
 from sarmoco.drivers.vita49 import encode_signal_packet
+from sarmoco.errors import RecorderError
 from sarmoco.processing.metrics import PointTargetMetrics, point_target_metrics
 from sarmoco.processing.types import Image
 from sarmoco.products.report import strip, write_report
@@ -35,6 +37,7 @@ from sarmoco.sim.run import SimRun, simulate
 from sarmoco.sim.scenario import load_preset
 from sarmoco.store.flags import PulseFlag
 from sarmoco.store.reader import open_store
+from sarmoco.store.schema import REFERENCE_TRACK_ATTR
 
 MOTION = MotionSpec(
     kind="turbulence",
@@ -63,12 +66,14 @@ def feed(
     nav_from_ns: int | None = None,
     focus_paused_ns: tuple[int, int] | None = None,
     replay: bool = False,
+    focus: Callable[[Pipeline, int], None] = Pipeline.focus,
 ) -> Pipeline:
     """Play a simulated run into a pipeline on the radar's virtual clock (the INS from
     ``nav_from_ns`` on, GPS ns; from its start when None). ``focus_paused_ns``: the
     pipeline is a live one that skips ahead, and focusing does not run while the radar
     clock is in that span (GPS ns), recording does. ``replay``: the first pulses are held
-    for the first track's course, as ``sarmoco replay`` holds them."""
+    for the first track's course, as ``sarmoco replay`` holds them. ``focus``: a focusing
+    pass (the pipeline, the radar clock, GPS ns)."""
     nav = run.ins.nav
     with open_recorder(cfg, store) as rec:
         pipe = Pipeline(
@@ -97,7 +102,7 @@ def feed(
             if i % 64 == 63:
                 pipe.record(t)
                 if not paused[0] <= t < paused[1]:
-                    pipe.focus(t)
+                    focus(pipe, t)
         pipe.finish()
     return pipe
 
@@ -149,6 +154,37 @@ def test_pulses_before_the_ins_starts_are_counted_once(run: SimRun, tmp_path: Pa
     assert metrics["pulses_unfocused"] == totals["pulses_unfocused"] == unfocused >= late
     fates = ("processed", "unfocused", "focus_skipped", "out_of_order")
     assert sum(metrics[f"pulses_{k}"] for k in fates) == run.t_ns.size
+
+
+def test_a_store_that_refuses_the_first_track_costs_one_block(run: SimRun, tmp_path: Path) -> None:
+    """The store's directory is away during the focusing pass that starts the focuser: the
+    first reference track's write is refused (a RecorderError, which the daemon reports and
+    goes on from). With the store back, the next pass records the track and focusing goes
+    on from a whole state: one block's pulses lost to focusing, none to the recording."""
+    cfg = scenario_config(
+        run.scenario, radar={"sample_format": "float32"}, autofocus={"enabled": False}
+    )
+    store, away = tmp_path / "run.zarr", tmp_path / "away.zarr"
+    refused: list[RecorderError] = []
+
+    def focus(pipe: Pipeline, t_ns: int) -> None:
+        if pipe.focuser is not None or refused:
+            pipe.focus(t_ns)
+            return
+        store.rename(away)
+        try:
+            pipe.focus(t_ns)
+        except RecorderError as exc:
+            refused.append(exc)
+        finally:
+            away.rename(store)
+
+    pipe = feed(run, cfg, store, focus=focus)
+    assert len(refused) == 1 and "removed" in str(refused[0]), refused
+    got = open_store(store)
+    assert REFERENCE_TRACK_ATTR in got.attrs
+    assert got.committed("pulses") == run.t_ns.size
+    assert pipe.summary.pulses_processed == run.t_ns.size - cfg.imaging.block_pulses
 
 
 def test_focusing_skips_ahead_on_the_same_segment(tmp_path: Path) -> None:
