@@ -92,6 +92,20 @@ def _truth_vel(truth: dict[str, Any], t_ns: np.ndarray) -> np.ndarray:
     return np.stack([np.interp(t_ns, t, v[:, j]) for j in range(3)], axis=1)
 
 
+STAMP_TOLERANCE_NS = 5_000_000
+"""How far a TIMESYNC-mapped time stamp may be off on a loaded 2-core host, ns (the source
+states half its slowest admitted round trip: about 1 ms on loopback, a few under load)."""
+
+
+def _stamp_error(truth: dict[str, Any], t_ns: np.ndarray, vel_ned: np.ndarray) -> np.ndarray:
+    """Distance of each recorded velocity (NED m/s, at GPS ns ``t_ns``) from the true ones
+    within :data:`STAMP_TOLERANCE_NS` of its time stamp, m/s: 0 for the autopilot's
+    velocity at its own time, metres per second for another system's."""
+    shifts = np.linspace(-STAMP_TOLERANCE_NS, STAMP_TOLERANCE_NS, 41)
+    err = [np.linalg.norm(vel_ned - _truth_vel(truth, t_ns + round(d)), axis=1) for d in shifts]
+    return np.min(err, axis=0)
+
+
 def test_autopilot_reboot_and_second_system(tmp_path_factory: pytest.TempPathFactory) -> None:
     out = tmp_path_factory.mktemp("reboot_rogue")
     summary, status = _run_watched(out, ("clock-step=1.0:-600.8", "mavlink-rogue=7"))
@@ -145,7 +159,7 @@ def test_a_second_system_talking_first(
     stats = truth["wire"]["links"]["ins1"]["stats"]
     nav = store.read("nav", ["t_ns", "vel_ned"])
     kin = np.isfinite(nav["vel_ned"]).all(axis=1)
-    err = np.linalg.norm(nav["vel_ned"][kin] - _truth_vel(truth, nav["t_ns"][kin]), axis=1)
+    err = _stamp_error(truth, nav["t_ns"][kin], nav["vel_ned"][kin])
     flags = store.read("pulses", ["flags"])["flags"]
     pslr = [p["pslr_az_db"] for p in summary.image.points[:3]]
     print(f"second system first: messages {stats['messages']}, ins_rejected "
@@ -154,7 +168,7 @@ def test_a_second_system_talking_first(
           f"{flags.size} pulses flagged; azimuth PSLR {pslr} dB")  # fmt: skip
     assert stats["messages"]["ROGUE_PREROLL"] > 10 and stats["messages"]["ROGUE"] > 100
     assert stats["answered"]["SET_MESSAGE_INTERVAL"] > 0 and stats["answered"]["TIMESYNC"] > 0
-    assert kin.sum() > 100 and err.max() < 0.01  # the autopilot's, at their own stamps
+    assert kin.sum() > 100 and err.max() < 1e-3  # the autopilot's, at their own stamps
     assert (flags & np.uint32(NAV_UNUSABLE) == 0).all()
     assert all(p <= SINC_PSLR_DB + 1.0 for p in pslr), pslr
     assert "listening to the autopilot of system 1 (component 1" in log
