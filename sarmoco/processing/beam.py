@@ -215,6 +215,15 @@ def accc_coherence(rc: ComplexArray, correlation: complex) -> float:
     return abs(correlation) / energy if energy > 0 else 0.0
 
 
+def echoes_stand_out(rc: ComplexArray, ratio: float) -> bool:
+    """Whether some range bin of pulses (P, S) holds more than ``ratio`` times the median
+    bin's power summed over the pulses: a scatterer's echoes, where noise alone (P pulses)
+    spreads by about ``1 / sqrt(P)`` about the median. All-zero pulses hold nothing."""
+    power = np.einsum("pr,pr->r", rc, rc.conj()).real
+    median = float(np.median(power))
+    return bool(power.max() > ratio * median) if median > 0 else bool(power.max() > 0)
+
+
 def correlation_centroid_hz(correlation: complex, prf_hz: float) -> float:
     """Doppler centroid of a pulse-to-pulse correlation (:func:`accc_correlation`) at pulse
     rate ``prf_hz``, in ``(-PRF/2, PRF/2]``, Hz; NaN for a zero correlation."""

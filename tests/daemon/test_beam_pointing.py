@@ -15,8 +15,8 @@ import pytest
 
 from sarmoco.app.simconfig import scenario_config
 from sarmoco.daemon.config import Config
-from sarmoco.daemon.focuser import Focuser, _Beam
-from sarmoco.processing.beam import doppler_hz
+from sarmoco.daemon.focuser import MIN_COHERENCE, Focuser, _Beam
+from sarmoco.processing.beam import accc_coherence, accc_correlation, doppler_hz
 from sarmoco.sim.scenario import load_preset
 from sarmoco.sim.trajectory import euler_to_quat
 
@@ -85,3 +85,32 @@ def test_the_uncertainty_keeps_the_band_within_the_pulse_rate() -> None:
     f = doppler_hz(SPEED_MPS, wavelength, unsure.interval_at(np.array([T0_NS]))[0])
     assert f[0] < f0[0] and f[1] > f0[1]  # widened
     assert np.ptp(f) == pytest.approx(prf, rel=1e-6)  # as far as the pulse rate
+
+
+def test_a_block_of_noise_alone_takes_no_wider_beam() -> None:
+    """A block whose echoes correlate too little for a centroid: noise alone is imaged over
+    the attitude's beam (the wider one would add only noise, at about three times the
+    imaging cost); a target entering the beam (8 of 128 pulses lit in one range bin, 20 dB
+    over the noise; the echoes' coherence stays far below what a centroid needs) keeps the
+    pointing uncertainty's beam."""
+    rng = np.random.default_rng(1)
+    trusted, cfg = _beam(1000.0, 0.0)
+    noise_only, _ = _beam(1000.0)
+    entering, _ = _beam(1000.0)
+    prf = cfg.radar.prf_hz
+    t_ns = T0_NS + np.arange(128) * round(1e9 / prf)
+    shape = (128, 256)
+    noise = (rng.standard_normal(shape) + 1j * rng.standard_normal(shape)) / math.sqrt(2.0)
+    lit = noise.copy()
+    lit[-8:, 100] += 10.0 * np.exp(2j * np.pi * 50.0 * np.arange(8) / prf)
+    assert accc_coherence(lit, accc_correlation(lit)) < MIN_COHERENCE / 3
+    for beam in (trusted, noise_only, entering):
+        beam.point(_yawed(8), T0_NS)
+    noise_only.measure(noise.astype(np.complex64), t_ns, prf)
+    entering.measure(lit.astype(np.complex64), t_ns, prf)
+    first = np.array([T0_NS])
+    lo0, hi0 = trusted.interval_at(first)[0]
+    np.testing.assert_allclose(noise_only.interval_at(first)[0], [lo0, hi0], atol=1e-12)
+    lo, hi = entering.interval_at(first)[0]
+    assert lo == pytest.approx(lo0 - math.radians(2.0), abs=1e-9)
+    assert hi == pytest.approx(hi0 + math.radians(2.0), abs=1e-9)
