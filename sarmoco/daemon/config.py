@@ -336,8 +336,8 @@ class ImagingConfig:
         "How far the beam may lie from where the attitude points it, on each side, until "
         "the segment's echoes show where it is: the pixels take the pulses of that much "
         "more squint (an INS heading still converging, a mount or a stabilised antenna that "
-        "does not follow the body), as far as the band stays within the pulse rate; 0 "
-        "trusts the attitude from the first pulse",
+        "does not follow the body), as far as the band stays within the pulse rate, in "
+        "blocks whose echoes are more than noise; 0 trusts the attitude from the first pulse",
         unit="deg",
         ge=0,
         lt=45,
