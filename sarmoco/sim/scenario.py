@@ -48,6 +48,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields
 from importlib import resources
 from typing import Any, Literal
@@ -378,6 +379,108 @@ _SCENARIO_KEYS = {f.name for f in fields(Scenario)} - {
 _PRESET_KEYS = {"azimuth_resolution_m", "beamwidth_rad"}
 
 
+@dataclass(frozen=True, kw_only=True)
+class PresetParams:
+    """A preset's geometry and radar values, scaled, with :func:`load_preset`'s overrides.
+
+    One field per override key (every :class:`RadarParams` field and every overridable
+    :class:`Scenario` field), each holding the override where one is given. A value of None
+    is derived by :func:`load_preset` from the others.
+
+    Attributes
+    ----------
+    speed_mps : float
+        Nominal ground speed along the track (track frame +x), m/s.
+    altitude_m : float
+        APC height above the flat ground (the track lies at track frame z = -altitude_m), m.
+    center_slant_range_m : float
+        Broadside slant range from the track to the scene centre, m.
+    swath_m : float
+        Ground-range extent of the scene, m, scaled; the preset's targets lie at fractions
+        of it about the scene centre, along and across the track.
+    mode : {"stripmap", "spotlight"}
+        Beam mode (see :class:`Scenario`).
+    snr_db : float or None
+        Per-sample SNR of a unit target before compression, dB; None: no noise.
+    t0_ns : int
+        GPS time of the first pulse, ns.
+    carrier_hz : float
+        Centre (RF reference) frequency, Hz.
+    bandwidth_hz : float
+        Chirp bandwidth, Hz.
+    pulse_width_s : float
+        Chirp duration, s, scaled.
+    sample_rate_hz : float
+        Complex (I/Q) sample rate of the receiver, Hz.
+    receive : {"matched", "dechirp"}
+        Receive chain (see :class:`RadarParams`).
+    chirp_direction : {"up", "down"}
+        Sweep of the transmitted chirp.
+    iq_conjugate : bool
+        The receiver delivers the conjugate of the baseband I/Q.
+    integration_angle_rad : float
+        Azimuth angle spanned by the synthetic aperture (stripmap: the rect real beam), rad:
+        the preset's, or its ``azimuth_resolution_m`` at the preset's carrier.
+    prf_hz : float or None
+        Pulse repetition frequency, Hz; None: the preset's, scaled, but not below
+        :data:`PRF_OVERSAMPLING` times the targets' Doppler bandwidth.
+    n_samples : int or None
+        Complex samples per pulse; None: as many as the slant-range window needs. A preset's
+        own count (scaled) stands while its receive chain is kept.
+    range_gate_delay_s : float or None
+        Two-way delay from the pulse time stamp to the first sample (matched) or to the
+        dechirp reference (dechirp), s; None: from the slant-range window.
+    aperture_s : float or None
+        Duration of the targets' aperture, s (``approach_s`` not included); None: from the
+        integration angle and the targets.
+    track_start_north_m : float or None
+        Along-track position (track frame x) of the nominal APC at the first pulse of the
+        targets' aperture, m; None: placed so that the targets cross the beam centre
+        about mid-aperture.
+    targets : sequence of Target or None
+        Point scatterers, positions in the track frame (x along the track, y toward the
+        look side, z down), m; None: the preset's.
+    heading_rad : float
+        Heading of the nominal track, rad from north toward east.
+    look_side : {"right", "left"}
+        Side of the track the antenna looks to.
+    lever_arm_m : tuple of 3 float
+        INS point to antenna phase centre, body frame (forward, right, down), m.
+    crab_rad : float
+        Body yaw minus track heading, rad, positive clockwise seen from above.
+    antenna_squint_rad : float
+        The antenna mount's boresight yaw from the look side's body broadside toward the
+        body's nose, rad (positive forward).
+    """
+
+    speed_mps: float
+    altitude_m: float
+    center_slant_range_m: float
+    swath_m: float
+    mode: Literal["stripmap", "spotlight"]
+    snr_db: float | None
+    t0_ns: int = DEFAULT_T0_NS
+    carrier_hz: float
+    bandwidth_hz: float
+    pulse_width_s: float
+    sample_rate_hz: float
+    receive: Literal["matched", "dechirp"]
+    chirp_direction: Literal["up", "down"]
+    iq_conjugate: bool
+    integration_angle_rad: float
+    prf_hz: float | None = None
+    n_samples: int | None = None
+    range_gate_delay_s: float | None = None
+    aperture_s: float | None = None
+    track_start_north_m: float | None = None
+    targets: Sequence[Target] | None = None
+    heading_rad: float = 0.0
+    look_side: Literal["right", "left"] = "right"
+    lever_arm_m: tuple[float, float, float] = DEFAULT_LEVER_ARM_M
+    crab_rad: float = 0.0
+    antenna_squint_rad: float = 0.0
+
+
 def _read_preset(name: str) -> dict[str, Any]:
     if name not in PRESETS:
         raise ConfigError(f"scenario: {name!r} is not one of {', '.join(PRESETS)}")
@@ -395,22 +498,22 @@ def _integration_angle(raw: dict[str, Any], wavelength_m: float) -> float:
     )
 
 
-def _aperture_s(p: dict[str, Any], targets_ned: FloatArray, ground_centre_m: float) -> float:
-    if p["mode"] == "spotlight":
-        half = math.tan(p["integration_angle_rad"] / 2.0)
-        r_c = math.hypot(ground_centre_m, p["altitude_m"])
-        return 2.0 * r_c * half / p["speed_mps"]
+def _aperture_s(p: PresetParams, targets_ned: FloatArray, ground_centre_m: float) -> float:
+    if p.mode == "spotlight":
+        half = math.tan(p.integration_angle_rad / 2.0)
+        r_c = math.hypot(ground_centre_m, p.altitude_m)
+        return 2.0 * r_c * half / p.speed_mps
     lo, hi = _lit_track_interval(p, targets_ned)
-    return 1.02 * float(np.max(hi) - np.min(lo)) / p["speed_mps"]
+    return 1.02 * float(np.max(hi) - np.min(lo)) / p.speed_mps
 
 
-def _track_start(p: dict[str, Any], targets_ned: FloatArray) -> float:
-    if p["mode"] == "spotlight":
+def _track_start(p: PresetParams, targets_ned: FloatArray, aperture_s: float) -> float:
+    if p.mode == "spotlight":
         centre = targets_ned[:, 0]
     else:
         centre = targets_ned[:, 0] - _beam_geometry(p, targets_ned)[0]
     mid = 0.5 * float(np.min(centre) + np.max(centre))
-    return mid - 0.5 * p["speed_mps"] * p["aperture_s"]
+    return mid - 0.5 * p.speed_mps * aperture_s
 
 
 def _beam_squint(antenna_squint_rad: float, crab_rad: float, look_side: str) -> float:
@@ -418,7 +521,7 @@ def _beam_squint(antenna_squint_rad: float, crab_rad: float, look_side: str) -> 
     return antenna_squint_rad - (crab_rad if look_side == "right" else -crab_rad)
 
 
-def _beam_geometry(p: dict[str, Any], targets_ned: FloatArray) -> tuple[FloatArray, FloatArray]:
+def _beam_geometry(p: PresetParams, targets_ned: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Per target (track frame), the along-track offset from the platform to the target at
     the beam centre crossing, and the half-length of the track that lights it, m.
 
@@ -429,50 +532,50 @@ def _beam_geometry(p: dict[str, Any], targets_ned: FloatArray) -> tuple[FloatArr
     ``u`` between ``c -+ w`` with ``c = y sin psi cos psi / (cos**2 psi - S**2)`` and
     ``w = S sqrt(rho**2 (cos**2 psi - S**2) + y**2 sin**2 psi) / (cos**2 psi - S**2)``.
     """
-    psi = _beam_squint(p["antenna_squint_rad"], p["crab_rad"], p["look_side"])
-    sin_half = math.sin(p["integration_angle_rad"] / 2.0)
+    psi = _beam_squint(p.antenna_squint_rad, p.crab_rad, p.look_side)
+    sin_half = math.sin(p.integration_angle_rad / 2.0)
     cos2 = math.cos(psi) ** 2 - sin_half**2
     y = targets_ned[:, 1]
-    rho = np.hypot(y, targets_ned[:, 2] + p["altitude_m"])
+    rho = np.hypot(y, targets_ned[:, 2] + p.altitude_m)
     centre = y * (math.sin(psi) * math.cos(psi) / cos2)
     half = sin_half * np.sqrt(rho**2 * cos2 + (y * math.sin(psi)) ** 2) / cos2
     return centre, half
 
 
-def _lit_track_interval(
-    p: dict[str, Any], targets_ned: FloatArray
-) -> tuple[FloatArray, FloatArray]:
+def _lit_track_interval(p: PresetParams, targets_ned: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Along-track platform positions [first, last] that light each target (stripmap), m."""
     centre, half = _beam_geometry(p, targets_ned)
     x = targets_ned[:, 0] - centre
     return x - half, x + half
 
 
-def _doppler_bandwidth_hz(p: dict[str, Any], targets_ned: FloatArray, wavelength_m: float) -> float:
-    """Two-sided Doppler bandwidth of all targets over the aperture, Hz."""
-    if p["mode"] == "stripmap":
-        return 4.0 * p["speed_mps"] * math.sin(p["integration_angle_rad"] / 2.0) / wavelength_m
-    x0 = p["track_start_north_m"]
-    x1 = x0 + p["speed_mps"] * p["aperture_s"]
+def _doppler_bandwidth_hz(
+    p: PresetParams, targets_ned: FloatArray, wavelength_m: float, track_m: tuple[float, float]
+) -> float:
+    """Two-sided Doppler bandwidth of all targets over the aperture, Hz.
+
+    ``track_m`` holds the along-track positions (track frame x) of the nominal APC at the
+    aperture's first and last pulse, m.
+    """
+    if p.mode == "stripmap":
+        return 4.0 * p.speed_mps * math.sin(p.integration_angle_rad / 2.0) / wavelength_m
     sins = []
-    for x_apc in (x0, x1):
-        d = targets_ned - np.array([x_apc, 0.0, -p["altitude_m"]])
+    for x_apc in track_m:
+        d = targets_ned - np.array([x_apc, 0.0, -p.altitude_m])
         sins.append(d[:, 0] / np.linalg.norm(d, axis=1))
     s = np.concatenate(sins)
-    return 2.0 * p["speed_mps"] * float(s.max() - s.min()) / wavelength_m
+    return 2.0 * p.speed_mps * float(s.max() - s.min()) / wavelength_m
 
 
 def _slant_window_m(
-    p: dict[str, Any], targets_ned: FloatArray, ground_centre_m: float
+    p: PresetParams, targets_ned: FloatArray, ground_centre_m: float, track_m: tuple[float, float]
 ) -> tuple[float, float]:
-    """Slant-range interval [near, far] the receive window must hold, m."""
-    h = p["altitude_m"]
-    edges = np.array([ground_centre_m - p["swath_m"] / 2.0, ground_centre_m + p["swath_m"] / 2.0])
+    """Slant-range interval [near, far] the receive window must hold, m (``track_m`` as for
+    :func:`_doppler_bandwidth_hz`)."""
+    h = p.altitude_m
+    edges = np.array([ground_centre_m - p.swath_m / 2.0, ground_centre_m + p.swath_m / 2.0])
     ranges = [np.hypot(np.maximum(edges, 0.0), h)]
-    for x_apc in (
-        p["track_start_north_m"],
-        p["track_start_north_m"] + p["speed_mps"] * p["aperture_s"],
-    ):
+    for x_apc in track_m:
         d = targets_ned - np.array([x_apc, 0.0, -h])
         ranges.append(np.linalg.norm(d, axis=1))
     ranges.append(np.hypot(targets_ned[:, 1], targets_ned[:, 2] + h))
@@ -481,23 +584,25 @@ def _slant_window_m(
     return float(r.min()) - margin, float(r.max()) + margin
 
 
-def _receiver(p: dict[str, Any], near_m: float, far_m: float, r_c: float) -> tuple[int, float]:
+def _receiver(p: PresetParams, near_m: float, far_m: float, r_c: float) -> tuple[int, float]:
     """n_samples and range_gate_delay_s for the receive chain (explicit values win)."""
-    fs, tp = p["sample_rate_hz"], p["pulse_width_s"]
-    if p["receive"] == "matched":
-        if fs < p["bandwidth_hz"]:
+    fs, tp = p.sample_rate_hz, p.pulse_width_s
+    if p.receive == "matched":
+        if fs < p.bandwidth_hz:
             raise ConfigError(
-                f"scenario.sample_rate_hz: {fs!r} is below the bandwidth {p['bandwidth_hz']!r} "
+                f"scenario.sample_rate_hz: {fs!r} is below the bandwidth {p.bandwidth_hz!r} "
                 "(matched-filter receive samples the whole chirp)"
             )
-        gate = p.get("range_gate_delay_s", 2.0 * near_m / C_MPS)
-        n = p.get("n_samples", 2 * math.ceil((2.0 * (far_m - near_m) / C_MPS + tp) * fs / 2.0))
+        gate = 2.0 * near_m / C_MPS if p.range_gate_delay_s is None else p.range_gate_delay_s
+        record_s = 2.0 * (far_m - near_m) / C_MPS + tp
+        n = 2 * math.ceil(record_s * fs / 2.0) if p.n_samples is None else p.n_samples
         return int(n), float(gate)
-    gate = p.get("range_gate_delay_s", 2.0 * r_c / C_MPS)
+    gate = 2.0 * r_c / C_MPS if p.range_gate_delay_s is None else p.range_gate_delay_s
     ref_m = C_MPS * gate / 2.0
     max_dev_s = 2.0 * max(ref_m - near_m, far_m - ref_m) / C_MPS
-    n = int(p.get("n_samples", 2 * math.ceil((tp + 2.0 * max_dev_s) * fs / 2.0)))
-    chirp_rate = p["bandwidth_hz"] / tp
+    record_s = tp + 2.0 * max_dev_s
+    n = int(2 * math.ceil(record_s * fs / 2.0) if p.n_samples is None else p.n_samples)
+    chirp_rate = p.bandwidth_hz / tp
     half_window_s = min((n / fs - tp) / 2.0, fs / (2.0 * chirp_rate))
     if half_window_s < max_dev_s:
         raise ConfigError(
@@ -548,89 +653,92 @@ def load_preset(
         raise ConfigError(f"scenario: unknown override(s) {sorted(unknown)}")
     raw = _read_preset(name)
     p = _preset_params(raw, scale, overrides)
-    if p["center_slant_range_m"] <= p["altitude_m"]:
+    if p.center_slant_range_m <= p.altitude_m:
         raise ConfigError(
-            f"scenario.center_slant_range_m: {p['center_slant_range_m']} is not > altitude "
-            f"{p['altitude_m']}"
+            f"scenario.center_slant_range_m: {p.center_slant_range_m} is not > altitude "
+            f"{p.altitude_m}"
         )
-    ground_c = math.sqrt(p["center_slant_range_m"] ** 2 - p["altitude_m"] ** 2)
-    look_side, heading, lever = _orientation(p)
+    ground_c = math.sqrt(p.center_slant_range_m**2 - p.altitude_m**2)
+    p = _orientation(p)
     targets = _targets(p, raw.get("targets", {}), ground_c)
     t_ned = np.array([t.pos_ned for t in targets], dtype=np.float64).reshape(-1, 3)
-    p.setdefault("aperture_s", _aperture_s(p, t_ned, ground_c))
-    p.setdefault("track_start_north_m", _track_start(p, t_ned))
-    radar, (near, far) = _radar(p, float(raw["radar"]["prf_hz"]), scale, t_ned, ground_c)
+    aperture_s = p.aperture_s
+    if aperture_s is None:
+        aperture_s = _aperture_s(p, t_ned, ground_c)
+    start_m = p.track_start_north_m
+    if start_m is None:
+        start_m = _track_start(p, t_ned, aperture_s)
+    track_m = (start_m, start_m + p.speed_mps * aperture_s)
+    radar, (near, far) = _radar(p, float(raw["radar"]["prf_hz"]), scale, t_ned, ground_c, track_m)
     if not approach_s >= 0.0:
         raise ConfigError(f"scenario.approach_s: {approach_s!r} is not >= 0")
-    p["track_start_north_m"] -= approach_s * p["speed_mps"]
-    p["aperture_s"] += approach_s
-    rot = _track_to_ned(heading, look_side)
+    rot = _track_to_ned(p.heading_rad, p.look_side)
     notes = {k: float(raw[k]) for k in _PRESET_KEYS if k in raw}
     notes["slant_window_near_m"], notes["slant_window_far_m"] = near, far
     return Scenario(
         name=name,
         radar=radar,
-        speed_mps=p["speed_mps"],
-        altitude_m=p["altitude_m"],
-        center_slant_range_m=p["center_slant_range_m"],
-        swath_m=p["swath_m"],
-        mode=p["mode"],
-        aperture_s=float(p["aperture_s"]),
+        speed_mps=p.speed_mps,
+        altitude_m=p.altitude_m,
+        center_slant_range_m=p.center_slant_range_m,
+        swath_m=p.swath_m,
+        mode=p.mode,
+        aperture_s=float(aperture_s + approach_s),
         targets=tuple(Target(_point(rot @ np.asarray(t.pos_ned)), t.amplitude) for t in targets),
-        snr_db=None if p["snr_db"] is None else float(p["snr_db"]),
+        snr_db=None if p.snr_db is None else float(p.snr_db),
         scale=scale,
         scene_center_ned=(float(rot[0, 1] * ground_c), float(rot[1, 1] * ground_c), 0.0),
-        integration_angle_rad=float(p["integration_angle_rad"]),
-        track_start_north_m=float(p["track_start_north_m"]),
-        t0_ns=int(p["t0_ns"]),
-        heading_rad=heading,
-        look_side=look_side,
-        lever_arm_m=lever,
-        crab_rad=p["crab_rad"],
-        antenna_squint_rad=p["antenna_squint_rad"],
+        integration_angle_rad=float(p.integration_angle_rad),
+        track_start_north_m=float(start_m - approach_s * p.speed_mps),
+        t0_ns=int(p.t0_ns),
+        heading_rad=p.heading_rad,
+        look_side=p.look_side,
+        lever_arm_m=p.lever_arm_m,
+        crab_rad=p.crab_rad,
+        antenna_squint_rad=p.antenna_squint_rad,
         notes=notes,
     )
 
 
-def _preset_params(raw: dict[str, Any], scale: float, overrides: dict[str, Any]) -> dict[str, Any]:
-    """The preset's geometry and radar keys as one flat table, scaled, overrides applied.
+def _preset_params(raw: dict[str, Any], scale: float, overrides: dict[str, Any]) -> PresetParams:
+    """The preset's geometry and radar values, scaled, overrides applied.
 
     The preset's ``n_samples`` is kept (scaled) only while the receive chain is its own.
     """
     radar_raw = raw["radar"]
-    p: dict[str, Any] = {
-        "speed_mps": float(raw["speed_mps"]),
-        "altitude_m": float(raw["altitude_m"]),
-        "center_slant_range_m": float(raw["center_slant_range_m"]),
-        "swath_m": float(raw["swath_m"]) * scale,
-        "mode": raw["mode"],
-        "snr_db": raw.get("snr_db"),
-        "t0_ns": DEFAULT_T0_NS,
-        "carrier_hz": float(radar_raw["carrier_hz"]),
-        "bandwidth_hz": float(radar_raw["bandwidth_hz"]),
-        "pulse_width_s": float(radar_raw["pulse_width_s"]) * scale,
-        "sample_rate_hz": float(radar_raw["sample_rate_hz"]),
-        "receive": radar_raw["receive"],
-        "chirp_direction": radar_raw.get("chirp_direction", "up"),
-        "iq_conjugate": radar_raw.get("iq_conjugate", False),
-    }
-    p["integration_angle_rad"] = _integration_angle(raw, C_MPS / p["carrier_hz"])
-    p.update(overrides)
-    if "n_samples" in radar_raw and "n_samples" not in p and p["receive"] == radar_raw["receive"]:
-        p["n_samples"] = 2 * round(int(radar_raw["n_samples"]) * scale / 2.0)
-    if p["mode"] not in ("stripmap", "spotlight"):
-        raise ConfigError(f"scenario.mode: {p['mode']!r} is not 'stripmap' or 'spotlight'")
+    carrier_hz = float(radar_raw["carrier_hz"])
+    p = PresetParams(
+        speed_mps=float(raw["speed_mps"]),
+        altitude_m=float(raw["altitude_m"]),
+        center_slant_range_m=float(raw["center_slant_range_m"]),
+        swath_m=float(raw["swath_m"]) * scale,
+        mode=raw["mode"],
+        snr_db=raw.get("snr_db"),
+        carrier_hz=carrier_hz,
+        bandwidth_hz=float(radar_raw["bandwidth_hz"]),
+        pulse_width_s=float(radar_raw["pulse_width_s"]) * scale,
+        sample_rate_hz=float(radar_raw["sample_rate_hz"]),
+        receive=radar_raw["receive"],
+        chirp_direction=radar_raw.get("chirp_direction", "up"),
+        iq_conjugate=radar_raw.get("iq_conjugate", False),
+        integration_angle_rad=_integration_angle(raw, C_MPS / carrier_hz),
+    )
+    p = dataclasses.replace(p, **overrides)
+    if "n_samples" in radar_raw and p.n_samples is None and p.receive == radar_raw["receive"]:
+        p = dataclasses.replace(p, n_samples=2 * round(int(radar_raw["n_samples"]) * scale / 2.0))
+    if p.mode not in ("stripmap", "spotlight"):
+        raise ConfigError(f"scenario.mode: {p.mode!r} is not 'stripmap' or 'spotlight'")
     return p
 
 
-def _targets(p: dict[str, Any], fractions: dict[str, Any], ground_c: float) -> tuple[Target, ...]:
+def _targets(p: PresetParams, fractions: dict[str, Any], ground_c: float) -> tuple[Target, ...]:
     """The override's targets, or the preset's (fractions of the swath about the scene
     centre at ground range ``ground_c``, m), in the track frame."""
-    if "targets" in p:
-        targets = tuple(p["targets"])
+    if p.targets is not None:
+        targets = tuple(p.targets)
     else:
         targets = tuple(
-            Target((fn * p["swath_m"], ground_c + fe * p["swath_m"], 0.0))
+            Target((fn * p.swath_m, ground_c + fe * p.swath_m, 0.0))
             for fn, fe in zip(fractions["north_frac"], fractions["east_frac"], strict=True)
         )
     if not targets:
@@ -639,56 +747,65 @@ def _targets(p: dict[str, Any], fractions: dict[str, Any], ground_c: float) -> t
 
 
 def _radar(
-    p: dict[str, Any], full_prf_hz: float, scale: float, targets_ned: FloatArray, ground_c: float
+    p: PresetParams,
+    full_prf_hz: float,
+    scale: float,
+    targets_ned: FloatArray,
+    ground_c: float,
+    track_m: tuple[float, float],
 ) -> tuple[RadarParams, tuple[float, float]]:
-    """The radar parameters and the slant window [near, far] (m) they receive.
+    """The radar parameters and the slant window [near, far] (m) they receive (``track_m``
+    as for :func:`_doppler_bandwidth_hz`).
 
     The PRF, unless given, is the preset's scaled down but not below
     :data:`PRF_OVERSAMPLING` times the targets' Doppler bandwidth; the gate and sample
     count follow the window (:func:`_receiver`).
     """
-    if "prf_hz" not in p:
-        floor = PRF_OVERSAMPLING * _doppler_bandwidth_hz(p, targets_ned, C_MPS / p["carrier_hz"])
-        p["prf_hz"] = max(full_prf_hz * scale, min(full_prf_hz, floor))
-    near, far = _slant_window_m(p, targets_ned, ground_c)
-    n_samples, gate = _receiver(p, near, far, p["center_slant_range_m"])
+    prf_hz = p.prf_hz
+    if prf_hz is None:
+        wavelength_m = C_MPS / p.carrier_hz
+        floor = PRF_OVERSAMPLING * _doppler_bandwidth_hz(p, targets_ned, wavelength_m, track_m)
+        prf_hz = max(full_prf_hz * scale, min(full_prf_hz, floor))
+    near, far = _slant_window_m(p, targets_ned, ground_c, track_m)
+    n_samples, gate = _receiver(p, near, far, p.center_slant_range_m)
     radar = RadarParams(
-        carrier_hz=p["carrier_hz"],
-        bandwidth_hz=p["bandwidth_hz"],
-        pulse_width_s=p["pulse_width_s"],
-        sample_rate_hz=p["sample_rate_hz"],
-        prf_hz=p["prf_hz"],
+        carrier_hz=p.carrier_hz,
+        bandwidth_hz=p.bandwidth_hz,
+        pulse_width_s=p.pulse_width_s,
+        sample_rate_hz=p.sample_rate_hz,
+        prf_hz=prf_hz,
         n_samples=n_samples,
         range_gate_delay_s=gate,
-        receive=p["receive"],
-        chirp_direction=p["chirp_direction"],
-        iq_conjugate=p["iq_conjugate"],
+        receive=p.receive,
+        chirp_direction=p.chirp_direction,
+        iq_conjugate=p.iq_conjugate,
     )
     return radar, (near, far)
 
 
-def _orientation(
-    p: dict[str, Any],
-) -> tuple[Literal["right", "left"], float, tuple[float, float, float]]:
-    """Look side, heading (rad from north) and lever arm (body frame, m) of the overrides.
+def _orientation(p: PresetParams) -> PresetParams:
+    """``p`` with its orientation checked and its heading, lever arm, crab and mount squint
+    made floats (overrides may give ints, or a list for the lever arm).
 
-    Also sets ``p["look_side"]``, ``p["crab_rad"]`` and ``p["antenna_squint_rad"]``
-    (default 0), the latter two checked so that the beam's squint plus half the integration
-    angle stays below 90 degrees.
+    The look side must be "right" or "left", the lever arm 3 numbers, and the beam's
+    squint plus half the integration angle below 90 degrees.
     """
-    look_side = p.get("look_side", "right")
-    if look_side not in ("right", "left"):
-        raise ConfigError(f"scenario.look_side: {look_side!r} is not 'right' or 'left'")
-    lever = tuple(float(v) for v in p.get("lever_arm_m", DEFAULT_LEVER_ARM_M))
+    if p.look_side not in ("right", "left"):
+        raise ConfigError(f"scenario.look_side: {p.look_side!r} is not 'right' or 'left'")
+    lever = tuple(float(v) for v in p.lever_arm_m)
     if len(lever) != 3:
-        raise ConfigError(f"scenario.lever_arm_m: {p.get('lever_arm_m')!r} is not 3 numbers")
-    p["look_side"] = look_side
-    p["crab_rad"] = float(p.get("crab_rad", 0.0))
-    p["antenna_squint_rad"] = float(p.get("antenna_squint_rad", 0.0))
-    psi = _beam_squint(p["antenna_squint_rad"], p["crab_rad"], look_side)
-    if not abs(psi) + p["integration_angle_rad"] / 2.0 < math.pi / 2.0:
+        raise ConfigError(f"scenario.lever_arm_m: {p.lever_arm_m!r} is not 3 numbers")
+    crab, squint = float(p.crab_rad), float(p.antenna_squint_rad)
+    psi = _beam_squint(squint, crab, p.look_side)
+    if not abs(psi) + p.integration_angle_rad / 2.0 < math.pi / 2.0:
         raise ConfigError(
-            f"scenario.crab_rad/antenna_squint_rad: {p['crab_rad']!r}/{p['antenna_squint_rad']!r} "
+            f"scenario.crab_rad/antenna_squint_rad: {crab!r}/{squint!r} "
             f"squint the beam by {math.degrees(psi):.1f} deg, past the horizon"
         )
-    return look_side, float(p.get("heading_rad", 0.0)), _point(np.asarray(lever))
+    return dataclasses.replace(
+        p,
+        heading_rad=float(p.heading_rad),
+        lever_arm_m=_point(np.asarray(lever)),
+        crab_rad=crab,
+        antenna_squint_rad=squint,
+    )

@@ -4,6 +4,7 @@ physics."""
 from __future__ import annotations
 
 import math
+from dataclasses import fields
 
 import numpy as np
 import pytest
@@ -11,7 +12,15 @@ import pytest
 from sarmoco.errors import ConfigError
 from sarmoco.processing.types import C_MPS
 from sarmoco.sim.array_scenario import load_array_preset
-from sarmoco.sim.scenario import PRESETS, Target, load_preset, scene_targets
+from sarmoco.sim.scenario import (
+    _RADAR_KEYS,
+    _SCENARIO_KEYS,
+    PRESETS,
+    PresetParams,
+    Target,
+    load_preset,
+    scene_targets,
+)
 
 
 def test_thz_spotlight_is_the_papers_table_1() -> None:
@@ -123,6 +132,11 @@ def test_overrides_and_errors() -> None:
         load_preset("thz-spotlight", receive="matched")
     with pytest.raises(ConfigError):  # a 4096-sample dechirp window cannot hold a 3 km swath
         load_preset("thz-spotlight", swath_m=3000.0)
+
+
+def test_every_override_key_is_a_preset_parameter() -> None:
+    """The keys ``load_preset`` accepts as overrides are exactly the parameters' fields."""
+    assert {f.name for f in fields(PresetParams)} == _RADAR_KEYS | _SCENARIO_KEYS
 
 
 def test_scene_targets() -> None:
