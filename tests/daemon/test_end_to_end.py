@@ -58,9 +58,11 @@ def store_points(store_path: Path) -> list[dict[str, float]]:
     return bright_points(image)
 
 
-def assert_focused(out: Path, points: list[dict[str, float]]) -> list[dict[str, float]]:
-    """Every truth target is found focused at its place among the ``points`` (the report's
-    ``image.points``).
+def assert_focused(
+    out: Path, points: list[dict[str, float]], near_m: float = 0.5
+) -> list[dict[str, float]]:
+    """Every truth target is found focused at its place (within ``near_m``, m) among the
+    ``points`` (the report's ``image.points``).
 
     Returns the point of each target (in the truth's order).
     """
@@ -70,7 +72,7 @@ def assert_focused(out: Path, points: list[dict[str, float]]) -> list[dict[str, 
     irw_az = 0.886 * lam / (4 * math.sin(scn["integration_angle_rad"] / 2))
     found = []
     for x, y, r in targets_in_image(out):
-        near = [p for p in points if math.hypot(p["x_m"] - x, p["y_m"] - y) < 0.5]
+        near = [p for p in points if math.hypot(p["x_m"] - x, p["y_m"] - y) < near_m]
         assert near, f"target ({x:.2f}, {y:.2f}) not found among {points}"
         p = near[0]
         assert p["pslr_az_db"] <= -12.5 and p["pslr_rg_db"] <= -12.5, p

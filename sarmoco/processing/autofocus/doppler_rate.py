@@ -18,8 +18,11 @@ from sarmoco.errors import ProcessingError
 from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, IntArray
 
 
-def nominal_rate(range_m: FloatArray, speed_mps: float, wavelength_m: float) -> FloatArray:
-    """Nominal Doppler rate of a broadside target, ``-2 v**2 / (lambda R)``, Hz/s."""
+def nominal_rate(
+    range_m: FloatArray, speed_mps: float | FloatArray, wavelength_m: float
+) -> FloatArray:
+    """Nominal Doppler rate ``-2 v**2 / (lambda R)``, Hz/s, of a target at range ``R`` (m)
+    passing at ``v`` (m/s: the speed across its line of sight, one or one per range)."""
     return -2.0 * speed_mps**2 / (wavelength_m * np.asarray(range_m, dtype=float))
 
 
