@@ -134,13 +134,13 @@ class TestCrab:
 
     def test_crab_4_deg(self, tmp_path: Path) -> None:
         """A 1.2 m/s crosswind at 17.5 m/s: the beam squinted 3.5° backward, its Doppler
-        centroid (-106 Hz) aliased at 200 Hz PRF. Worst PSLR -13.04 dB (T3 range)."""
+        centroid (-106 Hz) aliased at 200 Hz PRF. Worst PSLR -12.98 dB (T4 azimuth)."""
         run_case(tmp_path, "--crab", "4")
 
     def test_crab_6_deg(self, tmp_path: Path) -> None:
         """A 6° crab: the run is three times the reference's length (1495 pulses), and its
         real flight's heading wanders up to 1.15° between apertures (no turn). Worst azimuth
-        PSLR -13.05 dB (T1), IRW within 1.01 x theory."""
+        PSLR -13.13 dB (T3), IRW within 1.01 x theory."""
         run_case(tmp_path, "--crab", "6")
 
     @pytest.mark.bench  # a minute of CPU: docs/measurements/acceptance.md
@@ -159,7 +159,7 @@ class TestCrabLeft:
 
     def test_crab_minus_4_deg_left(self, tmp_path: Path) -> None:
         """The same crab looking left (body yawed toward the scene): worst azimuth PSLR
-        -12.73 dB (T3); -12.47 dB with 0.4 s autofocus subapertures. Replayed again with
+        -12.85 dB (T3); -12.47 dB with 0.4 s autofocus subapertures. Replayed again with
         tile PGA (``autofocus.pga``), which must keep the squinted beam's band: with a
         broadside band it found 5 of 7 targets, the best at -0.84 dB; -12.95 dB with it."""
         run_case(tmp_path, "--crab", "-4", "--look-side", "left")
