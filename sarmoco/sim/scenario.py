@@ -440,17 +440,9 @@ class PresetParams:
     targets : sequence of Target or None
         Point scatterers, positions in the track frame (x along the track, y toward the
         look side, z down), m; None: the preset's.
-    heading_rad : float
-        Heading of the nominal track, rad from north toward east.
-    look_side : {"right", "left"}
-        Side of the track the antenna looks to.
-    lever_arm_m : tuple of 3 float
-        INS point to antenna phase centre, body frame (forward, right, down), m.
-    crab_rad : float
-        Body yaw minus track heading, rad, positive clockwise seen from above.
-    antenna_squint_rad : float
-        The antenna mount's boresight yaw from the look side's body broadside toward the
-        body's nose, rad (positive forward).
+    heading_rad, look_side, lever_arm_m, crab_rad, antenna_squint_rad
+        The track's heading, the look side, the lever arm, the crab and the mount's squint:
+        :class:`Scenario`'s fields of those names, in its units and frames.
     """
 
     speed_mps: float
