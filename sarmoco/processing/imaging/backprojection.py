@@ -61,6 +61,11 @@ PULSE_BLOCK = 4
 """The kernel's loop blocking: a parallel task takes ``ROW_BLOCK`` rows of the grid, and
 gives them ``PULSE_BLOCK`` pulses at a time.
 
+numba's threading layers split a ``prange`` into one contiguous run of tasks per thread,
+whatever ``numba.set_parallel_chunksize`` says; a block of pulses lights only the rows
+its beam covers (often one half of a tile), so the tasks take the row blocks
+interleaved (:func:`task_order`): each thread gets every ``T``-th block.
+
 A row reads the part of each pulse's upsampled line that its ranges span
 (ku-vehicle: 130 kB of a 416 kB line); so the parts of a few pulses stay in a core's L2
 cache while the task's rows all use them (and the rows' pixels stay there too), instead
@@ -189,10 +194,33 @@ def _beam_dy2(
     return rho_lo * rho_lo - h2, rho_hi * rho_hi - h2, True
 
 
+def task_order(n_rows: int, block: int) -> IntArray:
+    """The row blocks of ``n_rows`` rows (``block`` rows each) in the order a ``prange``
+    over them takes them: every ``T``-th block in turn (``T``: numba's threads), so that
+    each thread's contiguous share of the tasks spans the whole grid.
+
+    Parameters
+    ----------
+    n_rows : int
+        Rows of the grid.
+    block : int
+        Rows per task.
+
+    Returns
+    -------
+    ndarray of int64, shape (ceil(n_rows / block),)
+        Task ``t`` takes the rows ``[order[t] * block, (order[t] + 1) * block)``.
+    """
+    n_blocks = -(-n_rows // block)
+    threads = numba.get_num_threads()
+    return np.concatenate([np.arange(k, n_blocks, threads) for k in range(threads)])
+
+
 @numba.njit(parallel=True, nogil=True, cache=True, fastmath=True)
 def _bp_kernel(
     line: ComplexArray,
     rows: IntArray,
+    order: IntArray,
     r_first: float,
     dr: float,
     geo: FloatArray,
@@ -215,8 +243,8 @@ def _bp_kernel(
     lower and an upper bound on ``dy^2``, like the range axis's.
     Per row and pulse, a first loop computes range, bin, fraction and phase for
     the admitted columns (vectorised: see :func:`_sincos`), a second one interpolates
-    and accumulates. A parallel task owns ``ROW_BLOCK`` rows and gives them
-    ``PULSE_BLOCK`` pulses at a time, each pixel summing its pulses in order.
+    and accumulates. A parallel task owns ``ROW_BLOCK`` rows (block ``order[task]``) and
+    gives them ``PULSE_BLOCK`` pulses at a time, each pixel summing its pulses in order.
     """
     n_bins = line.shape[1]
     n0, n1 = ax0.shape[0], ax1.shape[0]
@@ -226,13 +254,14 @@ def _bp_kernel(
     r_last = r_first + (n_bins - 1) * dr
     inv_dr = 1.0 / dr
     n_pulses = rows.shape[0]
-    for task in numba.prange((n0 + ROW_BLOCK - 1) // ROW_BLOCK):
+    for task in numba.prange(order.shape[0]):
+        first = order[task] * ROW_BLOCK
         bin_ = np.empty(n1, np.int32)
         frac = np.empty(n1, np.float32)
         cos_ph = np.empty(n1, np.float32)
         sin_ph = np.empty(n1, np.float32)
         for q0 in range(0, n_pulses, PULSE_BLOCK):
-            for i in range(task * ROW_BLOCK, min(n0, (task + 1) * ROW_BLOCK)):
+            for i in range(first, min(n0, first + ROW_BLOCK)):
                 for q in range(q0, min(q0 + PULSE_BLOCK, n_pulses)):
                     p = rows[q]
                     w, h2, rref, k_dy = geo[p, 1], geo[p, 2], geo[p, 3], geo[p, 4]
@@ -430,6 +459,7 @@ def backproject_into(
     _bp_kernel(
         lines.data,
         pg.rows,
+        task_order(len(grid.axis0_m), ROW_BLOCK),
         lines.r_first_m,
         lines.dr_m,
         pg.geo,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 import pytest
 
@@ -12,6 +13,7 @@ from sarmoco.processing.imaging import (
     facing_heading,
     phase_history_from_compressed,
 )
+from sarmoco.processing.imaging.backprojection import ROW_BLOCK, task_order
 from sarmoco.processing.imaging.interp import fft_upsample, sinc_interp, sinc_interp_columns
 from sarmoco.processing.types import C_MPS
 
@@ -103,3 +105,17 @@ def test_phase_history_round_trip() -> None:
     assert np.allclose(freq2[:n_f], freq)
     assert np.allclose(ph2[:, :n_f] / rc.shape[1], ph, atol=1e-4)
     assert np.allclose(ph2[:, n_f:], 0.0, atol=1e-4)
+
+
+@pytest.mark.parametrize("n_rows", [1, 7, 8, 9, 1200, 1201])
+def test_each_thread_shares_the_whole_grid(n_rows: int) -> None:
+    """numba gives each thread one contiguous run of a ``prange``'s tasks; a block of pulses
+    lights only the rows under its beam, so each run must hold blocks from the whole grid
+    (every block once), or one thread works while the other waits."""
+    threads = numba.get_num_threads()
+    order = task_order(n_rows, ROW_BLOCK)
+    n_blocks = -(-n_rows // ROW_BLOCK)
+    assert sorted(order.tolist()) == list(range(n_blocks))
+    for run in np.array_split(order, threads):
+        if n_blocks >= 2 * threads and run.size:
+            assert run.min() < threads and run.max() >= n_blocks - threads
