@@ -68,6 +68,7 @@ from sarmoco.processing.beam import (
     echoes_stand_out,
     resolve_ambiguity,
     squint_interval_rad,
+    squint_sine,
     within_band,
 )
 from sarmoco.processing.geometry import (
@@ -674,7 +675,7 @@ class _Beam:
         steady = correlation_centroid_hz(self._correlation, rate_hz)
         if math.isfinite(steady):
             steady = resolve_ambiguity(steady, p.attitude_hz, rate_hz)
-            sine = steady * self._wavelength_m / (2.0 * self._speed_mps)
+            sine = float(squint_sine(steady, self._speed_mps, self._wavelength_m))
             if abs(sine) < 1.0:
                 self._echo_squint_rad = math.asin(sine)
                 shift = self._echo_squint_rad - self._attitude_squint_rad

@@ -148,6 +148,28 @@ def doppler_hz(speed_mps: float, wavelength_m: float, squint_rad: FloatArray | f
     )
 
 
+def squint_sine(
+    doppler_hz: FloatArray | float, speed_mps: float, wavelength_m: float
+) -> FloatArray:
+    """``sin ψ = f λ / (2 v)``: the sine of the squint at which a point has Doppler
+    ``doppler_hz`` (the inverse of :func:`doppler_hz`), unclipped; beyond ±1 no squint has
+    that Doppler.
+
+    Parameters
+    ----------
+    doppler_hz : float or ndarray of float64
+        Doppler frequency, Hz.
+    speed_mps, wavelength_m : float
+        Along-track speed ``v`` (m/s) and wavelength ``λ`` (m).
+
+    Returns
+    -------
+    ndarray of float64
+        ``sin ψ``, ψ from the plane normal to the track (positive ahead), same shape.
+    """
+    return np.asarray(doppler_hz, dtype=np.float64) * (wavelength_m / (2.0 * speed_mps))
+
+
 def within_band(
     intervals_rad: FloatArray, band_hz: FloatArray, speed_mps: float, wavelength_m: float
 ) -> FloatArray:
@@ -168,8 +190,7 @@ def within_band(
         Each interval's part inside its band, rad; the band's own squints where the two
         do not overlap.
     """
-    sine = np.asarray(band_hz, dtype=np.float64) * wavelength_m / (2.0 * speed_mps)
-    band = np.arcsin(np.clip(sine, -1.0, 1.0))
+    band = np.arcsin(np.clip(squint_sine(band_hz, speed_mps, wavelength_m), -1.0, 1.0))
     cut = np.column_stack(
         [np.maximum(intervals_rad[:, 0], band[:, 0]), np.minimum(intervals_rad[:, 1], band[:, 1])]
     )

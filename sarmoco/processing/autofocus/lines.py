@@ -26,6 +26,7 @@ from sarmoco.processing.autofocus.separation import (
     weighted_lstsq,
 )
 from sarmoco.processing.autofocus.settings import AutofocusConfig, AutofocusGeometry
+from sarmoco.processing.beam import squint_sine
 from sarmoco.processing.mocomp import shift_range
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
 
@@ -112,7 +113,7 @@ def line_rate_speeds(
     corr = np.einsum("nbm,nbm->n", bands[..., 1:], np.conj(bands[..., :-1]))
     step_s = (float(t_s[-1]) - float(t_s[0])) / (bands.shape[-1] - 1)
     f_hz = geometry.centroid_hz + np.angle(corr) / (2.0 * np.pi * step_s)
-    sine = np.clip(geometry.wavelength_m * f_hz / (2.0 * v), -1.0, 1.0)
+    sine = np.clip(squint_sine(f_hz, v, geometry.wavelength_m), -1.0, 1.0)
     return np.asarray(v * np.sqrt(1.0 - sine**2), dtype=float)
 
 

@@ -238,13 +238,12 @@ def _bp_kernel(
     the compensated displacement along axis 1 times ``k`` (rad/m; used when ``squint``,
     loop-invariant, so the compiler keeps a loop without the term), and the tangents of
     the beam's squint interval.
-    A pixel ``(a0, a1)`` takes the pulse when its range is inside the range axis
-    and (when ``cull``) ``t_lo rho <= dx <= t_hi rho``, ``rho = sqrt(dy^2 + h^2)``: a
-    lower and an upper bound on ``dy^2``, like the range axis's.
+    A pixel ``(a0, a1)`` takes the pulse when its range is inside the range axis and (when
+    ``cull``) ``t_lo rho <= dx <= t_hi rho``, ``rho = sqrt(dy^2 + h^2)``: bounds on ``dy^2``.
     Per row and pulse, a first loop computes range, bin, fraction and phase for
     the admitted columns (vectorised: see :func:`_sincos`), a second one interpolates
-    and accumulates. A parallel task owns ``ROW_BLOCK`` rows (block ``order[task]``) and
-    gives them ``PULSE_BLOCK`` pulses at a time, each pixel summing its pulses in order.
+    and accumulates. Task ``t`` owns the rows of block ``order[t]`` (``ROW_BLOCK`` rows), given
+    ``PULSE_BLOCK`` pulses at a time; each pixel sums its pulses in order.
     """
     n_bins = line.shape[1]
     n0, n1 = ax0.shape[0], ax1.shape[0]

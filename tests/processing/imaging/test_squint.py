@@ -25,6 +25,7 @@ from sarmoco.processing.beam import (
     doppler_hz,
     resolve_ambiguity,
     squint_interval_rad,
+    squint_sine,
     within_band,
 )
 from sarmoco.processing.imaging.backprojection import RangeLines, backproject_into
@@ -218,3 +219,12 @@ def test_prefilter_says_which_band_each_output_holds() -> None:
     assert np.allclose(centre[:first_late], 4.1)
     assert np.allclose(centre[first_late:], -8.7)
     assert np.allclose(band[:, 1] - band[:, 0], 2 * 38.4)
+
+
+def test_squint_sine_inverts_the_doppler() -> None:
+    """``sin ψ = f λ / (2 v)`` back from ``f = 2 v sin ψ / λ`` (Ku band, 17.5 m/s), and a
+    Doppler beyond ``2 v / λ`` has no squint (|sine| > 1, left to the caller)."""
+    squint = np.radians(np.linspace(-15.0, 15.0, 31))
+    f = doppler_hz(17.5, 0.02, squint)
+    np.testing.assert_allclose(np.arcsin(squint_sine(f, 17.5, 0.02)), squint, atol=1e-12)
+    assert float(squint_sine(2.0 * 17.5 / 0.02 * 1.01, 17.5, 0.02)) > 1.0
