@@ -612,8 +612,8 @@ class _Beam:
         each side, as far as its Doppler band stays within the pulse rate: a wider band
         would take a target lit at its low edge again, aliased, at its high edge (a ghost
         a pulse rate's worth of Doppler away)."""
-        per_sine = 2.0 * self._speed_mps / self._wavelength_m  # Hz per unit of sin ψ
-        room = max(0.0, (self._prf_hz / per_sine - (math.sin(hi) - math.sin(lo))) / 2.0)
+        rate_sine = float(squint_sine(self._prf_hz, self._speed_mps, self._wavelength_m))
+        room = max(0.0, (rate_sine - (math.sin(hi) - math.sin(lo))) / 2.0)
         low = max(lo - self._unsure_rad, math.asin(max(-1.0, math.sin(lo) - room)))
         high = min(hi + self._unsure_rad, math.asin(min(1.0, math.sin(hi) + room)))
         return low, high

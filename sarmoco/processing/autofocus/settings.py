@@ -8,6 +8,7 @@ from typing import Literal
 
 from sarmoco.errors import ProcessingError
 from sarmoco.keys import key
+from sarmoco.processing.beam import doppler_hz
 
 
 @dataclass(frozen=True)
@@ -47,7 +48,7 @@ class AutofocusGeometry:
         """Doppler frequency of a target at the beam centre, ``2 v sin ψ / λ``, Hz (slow time
         on the reference track's uniform speed: the pulses' time is their along-track
         position over v)."""
-        return 2.0 * self.speed_mps * math.sin(self.squint_rad) / self.wavelength_m
+        return float(doppler_hz(self.speed_mps, self.wavelength_m, self.squint_rad))
 
     @property
     def walk_mps(self) -> float:
