@@ -405,6 +405,13 @@ class ImagingConfig:
     live_window_s: float = _key(
         5.0, "Seconds of data over which the live imager's load is averaged", unit="s", gt=0
     )
+    north_up: bool = _key(
+        True,
+        "After a replay, also resample each reference-track segment's tiles onto a "
+        "north/east grid of the same spacing, phase kept (the store's north_up group, in "
+        "the INS's own position frame where the INS gave positions): the tiles' grid turns "
+        "with the course flown, this one does not",
+    )
     ffbp_max_phase_error_rad: float = _key(
         0.3,
         "With method ffbp: bound on the two-way phase error of the factorisation summed over "

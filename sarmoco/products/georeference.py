@@ -137,30 +137,109 @@ def georeference(store: RunStore) -> Georeference:
         falls within the focused pulses.
     """
     origin = schema.decode_geodetic_origin(store.attrs, str(store.path))
+    nav = store.read(schema.NAV.name, ["t_ns", "lla", "result"])
+    ok = np.isfinite(nav["lla"]).all(axis=1) & (nav["result"] == int(PushResult.ACCEPTED))
+    t_fix = nav["t_ns"][ok]
+    offset, rms, n = _track_offset(store, t_fix, geodetic_to_ned(nav["lla"][ok], origin.lla))
+    return Georeference(origin, offset, rms, n)
+
+
+def _track_offset(
+    store: RunStore, t_fix: IntArray, fixes_ned: FloatArray
+) -> tuple[FloatArray, float, int]:
+    """The run frame's origin in the frame of the INS's positions.
+
+    Parameters
+    ----------
+    store : RunStore
+        The run.
+    t_fix : ndarray of int64, shape (F,)
+        Times of the INS positions, GPS ns.
+    fixes_ned : ndarray, shape (F, 3)
+        INS positions (the INS's point), NED in their frame, m.
+
+    Returns
+    -------
+    offset_ned_m : ndarray, shape (3,)
+        Mean of the positions moved to the antenna (lever arm turned by the attitude of the
+        nearest pulse) minus the integrated track at the same instants, m.
+    fit_rms_m : float
+        RMS of what the mean leaves, m.
+    n_fixes : int
+        Positions within the focused pulses.
+
+    Raises
+    ------
+    RecorderError
+        No position falls within the focused pulses.
+    """
     cfg = parse_config(store.attrs["config"])
     t, pos, quat = run_track(store)
-    nav = store.read(schema.NAV.name, ["t_ns", "lla", "result"])
-    ok = (
-        np.isfinite(nav["lla"]).all(axis=1)
-        & (nav["result"] == int(PushResult.ACCEPTED))
-        & (nav["t_ns"] >= t[0])
-        & (nav["t_ns"] <= t[-1])
-    )
-    if not ok.any():
-        raise RecorderError(
-            f"{store.path}: nav/lla: no INS geodetic position within the focused pulses"
-        )
-    t_fix = nav["t_ns"][ok]
+    inside = (t_fix >= t[0]) & (t_fix <= t[-1])
+    if not inside.any():
+        raise RecorderError(f"{store.path}: nav: no INS position within the focused pulses")
+    t_fix = t_fix[inside]
     nearest = np.clip(np.searchsorted(t, t_fix), 0, t.size - 1)
     arm = lever_arm_ned(quat[nearest], np.asarray(cfg.ins.lever_arm_m, dtype=np.float64))
-    fixes = geodetic_to_ned(nav["lla"][ok], origin.lla) + arm
+    fixes = fixes_ned[inside] + arm
     rel = (t - t[0]).astype(np.float64)
     track = np.stack(
         [np.interp((t_fix - t[0]).astype(np.float64), rel, pos[:, k]) for k in range(3)], axis=1
     )
     offset = (fixes - track).mean(axis=0)
     rms = float(np.sqrt(np.mean(np.sum((fixes - track - offset) ** 2, axis=1))))
-    return Georeference(origin, offset, rms, int(ok.sum()))
+    return offset, rms, int(inside.sum())
+
+
+@dataclass(frozen=True)
+class NedFrame:
+    """The NED frame a store's images can be put in, tied to the run frame.
+
+    Attributes
+    ----------
+    offset_ned_m : ndarray, shape (3,)
+        Run-frame origin in this frame, m (``p_frame = p_run + offset``).
+    description : str
+        Which frame: its origin and where it comes from.
+    """
+
+    offset_ned_m: FloatArray
+    description: str
+
+
+def ned_frame(store: RunStore) -> NedFrame:
+    """The INS's own position frame where the store has positions, else the run frame.
+
+    In order: NED about the geodetic origin (:func:`georeference`) where the INS gave
+    geodetic positions; the INS's local NED frame where it gave local positions only
+    (``nav/pos_ned``: for MAVLink LOCAL_POSITION_NED the autopilot's EKF origin); the run
+    frame (origin at the antenna phase centre of the first focused pulse) otherwise.
+    """
+    try:
+        geo = georeference(store)
+    except RecorderError:
+        pass
+    else:
+        lat, lon, alt = geo.origin.lla
+        return NedFrame(
+            geo.offset_ned_m,
+            f"NED, m, about the geodetic origin {lat:.9f} deg, {lon:.9f} deg, {alt:.3f} m "
+            f"({geo.origin.source}); INS positions fitted with {geo.fit_rms_m:.3f} m rms",
+        )
+    nav = store.read(schema.NAV.name, ["t_ns", "pos_ned", "result"])
+    ok = np.isfinite(nav["pos_ned"]).all(axis=1) & (nav["result"] == int(PushResult.ACCEPTED))
+    try:
+        offset, rms, _ = _track_offset(store, nav["t_ns"][ok], nav["pos_ned"][ok])
+    except RecorderError:
+        return NedFrame(
+            np.zeros(3),
+            "NED, m, run frame: origin at the antenna phase centre of the first focused pulse",
+        )
+    return NedFrame(
+        offset,
+        f"NED, m, the INS's own local frame (the origin of its positions, nav/pos_ned); INS "
+        f"positions fitted with {rms:.3f} m rms",
+    )
 
 
 @dataclass(frozen=True)

@@ -307,18 +307,30 @@ def create_tile(
     from wherever it was formed (region writes into arrays that exist).
     """
     group = images.create_group(schema.tile_name(index))
-    axes = [np.asarray(a, dtype=np.float64) for a in (axis0_m, axis1_m)]
-    shape = (axes[0].size, axes[1].size)
-    group.create_array(
+    _create_image(group, schema.TILE_DIMS, schema.TILE_COORDS, (axis0_m, axis1_m))
+    return group
+
+
+def _create_image(
+    group: zarr.Group,
+    dims: tuple[str, str],
+    coords: tuple[str, str],
+    axes: tuple[npt.ArrayLike, npt.ArrayLike],
+) -> zarr.Array:
+    """An empty complex64 ``data`` array of dimensions ``dims`` in ``group``, and its two
+    coordinate arrays ``coords`` written from ``axes``."""
+    values = [np.asarray(a, dtype=np.float64) for a in axes]
+    shape = (values[0].size, values[1].size)
+    data = group.create_array(
         "data",
         shape=shape,
         chunks=tuple(min(n, 1024) for n in shape),
         dtype=np.complex64,
-        dimension_names=schema.TILE_DIMS,
-        attributes={"coordinates": " ".join(schema.TILE_COORDS)},
+        dimension_names=dims,
+        attributes={"coordinates": " ".join(coords)},
         **schema.chunk_codecs(),
     )
-    for name, dim, value in zip(schema.TILE_COORDS, schema.TILE_DIMS, axes, strict=True):
+    for name, dim, value in zip(coords, dims, values, strict=True):
         arr = group.create_array(
             name,
             shape=value.shape,
@@ -328,7 +340,37 @@ def create_tile(
             **schema.chunk_codecs(),
         )
         arr[...] = value
-    return group
+    return data
+
+
+def write_north_up(
+    path: str | Path,
+    segment: int,
+    data: npt.NDArray[np.complexfloating[Any, Any]],
+    north_m: npt.ArrayLike,
+    east_m: npt.ArrayLike,
+    attributes: Mapping[str, Any],
+) -> None:
+    """Write segment ``segment``'s north-up image into the finished store at ``path``
+    (group :data:`~sarmoco.store.schema.NORTH_UP_GROUP`, replaced if there).
+
+    Raises
+    ------
+    RecorderError
+        The store cannot be opened for writing, or the image is not of its axes' shape.
+    """
+    try:
+        root = zarr.open_group(str(path), mode="r+", zarr_format=3)
+    except (OSError, ValueError, KeyError) as exc:
+        raise RecorderError(f"{path}: cannot add a north-up image: {exc}") from exc
+    shape = (np.size(north_m), np.size(east_m))
+    if data.shape != shape:
+        raise RecorderError(f"{path}: north-up image {data.shape} for axes {shape}")
+    parent = root.require_group(schema.NORTH_UP_GROUP)
+    group = parent.create_group(schema.north_up_name(segment), overwrite=True)
+    array = _create_image(group, schema.NORTH_UP_DIMS, schema.NORTH_UP_COORDS, (north_m, east_m))
+    array.with_config(schema.CHUNK_CONFIG)[...] = np.asarray(data, dtype=np.complex64)
+    group.update_attributes(dict(attributes))
 
 
 def write_tile(

@@ -42,6 +42,10 @@ dimension, plus a ``committed`` attribute counting the rows that are complete)::
                   each height_m (x, y) float64 m up, x_m (x), y_m (y) imaging-frame m;
                   attrs reference_track, compensated, blocks, height_resolution_m,
                   datum_depth_m (an optional group: stores without it read as before)
+      north_up/   written after a replay (optional): image_00/ ... one per reference-track
+                  segment, the tiles resampled onto a north/east grid, each with
+                  data (north, east) complex64, north_m (north), east_m (east), attrs
+                  frame (the NED frame and origin of the coordinates), segment_tiles
 
 Names: times are integers in ns with the unit in the name (``t_ns``, ``rx_ns``);
 scalar physical columns carry their unit (``d_los_m``, ``a_y_mps2``); NED vectors
@@ -335,6 +339,19 @@ TILE_DIMS = ("axis0", "axis1")
 """Dimensions of a tile's ``data``: along the reference track, then ground range."""
 TILE_COORDS = ("axis0_m", "axis1_m")
 """A tile's coordinate arrays (imaging-frame metres, one per entry of :data:`TILE_DIMS`)."""
+
+NORTH_UP_GROUP = "north_up"
+"""Group of the north-up images (:func:`north_up_name`), written after a replay."""
+NORTH_UP_DIMS = ("north", "east")
+"""Dimension names of a north-up image's ``data``."""
+NORTH_UP_COORDS = ("north_m", "east_m")
+"""Coordinate arrays of a north-up image (m, NED in the frame its ``frame`` attribute names)."""
+
+
+def north_up_name(segment: int) -> str:
+    """Group name of reference-track segment ``segment``'s image inside :data:`NORTH_UP_GROUP`."""
+    return f"image_{segment:02d}"
+
 
 DEM_GROUP = "dem"
 """Group of an array run's DEM products (not a table: one sub-group per product)."""
