@@ -1,5 +1,5 @@
 """What is made from a recorded store on the ground: the run report and its quicklooks,
-the array report, georeferencing, GeoTIFF, SICD, CPHD and CRSD.
+the array report, georeferencing, north-up images, GeoTIFF, SICD, CPHD and CRSD.
 
 Products read a store (:mod:`sarmoco.store`) and use processing for the physics; the
 daemon never imports them, so the process that flies loads none of this.
@@ -13,6 +13,7 @@ __all__ = [
     "crsd",
     "georeference",
     "geotiff",
+    "northup",
     "report",
     "sicd",
 ]
