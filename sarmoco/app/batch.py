@@ -57,6 +57,7 @@ from sarmoco.daemon.focuser import tile_imaging
 from sarmoco.daemon.runner import replay_files, replay_store
 from sarmoco.daemon.tables import RunSummary, recorded_tile_metrics
 from sarmoco.errors import ConfigError, ProcessingError
+from sarmoco.products.northup import write_north_up_images
 from sarmoco.store import schema
 from sarmoco.store.recorder import create_tile, write_tile
 
@@ -449,5 +450,7 @@ def run_command(args: argparse.Namespace) -> int:
         summaries = run_batch(client, cfg, recordings, args.tiles_per_block, not args.quiet)
     for r, s in zip(recordings, summaries, strict=True):
         print(f"{r.out}: {s.pulses_processed} pulses focused, {s.tiles} tiles")
+        for image in write_north_up_images(r.out):
+            print(f"{r.out}: {image}")
     print(f"batch: {len(recordings)} recording(s) in {time.monotonic() - start:.1f} s")
     return 0

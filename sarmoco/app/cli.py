@@ -112,11 +112,10 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     else:
         summary = replay_files(cfg, Path(args.radar), Path(args.nav), out, not args.quiet)
     print(f"{out}: {summary.pulses_processed} pulses focused, {summary.tiles} tiles")
-    if cfg.imaging.north_up and summary.tiles:
-        from sarmoco.products.northup import write_north_up_images
+    from sarmoco.products.northup import write_north_up_images
 
-        for image in write_north_up_images(out):
-            print(f"{out}: north-up image {image.segment} {image.shape}, {image.frame}")
+    for image in write_north_up_images(out):
+        print(f"{out}: {image}")
     return 0
 
 

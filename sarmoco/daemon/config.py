@@ -407,7 +407,7 @@ class ImagingConfig:
     )
     north_up: bool = _key(
         True,
-        "After a replay, also resample each reference-track segment's tiles onto a "
+        "After a replay or batch, also resample each reference-track segment's tiles onto a "
         "north/east grid of the same spacing, phase kept (the store's north_up group, in "
         "the INS's own position frame where the INS gave positions): the tiles' grid turns "
         "with the course flown, this one does not",

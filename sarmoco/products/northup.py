@@ -244,6 +244,10 @@ class NorthUpWritten:
     shape: tuple[int, int]
     frame: str
 
+    def __str__(self) -> str:
+        rows, cols = self.shape
+        return f"north-up image {self.segment} of {rows} x {cols} pixels, {self.frame}"
+
 
 def write_north_up_images(path: str | Path) -> list[NorthUpWritten]:
     """Resample each reference-track segment of the store at ``path`` onto a north/east
@@ -251,7 +255,8 @@ def write_north_up_images(path: str | Path) -> list[NorthUpWritten]:
 
     The coordinates are NED in the INS's own position frame where the store has INS
     positions (:func:`~sarmoco.products.georeference.ned_frame`); each image's ``frame``
-    attribute says which. Segments imaged off the ground plane are left out.
+    attribute says which. Nothing is written when the run's configuration turns it off
+    (``imaging.north_up``); segments imaged off the ground plane are left out.
 
     Raises
     ------
@@ -260,6 +265,8 @@ def write_north_up_images(path: str | Path) -> list[NorthUpWritten]:
     """
     store = open_store(path)
     cfg = parse_config(store.attrs["config"])
+    if not cfg.imaging.north_up:
+        return []
     depth = cfg.geometry.height_m
     frame = ned_frame(store)
     written = []
