@@ -17,11 +17,12 @@ this: only the export and the quicklook do.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from sarmoco.daemon.config import parse_config
+from sarmoco.daemon.config import Config, parse_config
 from sarmoco.errors import RecorderError
 from sarmoco.geodesy import (
     ecef_to_geodetic,
@@ -339,3 +340,31 @@ def grid_points(image: Image, track: ReferenceTrack, ground_depth_m: float) -> F
     x, y = np.meshgrid(image.axis0_m, image.axis1_m, indexing="ij")
     pts = np.stack([x, y, np.full_like(x, ground_depth_m)], axis=-1)
     return np.asarray(track.origin_ned + pts @ track.rotation)
+
+
+def beam_squint_rad(store: RunStore, track: ReferenceTrack, cfg: Config, look_rad: float) -> float:
+    """Squint of a segment's beam centre at the look angle ``look_rad`` (rad, from the
+    vertical), rad (positive: ahead along the track; 0 for a store without a ``doppler``
+    table).
+
+    The median over the segment's processing blocks (from ``track.t0_ns`` on) of the
+    attitude's beam-centre squint (``doppler/squint_rad``, at the antenna's reference look
+    angle, :meth:`~sarmoco.daemon.config.GeometryConfig.reference_look_rad`), carried to
+    ``look_rad``: the ground squint of a cone about a level array axis turned by a crab
+    ``c`` is ``asin(sin β tan c)`` (:mod:`sarmoco.processing.beam`), so its sine scales with
+    ``sin β``.
+    """
+    try:
+        d = store.read("doppler", ["t_ns", "squint_rad"])
+    except RecorderError:
+        return 0.0
+    rows = d["t_ns"] >= track.t0_ns
+    if not rows.any():
+        rows = d["t_ns"] == d["t_ns"].max()
+    squint = np.asarray(d["squint_rad"])[rows]
+    squint = squint[np.isfinite(squint)]
+    if squint.size == 0:
+        return 0.0
+    ref = cfg.geometry.reference_look_rad()
+    sine = math.sin(float(np.median(squint))) * math.sin(look_rad) / math.sin(ref)
+    return math.asin(max(-1.0, min(1.0, sine)))

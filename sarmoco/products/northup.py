@@ -34,8 +34,7 @@ from scipy.ndimage import spline_filter
 from sarmoco.daemon.config import parse_config
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.types import ComplexArray, FloatArray, Image
-from sarmoco.products.georeference import ned_frame, segment_images
-from sarmoco.products.report import beam_squint_rad
+from sarmoco.products.georeference import beam_squint_rad, ned_frame, segment_images
 from sarmoco.store.reader import open_store
 from sarmoco.store.recorder import write_north_up
 

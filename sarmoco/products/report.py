@@ -50,6 +50,7 @@ from sarmoco.processing.metrics import (
 )
 from sarmoco.processing.mocomp import LosState, integrate_los
 from sarmoco.processing.types import Image
+from sarmoco.products.georeference import beam_squint_rad
 from sarmoco.products.geotiff import write_geotiffs
 from sarmoco.products.quicklook import (
     plot_cuts,
@@ -223,34 +224,6 @@ def _brightest_window(store: RunStore, half_m: tuple[float, float]) -> tuple[Ima
     cols = slice(max(int(j) - h1, 0), int(j) + h1 + 1)
     window = Image(tile.data[rows, cols], tile.axis0_m[rows], tile.axis1_m[cols], tile.frame)
     return window, _track(attrs["reference_track"])
-
-
-def beam_squint_rad(store: RunStore, track: ReferenceTrack, cfg: Config, look_rad: float) -> float:
-    """Squint of a segment's beam centre at the look angle ``look_rad`` (rad, from the
-    vertical), rad (positive: ahead along the track; 0 for a store without a ``doppler``
-    table).
-
-    The median over the segment's processing blocks (from ``track.t0_ns`` on) of the
-    attitude's beam-centre squint (``doppler/squint_rad``, at the antenna's reference look
-    angle, :meth:`~sarmoco.daemon.config.GeometryConfig.reference_look_rad`), carried to
-    ``look_rad``: the ground squint of a cone about a level array axis turned by a crab
-    ``c`` is ``asin(sin β tan c)`` (:mod:`sarmoco.processing.beam`), so its sine scales with
-    ``sin β``.
-    """
-    try:
-        d = store.read("doppler", ["t_ns", "squint_rad"])
-    except RecorderError:
-        return 0.0
-    rows = d["t_ns"] >= track.t0_ns
-    if not rows.any():
-        rows = d["t_ns"] == d["t_ns"].max()
-    squint = np.asarray(d["squint_rad"])[rows]
-    squint = squint[np.isfinite(squint)]
-    if squint.size == 0:
-        return 0.0
-    ref = cfg.geometry.reference_look_rad()
-    sine = math.sin(float(np.median(squint))) * math.sin(look_rad) / math.sin(ref)
-    return math.asin(max(-1.0, min(1.0, sine)))
 
 
 def focus_comparison(
