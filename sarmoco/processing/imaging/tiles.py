@@ -24,12 +24,21 @@ is neither formed nor handed out.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from sarmoco.errors import ProcessingError
 from sarmoco.processing.imaging.backprojection import RangeLines, backproject_into
+from sarmoco.processing.imaging.coarse import (
+    MARGIN,
+    MAX_IMAGES,
+    CoarseImage,
+    add_upsampled,
+    along_band,
+    coarse_factors,
+    coarse_grid,
+)
 from sarmoco.processing.imaging.ffbp import ffbp_into
 from sarmoco.processing.imaging.grid import PlaneGrid
 from sarmoco.processing.types import BoolArray, ComplexArray, FloatArray, Image, IntArray
@@ -148,7 +157,8 @@ class Tile:
     """A tile being accumulated: its index, grid, pixels, time span (GPS ns) and pulse count.
 
     ``n_pulses`` counts the pulses backprojected into the tile, i.e. after any
-    azimuth pre-filter's decimation.
+    azimuth pre-filter's decimation. ``coarse`` holds the blocks formed on coarser grids
+    (:mod:`sarmoco.processing.imaging.coarse`) until the tile is handed out.
     """
 
     index: int
@@ -157,6 +167,7 @@ class Tile:
     t0_ns: int
     t1_ns: int
     n_pulses: int = 0
+    coarse: list[CoarseImage] = field(default_factory=list)
 
     def image(self) -> Image:
         """The tile as an :class:`Image` (frame ``ground``, axes in imaging-frame metres)."""
@@ -183,6 +194,10 @@ class TileImager:
         rad; None: direct backprojection. The pulses are then held until ``RANGE_CHUNK_PULSES``
         are there (one factorisation over each chunk), so tiles finish up to that many
         pulses later.
+
+    Where the tiles' pixels are finer than the image's band, blocks are formed on a
+    coarser grid and interpolated onto the tile's when it is handed out
+    (:mod:`sarmoco.processing.imaging.coarse`; :attr:`factors` says how much coarser).
     """
 
     def __init__(
@@ -198,6 +213,15 @@ class TileImager:
         self.ffbp_budget_rad = ffbp_budget_rad
         self.range_axis_m = np.asarray(range_axis_m, dtype=np.float64)
         self.wavelength_m = float(wavelength_m)
+        far = math.atan2(layout.ground_range_m + layout.swath_m / 2.0, layout.height_m)
+        self.factors = coarse_factors(
+            layout.pixel_m,
+            layout.beamwidth_rad,
+            self.wavelength_m,
+            float(self.range_axis_m[1] - self.range_axis_m[0]),
+            far,
+        )
+        """Coarsening, along track and across, of the grids blocks may be formed on."""
         self._open: dict[int, Tile] = {}
         self._first_open = -(2**62)
         """Tiles below this index were handed out and are never reopened."""
@@ -307,25 +331,26 @@ class TileImager:
                 continue
             if lines is None:
                 lines = RangeLines.upsample(rc, self.range_axis_m)
+            out, grid = self._target(tile, beam[sel])
             if self.ffbp_budget_rad is None:
                 backproject_into(
-                    tile.data,
+                    out,
                     lines,
                     apc_m,
                     self.wavelength_m,
-                    tile.grid,
+                    grid,
                     pulses=sel,
                     compensated_dy_m=compensated_dy_m,
                     beam_squint_rad=beam,
                 )
             else:
                 ffbp_into(
-                    tile.data,
+                    out,
                     lines,
                     float(self.range_axis_m[1] - self.range_axis_m[0]),
                     apc_m,
                     self.wavelength_m,
-                    tile.grid,
+                    grid,
                     self.ffbp_budget_rad,
                     pulses=sel,
                     compensated_dy_m=compensated_dy_m,
@@ -333,6 +358,28 @@ class TileImager:
                 )
             tile.n_pulses += sel.size
             tile.t1_ns = int(t_ns[sel[-1]])
+
+    def _target(self, tile: Tile, beam: FloatArray) -> tuple[ComplexArray, PlaneGrid]:
+        """Where a block of squint intervals ``beam`` is formed in ``tile``: the coarsest
+        image whose carrier its band fits, a new one coarser than those, or the tile's own
+        grid."""
+        band = along_band(beam, self.wavelength_m)
+        fits = [image for image in tile.coarse if image.takes(band)]
+        best = max(fits, key=lambda image: math.prod(image.factor), default=None)
+        m0, m1 = self.factors
+        room = len(tile.coarse) < MAX_IMAGES and min(tile.data.shape) >= 4 * MARGIN * max(m0, m1)
+        for factor in dict.fromkeys([(m0, m1), (1, m1)]):
+            if best is not None and math.prod(best.factor) >= math.prod(factor):
+                break
+            if not room or factor == (1, 1):
+                continue
+            grid = coarse_grid(tile.grid, factor)
+            shape = (grid.axis0_m.size, grid.axis1_m.size)
+            image = CoarseImage(sum(band) / 2.0, factor, grid, np.zeros(shape, np.complex64))
+            if image.takes(band):
+                tile.coarse.append(image)
+                return image.data, image.grid
+        return (best.data, best.grid) if best is not None else (tile.data, tile.grid)
 
     def close(self) -> list[Tile]:
         """Hand out every tile still open (end of the run), after the pulses held for FFBP."""
@@ -343,4 +390,9 @@ class TileImager:
     def _pop_below(self, index: int) -> list[Tile]:
         keys = sorted(k for k in self._open if k < index)
         self._first_open = max(self._first_open, index)
-        return self.layout.clip([self._open.pop(k) for k in keys])
+        tiles = [self._open.pop(k) for k in keys]
+        for tile in tiles:
+            for image in tile.coarse:
+                add_upsampled(tile.data, tile.grid, image, self.wavelength_m)
+            tile.coarse.clear()
+        return self.layout.clip(tiles)
