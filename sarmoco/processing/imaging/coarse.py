@@ -155,7 +155,7 @@ def add_upsampled(
         return along.astype(np.complex64), across.astype(np.complex64)
 
     rows, cols = phasors(coarse.grid, -1.0)
-    value = coarse.data * rows[:, None] * cols[None, :]
+    value: ComplexArray = coarse.data * rows[:, None] * cols[None, :]
     f0, f1 = coarse.factor
     if f0 > 1:
         value = sinc_interp_columns(value, MARGIN + np.arange(fine.axis0_m.size) / f0, TAPS)
