@@ -27,12 +27,8 @@ from sarmoco.processing.imaging.coarse import (
 from sarmoco.processing.imaging.grid import PlaneGrid
 from sarmoco.processing.imaging.tiles import Tile, TileImager, TileLayout
 from sarmoco.processing.metrics import point_target_metrics
+from tests.processing.imaging.test_squint import BEAM, DR, LAM, PRF, R0, RHO, TOL, H, V, _axis
 
-LAM, V, H, PRF = 0.02, 17.5, 450.0, 200.0
-BEAM = math.radians(1.909)
-TOL = math.radians(0.3)
-R0 = 900.0
-DR, RHO = 0.208, 0.25
 YG = math.sqrt(R0**2 - H**2)
 TARGETS = ((30.0, YG), (39.7, YG + 4.0))  # the second 0.3 m before tile 1 ends (x = 40 m)
 OFF_DEG = -4.0
@@ -42,14 +38,8 @@ WIDENED = math.radians(4.5)
 uncertain: more band than a coarse grid holds."""
 
 
-def _axis(crab_deg: float) -> np.ndarray:
-    """Array axis in the imaging frame of a body yawed by ``crab_deg`` toward the right."""
-    c = math.radians(crab_deg)
-    return np.array([math.cos(c), math.sin(c), 0.0])
-
-
 def _tiles(factors: tuple[int, int] | None) -> dict[int, Tile]:
-    axis = _axis(4.0)
+    axis = _axis(4.0, 1.0)
     psi_c = float(centre_squint_rad(axis, math.acos(H / R0)))
     n = 1400
     t = (np.arange(n) - n / 2) / PRF
@@ -60,7 +50,7 @@ def _tiles(factors: tuple[int, int] | None) -> dict[int, Tile]:
         d = np.array([x, y, H]) - apc
         r = np.linalg.norm(d, axis=1)
         off = np.arange(n) // 128 <= 1
-        pointed = np.where(off[:, None], _axis(4.0 + OFF_DEG)[None, :], axis[None, :])
+        pointed = np.where(off[:, None], _axis(4.0 + OFF_DEG, 1.0)[None, :], axis[None, :])
         lit = np.abs(np.sum(d * pointed, axis=1)) <= r * math.sin(BEAM / 2)
         echo = np.sinc((r_axis[None, :] - r[:, None]) / RHO) * np.exp(
             -4j * np.pi * r[:, None] / LAM
