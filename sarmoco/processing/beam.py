@@ -140,6 +140,11 @@ def squint_interval_rad(
     return float(np.min(-edge - phi)), float(np.max(edge - phi))
 
 
+PER_METRE = 1.0
+"""The speed, m/s, at which a Doppler frequency in Hz (:func:`doppler_hz`,
+:func:`squint_sine`) is an image's along-track spatial frequency in cycles/m."""
+
+
 def doppler_hz(speed_mps: float, wavelength_m: float, squint_rad: FloatArray | float) -> FloatArray:
     """Doppler frequency ``2 v sin ψ / λ`` of a point seen at squint ``squint_rad``, Hz."""
     return np.asarray(

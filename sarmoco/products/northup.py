@@ -29,10 +29,18 @@ from pathlib import Path
 
 import numba
 import numpy as np
+from scipy.integrate import cumulative_trapezoid
 from scipy.ndimage import spline_filter
 
 from sarmoco.daemon.config import parse_config
 from sarmoco.errors import ProcessingError
+from sarmoco.processing.beam import (
+    PER_METRE,
+    accc_correlation,
+    doppler_hz,
+    resolve_ambiguity,
+    squint_sine,
+)
 from sarmoco.processing.types import ComplexArray, FloatArray, Image
 from sarmoco.products.georeference import beam_squint_rad, ned_frame, segment_images
 from sarmoco.store.reader import open_store
@@ -60,9 +68,13 @@ class NorthUpImage:
 
 
 def along_track_carrier(
-    image: Image, depth_m: float, wavelength_m: float, squint_sine: float | None = None
+    image: Image, depth_m: float, wavelength_m: float, squint_rad: float | None = None
 ) -> FloatArray:
     """The image's along-track carrier at each row (axis 0), cycles per metre.
+
+    Per block of :data:`CARRIER_ROWS` rows, the ACCC of the range-demodulated rows
+    (:func:`~sarmoco.processing.beam.accc_correlation`, the rows as pulses at one per pixel
+    spacing), unwrapped along track and interpolated to every row.
 
     Parameters
     ----------
@@ -72,17 +84,16 @@ def along_track_carrier(
         Depth of the ground below the reference track, m.
     wavelength_m : float
         Carrier wavelength, m.
-    squint_sine : float, optional
-        Sine of the beam centre's squint (positive ahead) that formed the image: picks the
-        carrier among those the row spacing cannot tell apart. None: the one nearest zero.
+    squint_rad : float, optional
+        Squint of the beam centre (positive ahead) that formed the image: picks the carrier
+        among those the row spacing cannot tell apart. None: the one nearest zero.
     """
     a, c = image.axis0_m, image.axis1_m
     step = float(a[1] - a[0])
     k = 4.0 * np.pi / wavelength_m
     base = image.data * np.exp(-1j * k * np.hypot(c, depth_m)).astype(np.complex64)[None, :]
-    lag = np.einsum("ij,ij->i", base[1:], np.conj(base[:-1]))  # between rows i and i + 1
-    parts = np.array_split(np.arange(lag.size), max(1, lag.size // CARRIER_ROWS))
-    acc = np.array([lag[p].sum() for p in parts])
+    parts = np.array_split(np.arange(a.size - 1), max(1, (a.size - 1) // CARRIER_ROWS))
+    acc = np.array([accc_correlation(base[p[0] : p[-1] + 2]) for p in parts])
     centre = np.array([a[p].mean() for p in parts]) + step / 2.0
     power = np.abs(acc)
     if not power.max() > 0:
@@ -90,11 +101,10 @@ def along_track_carrier(
     lit = power > 1e-3 * power.max()
     cycles = np.unwrap(np.angle(acc[lit])) / (2.0 * np.pi * step)  # continuous along track
     per_row = np.interp(a, centre[lit], cycles)
-    rate = 1.0 / step
-    expected = 0.0 if squint_sine is None else 2.0 * squint_sine / wavelength_m
+    expected = 0.0 if squint_rad is None else float(doppler_hz(PER_METRE, wavelength_m, squint_rad))
     weights = power[lit]
     mean = float(np.sum(weights * cycles) / np.sum(weights))
-    return np.asarray(per_row + rate * np.round((expected - mean) / rate))
+    return np.asarray(per_row + resolve_ambiguity(mean, expected, 1.0 / step) - mean)
 
 
 def north_up(
@@ -104,7 +114,7 @@ def north_up(
     e1_ned: FloatArray,
     depth_m: float,
     wavelength_m: float,
-    squint_sine: float | None = None,
+    squint_rad: float | None = None,
 ) -> NorthUpImage:
     """Resample a ground image onto a north/east grid of its own pixel spacing.
 
@@ -120,8 +130,8 @@ def north_up(
         Depth of the ground below the reference track, m.
     wavelength_m : float
         Carrier wavelength, m.
-    squint_sine : float, optional
-        Sine of the beam centre's squint that formed the image (:func:`along_track_carrier`).
+    squint_rad : float, optional
+        Squint of the beam centre that formed the image, rad (:func:`along_track_carrier`).
 
     Raises
     ------
@@ -137,12 +147,10 @@ def north_up(
     if not np.allclose([e0 @ e0, e1 @ e1, e0 @ e1], [1.0, 1.0, 0.0], atol=1e-9):
         raise ProcessingError("north_up: e0, e1 are not orthonormal horizontal axes")
     k = 4.0 * np.pi / wavelength_m
-    carrier = along_track_carrier(image, depth_m, wavelength_m, squint_sine)
-    mean_sine = float(np.mean(carrier)) * wavelength_m / 2.0
+    carrier = along_track_carrier(image, depth_m, wavelength_m, squint_rad)
+    mean_sine = float(squint_sine(float(np.mean(carrier)), PER_METRE, wavelength_m))
     cos_psi = float(np.sqrt(max(0.0, 1.0 - mean_sine**2)))
-    phi_a = (
-        2.0 * np.pi * np.concatenate([[0.0], np.cumsum((carrier[1:] + carrier[:-1]) / 2)]) * step
-    )
+    phi_a = 2.0 * np.pi * cumulative_trapezoid(carrier, dx=step, initial=0.0)
 
     carrier_free = image.data * np.exp(
         -1j * (phi_a[:, None] + k * cos_psi * np.hypot(c, depth_m)[None, :])
@@ -273,7 +281,7 @@ def write_north_up_images(path: str | Path) -> list[NorthUpWritten]:
         if seg.image.frame != "ground":
             continue
         look = math.atan2(float(np.mean(seg.image.axis1_m)), depth)
-        sine = math.sin(beam_squint_rad(store, seg.track, cfg, look))
+        squint = beam_squint_rad(store, seg.track, cfg, look)
         image = north_up(
             seg.image,
             seg.track.origin_ned + frame.offset_ned_m,
@@ -281,7 +289,7 @@ def write_north_up_images(path: str | Path) -> list[NorthUpWritten]:
             seg.track.y_hat,
             depth,
             cfg.radar.wavelength_m,
-            sine,
+            squint,
         )
         attrs = {"frame": frame.description, "segment_tiles": list(seg.tiles)}
         write_north_up(path, k, image.data, image.north_m, image.east_m, attrs)

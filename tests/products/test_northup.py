@@ -69,8 +69,8 @@ class Focused:
     refs: list[Image]
     """Each target's neighbourhood formed directly on north/east."""
     targets: np.ndarray
-    sine: float
-    """Sine of the beam centre's squint."""
+    squint_rad: float
+    """The beam centre's squint."""
 
 
 @pytest.fixture(scope="module")
@@ -91,7 +91,7 @@ def focused() -> Focused:
         backproject_into(ref, lines, apc, LAM, box)
         refs.append(Image(ref, box.axis0_m, box.axis1_m, "ground"))
     image = Image(along, track.axis0_m, track.axis1_m, "ground")
-    return Focused(image, track.unit_vectors, refs, targets, math.sin(psi))
+    return Focused(image, track.unit_vectors, refs, targets, psi)
 
 
 def _window(nu: NorthUpImage, ref: Image) -> Image:
@@ -108,7 +108,7 @@ def test_north_up_image_is_the_image_formed_on_north_east(focused: Focused) -> N
     """Every reference pixel within 0.1 % (complex, rms; the interpolation leaves 1e-4) and
     each target's response as the direct focus gives it: PSLR within 0.01 dB, IRW within
     0.1 %, peak within 2 mm."""
-    nu = north_up(focused.image, np.zeros(3), *focused.axes, H, LAM, focused.sine)
+    nu = north_up(focused.image, np.zeros(3), *focused.axes, H, LAM, focused.squint_rad)
     for ref, tgt in zip(focused.refs, focused.targets, strict=True):
         got = _window(nu, ref)
         assert np.linalg.norm(got.data - ref.data) / np.linalg.norm(ref.data) < 1e-3
@@ -126,7 +126,7 @@ def test_the_carrier_beyond_the_pixel_rate_needs_the_beam_squint(focused: Focuse
     """At 8° of crab the along-track carrier (2 sin psi / lambda, -12.1 cycles/m) lies beyond
     half the 20 /m pixel rate: without the squint the amplitude is still right, the phase
     between the pixels is not."""
-    assert 2 * focused.sine / LAM < -0.5 / STEP
+    assert 2 * math.sin(focused.squint_rad) / LAM < -0.5 / STEP
     nu = north_up(focused.image, np.zeros(3), *focused.axes, H, LAM, None)
     ref = focused.refs[0]
     got = _window(nu, ref)

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sarmoco.processing.beam import PER_METRE, doppler_hz, squint_sine
 from sarmoco.processing.imaging.grid import PlaneGrid
 from sarmoco.processing.imaging.interp import sinc_interp, sinc_interp_columns
 from sarmoco.processing.types import ComplexArray, FloatArray
@@ -81,7 +82,7 @@ def coarse_factors(
     far_look_rad : float
         Look angle (from the vertical) of the swath's far edge, rad.
     """
-    along = 2.0 * math.sin(beam_rad / 2.0) / wavelength_m  # cycles/m either side
+    along = float(doppler_hz(PER_METRE, wavelength_m, beam_rad / 2.0))  # cycles/m either side
     across = 0.5 * math.sin(far_look_rad) / range_bin_m
 
     def factor(half: float) -> int:
@@ -93,9 +94,15 @@ def coarse_factors(
 def along_band(beam_squint_rad: FloatArray, wavelength_m: float) -> tuple[float, float]:
     """Lowest and highest along-track frequency a block's pulses put into the image,
     cycles/m, from their squint intervals (P, 2), rad."""
-    lo = float(np.min(beam_squint_rad[:, 0]))
-    hi = float(np.max(beam_squint_rad[:, 1]))
-    return 2.0 * math.sin(lo) / wavelength_m, 2.0 * math.sin(hi) / wavelength_m
+    edges = [np.min(beam_squint_rad[:, 0]), np.max(beam_squint_rad[:, 1])]
+    lo, hi = doppler_hz(PER_METRE, wavelength_m, np.array(edges))
+    return float(lo), float(hi)
+
+
+def band_fits(band: tuple[float, float], centre: float, step_m: float) -> bool:
+    """Whether an along-track band (cycles/m) lies within :data:`USABLE` cycles per sample of
+    spacing ``step_m`` about the carrier ``centre`` (cycles/m)."""
+    return max(abs(band[0] - centre), abs(band[1] - centre)) * step_m <= USABLE
 
 
 @dataclass
@@ -121,8 +128,7 @@ class CoarseImage:
 
     def takes(self, band: tuple[float, float]) -> bool:
         """Whether a block of along-track band ``band`` (cycles/m) fits this carrier."""
-        step = float(self.grid.axis0_m[1] - self.grid.axis0_m[0])
-        return max(abs(band[0] - self.centre), abs(band[1] - self.centre)) * step <= USABLE
+        return band_fits(band, self.centre, float(self.grid.axis0_m[1] - self.grid.axis0_m[0]))
 
 
 def coarse_grid(fine: PlaneGrid, factor: tuple[int, int]) -> PlaneGrid:
@@ -145,7 +151,7 @@ def add_upsampled(
     (:class:`~sarmoco.processing.imaging.tiles.TileLayout`).
     """
     k = 4.0 * np.pi / wavelength_m
-    sine = coarse.centre * wavelength_m / 2.0
+    sine = float(squint_sine(coarse.centre, PER_METRE, wavelength_m))
     cosine = math.sqrt(max(0.0, 1.0 - sine * sine))
     depth = float(fine.origin_m[2])
 

@@ -36,6 +36,7 @@ from sarmoco.processing.imaging.coarse import (
     CoarseImage,
     add_upsampled,
     along_band,
+    band_fits,
     coarse_factors,
     coarse_grid,
 )
@@ -366,17 +367,15 @@ class TileImager:
         band = along_band(beam, self.wavelength_m)
         fits = [image for image in tile.coarse if image.takes(band)]
         best = max(fits, key=lambda image: math.prod(image.factor), default=None)
+        held = 1 if best is None else math.prod(best.factor)
         m0, m1 = self.factors
         room = len(tile.coarse) < MAX_IMAGES and min(tile.data.shape) >= 4 * MARGIN * max(m0, m1)
-        for factor in dict.fromkeys([(m0, m1), (1, m1)]):
-            if best is not None and math.prod(best.factor) >= math.prod(factor):
-                break
-            if not room or factor == (1, 1):
-                continue
-            grid = coarse_grid(tile.grid, factor)
-            shape = (grid.axis0_m.size, grid.axis1_m.size)
-            image = CoarseImage(sum(band) / 2.0, factor, grid, np.zeros(shape, np.complex64))
-            if image.takes(band):
+        centre, step = sum(band) / 2.0, float(tile.grid.axis0_m[1] - tile.grid.axis0_m[0])
+        for factor in ((m0, m1), (1, m1)):
+            if room and math.prod(factor) > held and band_fits(band, centre, factor[0] * step):
+                grid = coarse_grid(tile.grid, factor)
+                shape = (grid.axis0_m.size, grid.axis1_m.size)
+                image = CoarseImage(centre, factor, grid, np.zeros(shape, np.complex64))
                 tile.coarse.append(image)
                 return image.data, image.grid
         return (best.data, best.grid) if best is not None else (tile.data, tile.grid)
