@@ -216,6 +216,37 @@ def task_order(n_rows: int, block: int) -> IntArray:
     return np.concatenate([np.arange(k, n_blocks, threads) for k in range(threads)])
 
 
+def thread_scratch(n: int, dtype: type[np.generic]) -> np.ndarray:
+    """One scratch row of ``n`` elements for each thread of the coming ``prange``, for a
+    parallel kernel's per-row intermediate results (``numba.get_thread_id()`` picks the
+    row); each row padded to whole 64-byte cache lines so that no two threads write one.
+
+    A kernel takes one such array per intermediate quantity, as its own argument. Measured
+    on the backprojection kernel (blocks of 128 pulses on 632 x 1532 and 1200 x 1532
+    pixels, two threads): scratch allocated inside the ``prange`` body (numba hoists it out
+    of the loop) 2.2 s; the rows of one array shared by the quantities 2.2 s; one array
+    per quantity 1.3 s; the pixels the same to the bit.
+
+    Parameters
+    ----------
+    n : int
+        Elements the row needs.
+    dtype : numpy scalar type
+        Element type.
+
+    Returns
+    -------
+    ndarray, shape (numba.get_num_threads(), n rounded up to 64 bytes), uninitialised
+    """
+    per_line = max(1, 64 // np.dtype(dtype).itemsize)
+    padded = -(-max(n, 1) // per_line) * per_line
+    return np.empty((numba.get_num_threads(), padded), dtype)
+
+
+SCRATCH_TYPES = (np.int32, np.float32, np.float32, np.float32)
+"""The direct kernel's scratch per column: range bin, its fraction, cosine and sine."""
+
+
 @numba.njit(parallel=True, nogil=True, cache=True, fastmath=True)
 def _bp_kernel(
     line: ComplexArray,
@@ -229,6 +260,10 @@ def _bp_kernel(
     k: float,
     cull: bool,
     squint: bool,
+    bins: IntArray,
+    fracs: FloatArray,
+    cosines: FloatArray,
+    sines: FloatArray,
     out: FloatArray,
 ) -> None:  # pragma: no cover - compiled
     """Accumulate the pulses ``rows`` of ``line`` into ``out`` (float32 view, re/im interleaved).
@@ -243,7 +278,9 @@ def _bp_kernel(
     Per row and pulse, a first loop computes range, bin, fraction and phase for
     the admitted columns (vectorised: see :func:`_sincos`), a second one interpolates
     and accumulates. Task ``t`` owns the rows of block ``order[t]`` (``ROW_BLOCK`` rows), given
-    ``PULSE_BLOCK`` pulses at a time; each pixel sums its pulses in order.
+    ``PULSE_BLOCK`` pulses at a time; each pixel sums its pulses in order. The first loop's
+    results go to the calling thread's rows of ``bins``, ``fracs``, ``cosines`` and ``sines``
+    (:func:`thread_scratch`).
     """
     n_bins = line.shape[1]
     n0, n1 = ax0.shape[0], ax1.shape[0]
@@ -255,10 +292,9 @@ def _bp_kernel(
     n_pulses = rows.shape[0]
     for task in numba.prange(order.shape[0]):
         first = order[task] * ROW_BLOCK
-        bin_ = np.empty(n1, np.int32)
-        frac = np.empty(n1, np.float32)
-        cos_ph = np.empty(n1, np.float32)
-        sin_ph = np.empty(n1, np.float32)
+        thread = numba.get_thread_id()
+        bin_, frac = bins[thread], fracs[thread]
+        cos_ph, sin_ph = cosines[thread], sines[thread]
         for q0 in range(0, n_pulses, PULSE_BLOCK):
             for i in range(first, min(n0, first + ROW_BLOCK)):
                 for q in range(q0, min(q0 + PULSE_BLOCK, n_pulses)):
@@ -455,6 +491,7 @@ def backproject_into(
         "backproject", out, lines, apc_m, wavelength_m, grid,
         ref_range_m, pulses, beam_half_angle_rad, compensated_dy_m, beam_squint_rad,
     )  # fmt: skip
+    bins, fracs, cosines, sines = (thread_scratch(len(grid.axis1_m), t) for t in SCRATCH_TYPES)
     _bp_kernel(
         lines.data,
         pg.rows,
@@ -467,6 +504,10 @@ def backproject_into(
         pg.k,
         pg.cull,
         pg.squint,
+        bins,
+        fracs,
+        cosines,
+        sines,
         out.view(np.float32),
     )
 

@@ -54,10 +54,14 @@ from sarmoco.processing.imaging.backprojection import (
     _sincos,
     backproject_into,
     pulse_geometry,
+    thread_scratch,
 )
 from sarmoco.processing.imaging.grid import PlaneGrid
 from sarmoco.processing.imaging.interp import fft_upsample
 from sarmoco.processing.types import ComplexArray, FloatArray, IntArray
+
+GRID_SCRATCH_TYPES = (np.float64, np.float64, np.float32, np.float32)
+"""The last stage's scratch per column: range and angle position, cosine and sine."""
 
 MERGE_FACTORS = (2, 3, 4)
 """Subapertures merged per stage that the planner considers."""
@@ -290,20 +294,25 @@ def _polar_to_grid(
     ax1: FloatArray,
     k: float,
     order: int,
+    r_rows: FloatArray,
+    a_rows: FloatArray,
+    cosines: FloatArray,
+    sines: FloatArray,
     out: FloatArray,
 ) -> None:  # pragma: no cover - compiled
     """Last stage: add every polar subimage, read at each pixel, into ``out`` (in place).
 
     ``out`` is the float32 view (re/im interleaved) of the complex64 pixels. Per row and
     subimage a first loop computes the polar position and phase of every column
-    (vectorised), a second one reads and accumulates.
+    (vectorised) into the calling thread's rows of ``r_rows``, ``a_rows``, ``cosines`` and
+    ``sines`` (:func:`~sarmoco.processing.imaging.backprojection.thread_scratch`), a second
+    one reads and accumulates.
     """
     n1 = ax1.shape[0]
     for i in numba.prange(ax0.shape[0]):
-        r_pos = np.empty(n1, np.float64)
-        a_pos = np.empty(n1, np.float64)
-        cos_ph = np.empty(n1, np.float32)
-        sin_ph = np.empty(n1, np.float32)
+        thread = numba.get_thread_id()
+        r_pos, a_pos = r_rows[thread], a_rows[thread]
+        cos_ph, sin_ph = cosines[thread], sines[thread]
         for c in range(child.shape[0]):
             du = ax0[i] - c_geo[c, 0]
             base = du * du + c_geo[c, 2]
@@ -583,10 +592,13 @@ def ffbp_into(
             first, cgeo, alpha0, d_alpha, r0, dr_m, side, k, plan.angle_order, data,
         )  # fmt: skip
         level = _upsampled(_Level(cgeo, alpha0, d_alpha, r0, dr_m, data, length))
+    r_rows, a_rows, cosines, sines = (
+        thread_scratch(grid.axis1_m.size, t) for t in GRID_SCRATCH_TYPES
+    )
     _polar_to_grid(
         level.data, level.geo, level.alpha0, level.d_alpha, level.r0, level.dr,
         np.asarray(grid.axis0_m, dtype=np.float64), np.asarray(grid.axis1_m, dtype=np.float64),
-        k, plan.angle_order, out.view(np.float32),
+        k, plan.angle_order, r_rows, a_rows, cosines, sines, out.view(np.float32),
     )  # fmt: skip
     return plan
 

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import pytest
 
@@ -204,6 +205,25 @@ def test_ffbp_matches_direct_within_the_budget(
         deep = _compare(prep, tgt, pixel_m, BUDGET_RAD, Factorisation(2, 4, BUDGET_RAD / 4))
         print(f"{name} target {tgt[:2].round(2)}: {deep}")
         assert deep.violations() == [], str(deep)
+
+
+def test_one_thread_and_all_give_the_same_pixels(ku: Prepared) -> None:
+    """Each thread writes its intermediate columns to its own scratch rows: the direct and
+    the factorised kernels on all of numba's threads give the pixels one thread gives, to
+    the last bit (threads sharing scratch overwrite each other's columns)."""
+    threads = numba.get_num_threads()
+    if threads < 2:
+        pytest.skip("numba has one thread here: nothing runs side by side")
+    grid = _grid(ku.case.targets_img[0], 0.02, half_m=4.0)
+    try:
+        numba.set_num_threads(1)
+        alone = _images(ku, grid, BUDGET_RAD)
+    finally:
+        numba.set_num_threads(threads)
+    together = _images(ku, grid, BUDGET_RAD)
+    assert alone[2].stages > 1  # the factorised kernels ran, not the direct one again
+    for one, many in zip(alone[:2], together[:2], strict=True):
+        assert np.abs(one).max() > 0 and np.array_equal(one, many)
 
 
 def test_the_budget_controls_the_error(ku: Prepared) -> None:
