@@ -268,19 +268,14 @@ def _bp_kernel(
 ) -> None:  # pragma: no cover - compiled
     """Accumulate the pulses ``rows`` of ``line`` into ``out`` (float32 view, re/im interleaved).
 
-    ``geo[p]`` is pulse ``p``'s APC in grid coordinates ``(u, w, h^2, R_ref, k ΔY, t_lo,
-    t_hi)``: along axis 0, along axis 1, squared height over the plane, reference range,
-    the compensated displacement along axis 1 times ``k`` (rad/m; used when ``squint``,
-    loop-invariant, so the compiler keeps a loop without the term), and the tangents of
-    the beam's squint interval.
-    A pixel ``(a0, a1)`` takes the pulse when its range is inside the range axis and (when
-    ``cull``) ``t_lo rho <= dx <= t_hi rho``, ``rho = sqrt(dy^2 + h^2)``: bounds on ``dy^2``.
-    Per row and pulse, a first loop computes range, bin, fraction and phase for
-    the admitted columns (vectorised: see :func:`_sincos`), a second one interpolates
-    and accumulates. Task ``t`` owns the rows of block ``order[t]`` (``ROW_BLOCK`` rows), given
-    ``PULSE_BLOCK`` pulses at a time; each pixel sums its pulses in order. The first loop's
-    results go to the calling thread's rows of ``bins``, ``fracs``, ``cosines`` and ``sines``
-    (:func:`thread_scratch`).
+    ``geo[p]``: pulse ``p``'s ``(u, w, h^2, R_ref, k ΔY, t_lo, t_hi)`` (:class:`PulseGeometry`;
+    ``k ΔY`` used when ``squint``, loop-invariant, so the compiler keeps a loop without it).
+    A pixel takes the pulse when its range is on the range axis and (when ``cull``)
+    ``t_lo rho <= dx <= t_hi rho``, ``rho = sqrt(dy^2 + h^2)``: bounds on ``dy^2``. Per row
+    and pulse a first loop puts range bin, fraction and phase of the admitted columns in
+    the thread's rows of ``bins``, ``fracs``, ``cosines``, ``sines`` (:func:`thread_scratch`;
+    vectorised, :func:`_sincos`), a second one interpolates and accumulates. Task ``t`` owns
+    the ``ROW_BLOCK`` rows of block ``order[t]``, given ``PULSE_BLOCK`` pulses at a time.
     """
     n_bins = line.shape[1]
     n0, n1 = ax0.shape[0], ax1.shape[0]

@@ -592,15 +592,21 @@ def ffbp_into(
             first, cgeo, alpha0, d_alpha, r0, dr_m, side, k, plan.angle_order, data,
         )  # fmt: skip
         level = _upsampled(_Level(cgeo, alpha0, d_alpha, r0, dr_m, data, length))
+    _to_grid(level, grid, k, plan.angle_order, out)
+    return plan
+
+
+def _to_grid(level: _Level, grid: PlaneGrid, k: float, order: int, out: ComplexArray) -> None:
+    """Add the last level's polar subimages to the pixels ``out`` of ``grid``
+    (:func:`_polar_to_grid`, with each thread's scratch rows)."""
     r_rows, a_rows, cosines, sines = (
         thread_scratch(grid.axis1_m.size, t) for t in GRID_SCRATCH_TYPES
     )
     _polar_to_grid(
         level.data, level.geo, level.alpha0, level.d_alpha, level.r0, level.dr,
         np.asarray(grid.axis0_m, dtype=np.float64), np.asarray(grid.axis1_m, dtype=np.float64),
-        k, plan.angle_order, r_rows, a_rows, cosines, sines, out.view(np.float32),
+        k, order, r_rows, a_rows, cosines, sines, out.view(np.float32),
     )  # fmt: skip
-    return plan
 
 
 def warm_up() -> None:
