@@ -450,7 +450,7 @@ def run_command(args: argparse.Namespace) -> int:
         summaries = run_batch(client, cfg, recordings, args.tiles_per_block, not args.quiet)
     for r, s in zip(recordings, summaries, strict=True):
         print(f"{r.out}: {s.pulses_processed} pulses focused, {s.tiles} tiles")
-        for image in write_north_up_images(r.out):
-            print(f"{r.out}: {image}")
+        for line in write_north_up_images(r.out).lines():
+            print(f"{r.out}: {line}")
     print(f"batch: {len(recordings)} recording(s) in {time.monotonic() - start:.1f} s")
     return 0

@@ -114,8 +114,8 @@ def _cmd_replay(args: argparse.Namespace) -> int:
     print(f"{out}: {summary.pulses_processed} pulses focused, {summary.tiles} tiles")
     from sarmoco.products.northup import write_north_up_images
 
-    for image in write_north_up_images(out):
-        print(f"{out}: {image}")
+    for line in write_north_up_images(out).lines():
+        print(f"{out}: {line}")
     return 0
 
 

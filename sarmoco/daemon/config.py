@@ -408,9 +408,9 @@ class ImagingConfig:
     north_up: bool = _key(
         True,
         "After a replay or batch, also resample each reference-track segment's tiles onto a "
-        "north/east grid of the same spacing, phase kept (the store's north_up group, in "
-        "the INS's own position frame where the INS gave positions): the tiles' grid turns "
-        "with the course flown, this one does not",
+        "north/east grid of the same spacing, phase kept (the store's north_up group, NED "
+        "about the origin the INS named for its positions; none where it named none): the "
+        "tiles' grid turns with the course flown, this one does not",
     )
     ffbp_max_phase_error_rad: float = _key(
         0.3,

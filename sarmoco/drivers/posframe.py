@@ -46,7 +46,7 @@ class LocalPositions:
     def state(self, lat_lon_alt: Vec3, source: str) -> None:
         """The INS states the origin of its local frame (deg, deg, m)."""
         if self.stated is None or self.stated.lat_lon_alt != lat_lon_alt:
-            self.stated = TangentFrame(lat_lon_alt, source, self._ellipsoid_height)
+            self.stated = TangentFrame(lat_lon_alt, source, self._ellipsoid_height, stated=True)
 
     def local(self, lat_lon_alt: Vec3) -> tuple[Vec3, TangentFrame]:
         """A geodetic position (deg, deg, m) as NED (m) in :attr:`frame`, and that frame."""

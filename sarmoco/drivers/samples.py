@@ -52,11 +52,15 @@ class TangentFrame:
         above mean sea level plus the geoid undulation it sends). False: the altitude above
         mean sea level as the INS gives it (MAVLink), used as the ellipsoid height (the
         geoid undulation, tens of metres, unknown).
+    stated : bool
+        The INS named this point as the origin of its positions (an EKF origin); False:
+        the first position a driver received, a point of the daemon's choosing.
     """
 
     lat_lon_alt: tuple[float, float, float]
     source: str
     ellipsoid_height: bool = False
+    stated: bool = False
 
 
 @dataclass(frozen=True, slots=True)

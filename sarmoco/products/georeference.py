@@ -202,10 +202,15 @@ class NedFrame:
         Run-frame origin in this frame, m (``p_frame = p_run + offset``).
     description : str
         Which frame: its origin and where it comes from.
+    stated : bool
+        The INS named the origin (its EKF origin, or the origin of its local positions);
+        False: a point of the daemon's choosing (the first geodetic fix, or the run frame's
+        first antenna position), which no other receiver of the INS's data would share.
     """
 
     offset_ned_m: FloatArray
     description: str
+    stated: bool
 
 
 def ned_frame(store: RunStore) -> NedFrame:
@@ -226,6 +231,7 @@ def ned_frame(store: RunStore) -> NedFrame:
             geo.offset_ned_m,
             f"NED, m, about the geodetic origin {lat:.9f} deg, {lon:.9f} deg, {alt:.3f} m "
             f"({geo.origin.source}); INS positions fitted with {geo.fit_rms_m:.3f} m rms",
+            geo.origin.stated,
         )
     nav = store.read(schema.NAV.name, ["t_ns", "pos_ned", "result"])
     ok = np.isfinite(nav["pos_ned"]).all(axis=1) & (nav["result"] == int(PushResult.ACCEPTED))
@@ -235,11 +241,13 @@ def ned_frame(store: RunStore) -> NedFrame:
         return NedFrame(
             np.zeros(3),
             "NED, m, run frame: origin at the antenna phase centre of the first focused pulse",
+            False,
         )
     return NedFrame(
         offset,
         f"NED, m, the INS's own local frame (the origin of its positions, nav/pos_ned); INS "
         f"positions fitted with {rms:.3f} m rms",
+        True,
     )
 
 

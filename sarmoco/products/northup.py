@@ -256,14 +256,47 @@ class NorthUpWritten:
         return f"north-up image {self.segment} of {rows} x {cols} pixels, {self.frame}"
 
 
-def write_north_up_images(path: str | Path) -> list[NorthUpWritten]:
+@dataclass(frozen=True)
+class NorthUpImages:
+    """What :func:`write_north_up_images` did to a store.
+
+    Attributes
+    ----------
+    images : list of NorthUpWritten
+        The images written.
+    not_written : str
+        Why none was written where the configuration asks for them ("" otherwise).
+    """
+
+    images: list[NorthUpWritten]
+    not_written: str = ""
+
+    def lines(self) -> list[str]:
+        """One line per image written, or the reason none was."""
+        if self.not_written:
+            return [f"north-up image not written: {self.not_written}"]
+        return [str(image) for image in self.images]
+
+
+UNNAMED_ORIGIN = (
+    "the INS named no origin for its positions (no EKF origin, no local positions), so "
+    "north/east would be about a point of the daemon's choosing; the tiles and the exports "
+    "(geodetic) hold the geometry"
+)
+"""Why a store gets no north-up image although ``imaging.north_up`` is on."""
+
+
+def write_north_up_images(path: str | Path) -> NorthUpImages:
     """Resample each reference-track segment of the store at ``path`` onto a north/east
     grid and write it into the store (:data:`~sarmoco.store.schema.NORTH_UP_GROUP`).
 
-    The coordinates are NED in the INS's own position frame where the store has INS
-    positions (:func:`~sarmoco.products.georeference.ned_frame`); each image's ``frame``
-    attribute says which. Nothing is written when the run's configuration turns it off
-    (``imaging.north_up``); segments imaged off the ground plane are left out.
+    The coordinates are NED about the origin the INS named for its positions
+    (:func:`~sarmoco.products.georeference.ned_frame`: its EKF origin, or the origin of its
+    local positions); each image's ``frame`` attribute says which. Nothing is written when
+    the run's configuration turns it off (``imaging.north_up``), nor when the INS named no
+    origin (a geodetic-only INS, or none): north and east about the first fix or the first
+    antenna position would be coordinates no one else shares. Segments imaged off the
+    ground plane are left out.
 
     Raises
     ------
@@ -273,9 +306,11 @@ def write_north_up_images(path: str | Path) -> list[NorthUpWritten]:
     store = open_store(path)
     cfg = parse_config(store.attrs["config"])
     if not cfg.imaging.north_up:
-        return []
-    depth = cfg.geometry.height_m
+        return NorthUpImages([])
     frame = ned_frame(store)
+    if not frame.stated:
+        return NorthUpImages([], UNNAMED_ORIGIN)
+    depth = cfg.geometry.height_m
     written = []
     for k, seg in enumerate(segment_images(store)):
         if seg.image.frame != "ground":
@@ -294,4 +329,4 @@ def write_north_up_images(path: str | Path) -> list[NorthUpWritten]:
         attrs = {"frame": frame.description, "segment_tiles": list(seg.tiles)}
         write_north_up(path, k, image.data, image.north_m, image.east_m, attrs)
         written.append(NorthUpWritten(k, image.data.shape, frame.description))
-    return written
+    return NorthUpImages(written)

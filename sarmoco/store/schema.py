@@ -707,12 +707,16 @@ class GeodeticOrigin:
         The altitude is the height above the WGS-84 ellipsoid; False: above mean sea level
         as the INS gave it, used as the ellipsoid height
         (:attr:`~sarmoco.drivers.samples.TangentFrame.ellipsoid_height`).
+    stated : bool
+        The INS named this point as its positions' origin (``"mavlink.GPS_GLOBAL_ORIGIN"``);
+        False: the first position received (:attr:`~sarmoco.drivers.samples.TangentFrame.stated`).
     """
 
     t_ns: int
     lla: tuple[float, float, float]
     source: str
     ellipsoid_height: bool = False
+    stated: bool = False
 
     @property
     def height_note(self) -> str:
@@ -722,7 +726,7 @@ class GeodeticOrigin:
     @property
     def frame(self) -> TangentFrame:
         """The tangent frame of the store's positions."""
-        return TangentFrame(self.lla, self.source, self.ellipsoid_height)
+        return TangentFrame(self.lla, self.source, self.ellipsoid_height, self.stated)
 
 
 HEIGHT_MSL = "INS altitude (MSL) used as WGS-84 ellipsoid height: geoid undulation not applied"
@@ -744,7 +748,8 @@ FRAME_UNSTATED = (
 def encode_geodetic_origin(origin: GeodeticOrigin | None) -> dict[str, Any]:
     """The root attribute :data:`GEODETIC_ORIGIN_ATTR`: ``{"absent": why}`` while the INS
     gave no absolute position, else ``t_ns``, ``lat_deg``, ``lon_deg``, ``alt_m``,
-    ``source`` and ``height`` (:data:`HEIGHT_ELLIPSOID` or :data:`HEIGHT_MSL`); ``frame``
+    ``source``, ``stated`` (the INS named the point; absent in older stores: False) and
+    ``height`` (:data:`HEIGHT_ELLIPSOID` or :data:`HEIGHT_MSL`); ``frame``
     says what the store's positions are in (:data:`FRAME_STATED` or :data:`FRAME_UNSTATED`)."""
     if origin is None:
         return {"absent": NO_ABSOLUTE_POSITION, "frame": FRAME_UNSTATED}
@@ -755,6 +760,7 @@ def encode_geodetic_origin(origin: GeodeticOrigin | None) -> dict[str, Any]:
         "lon_deg": lon,
         "alt_m": alt,
         "source": origin.source,
+        "stated": origin.stated,
         "height": origin.height_note,
         "frame": FRAME_STATED,
     }
@@ -783,8 +789,9 @@ def decode_geodetic_origin(attrs: Mapping[str, Any], where: str) -> GeodeticOrig
     if height not in (HEIGHT_ELLIPSOID, HEIGHT_MSL):
         raise RecorderError(f"{key}.height: {height!r} is neither {HEIGHT_ELLIPSOID!r} nor MSL")
     source = read_attr(value, "source", str, key)
+    stated = read_attr(value, "stated", bool, key) if "stated" in value else False
     lla = (float(lat), float(lon), float(alt))
-    return GeodeticOrigin(t_ns, lla, source, height == HEIGHT_ELLIPSOID)
+    return GeodeticOrigin(t_ns, lla, source, height == HEIGHT_ELLIPSOID, stated)
 
 
 def first_geodetic_origin(rows: Sequence[NavRow]) -> GeodeticOrigin | None:
@@ -793,5 +800,5 @@ def first_geodetic_origin(rows: Sequence[NavRow]) -> GeodeticOrigin | None:
     for s, _, result in rows:
         if result == PushResult.ACCEPTED and isinstance(s, VelocitySample) and s.pos_frame:
             f = s.pos_frame
-            return GeodeticOrigin(s.t_gps_ns, f.lat_lon_alt, f.source, f.ellipsoid_height)
+            return GeodeticOrigin(s.t_gps_ns, f.lat_lon_alt, f.source, f.ellipsoid_height, f.stated)
     return None

@@ -556,28 +556,49 @@ def test_a_left_looking_scene_is_georeferenced_and_its_sicd_reversed(
     assert sksicd.XmlHelper(product.xml).load("./{*}SCPCOA/{*}SideOfTrack") == "L"
 
 
+def test_no_north_up_image_about_a_point_the_ins_did_not_name(scene: Scene, tmp_path: Path) -> None:
+    """An SBG INS gives geodetic positions and names no origin: the store's frame is the
+    first fix's, a point of the daemon's choosing, so no north-up image is written (its
+    north and east would be about that point) and the replay says why."""
+    from sarmoco.products.northup import UNNAMED_ORIGIN, write_north_up_images
+
+    store = tmp_path / "run.zarr"
+    shutil.copytree(scene.store.path, store)
+    assert not schema.decode_geodetic_origin(scene.store.attrs, "run").stated
+    done = write_north_up_images(store)
+    assert done.images == [] and done.lines() == [f"north-up image not written: {UNNAMED_ORIGIN}"]
+    assert schema.NORTH_UP_GROUP not in open_store(store).root
+
+
 def test_the_north_up_image_puts_every_target_at_its_ned_position(
     scene: Scene, tmp_path: Path
 ) -> None:
-    """The segment resampled onto north/east (``write_north_up_images``, as a replay writes
-    it): coordinates NED about the store's geodetic origin, as its ``frame`` says; each
+    """The scene replayed from its MAVLink log, whose autopilot names its EKF origin
+    (GPS_GLOBAL_ORIGIN), and its segment resampled onto north/east (``sarmoco replay``
+    writes it): coordinates NED about that origin, as the image's ``frame`` says; each
     simulated target's response (its peak found between pixels by upsampling) within 1 cm
     of where the simulator put it, converted to that origin (ideal INS)."""
     from sarmoco.geodesy import ned_to_geodetic
     from sarmoco.processing.metrics import point_target_metrics
     from sarmoco.processing.types import Image
-    from sarmoco.products.northup import write_north_up_images
 
     store = tmp_path / "run.zarr"
-    shutil.copytree(scene.store.path, store)
-    (written,) = write_north_up_images(store)
-    origin = schema.decode_geodetic_origin(scene.store.attrs, "run")
-    assert written.frame.startswith("NED, m, about the geodetic origin")
+    sim = scene.out / "sim"
+    done = subprocess.run(
+        [sys.executable, "-m", "sarmoco", "replay", "--config", str(sim / "sarmoco.toml"),
+         "--radar", str(sim / "radar.vrt"), "--nav", str(sim / "nav.tlog"), "--out", str(store),
+         "--quiet"],
+        capture_output=True, text=True, check=True,
+    )  # fmt: skip
+    origin = schema.decode_geodetic_origin(open_store(store).attrs, "run")
+    assert origin.stated and origin.source == "mavlink.GPS_GLOBAL_ORIGIN"
+    (line,) = [x for x in done.stdout.splitlines() if "north-up image" in x]
+    assert "north-up image 0 of" in line and "about the geodetic origin" in line
     group = open_store(store).root[f"{schema.NORTH_UP_GROUP}/{schema.north_up_name(0)}"]
-    assert group.attrs["frame"] == written.frame
+    assert group.attrs["frame"] in line
     north, east = (np.asarray(group[name][...]) for name in schema.NORTH_UP_COORDS)
     data = np.asarray(group["data"][...])
-    assert data.shape == written.shape == (north.size, east.size)
+    assert data.shape == (north.size, east.size) and f"{data.shape[0]} x {data.shape[1]}" in line
     misses = []
     for target in scene.truth["targets"]:
         at = geodetic_to_ned(

@@ -59,7 +59,9 @@ def test_local_positions_get_the_ekf_origin_and_their_geodetic_position(tmp_path
             mav.local_position_ned_send(1000 + 20 * k, *p, 17.5, 1.0, 0.0)
 
     vel = _velocities(tlog(tmp_path / "o.tlog", send))
-    assert [s.pos_frame for s in vel] == [TangentFrame(ORIGIN, "mavlink.GPS_GLOBAL_ORIGIN")] * 2
+    assert [s.pos_frame for s in vel] == [
+        TangentFrame(ORIGIN, "mavlink.GPS_GLOBAL_ORIGIN", stated=True)
+    ] * 2
     lla = np.array([s.lat_lon_alt for s in vel])
     assert np.allclose(geodetic_to_ned(lla, ORIGIN), ned, atol=1e-5)  # float32 on the wire
 
@@ -95,7 +97,7 @@ def test_global_positions_are_local_ned_about_the_first_then_the_stated_origin(
     p1, p2 = vel[1].pos_ned, vel[2].pos_ned
     assert p1 is not None and p2 is not None
     assert np.allclose(p1, ned[1] - ned[0], atol=0.02)
-    assert vel[2].pos_frame == TangentFrame(ORIGIN, "mavlink.GPS_GLOBAL_ORIGIN")
+    assert vel[2].pos_frame == TangentFrame(ORIGIN, "mavlink.GPS_GLOBAL_ORIGIN", stated=True)
     assert np.allclose(p2, ned[2], atol=0.01)
     assert vel[0].vel_ned == pytest.approx((17.5, 1.0, 0.0))
 

@@ -170,7 +170,7 @@ def test_a_store_keeps_its_positions_in_the_first_frame_named() -> None:
     """Positions named in a later frame (an EKF origin stated after the first fixes) are
     re-expressed in the store's, to 1 µm; positions that name no frame pass unchanged."""
     first = TangentFrame((47.3769, 8.5417, 408.0), "mavlink.GLOBAL_POSITION_INT")
-    ekf = TangentFrame((47.3700, 8.5500, 400.0), "mavlink.GPS_GLOBAL_ORIGIN")
+    ekf = TangentFrame((47.3700, 8.5500, 400.0), "mavlink.GPS_GLOBAL_ORIGIN", stated=True)
     point = np.array([47.3800, 8.5450, 510.0])
     frame = StoreFrame()
 
