@@ -159,6 +159,14 @@ class TestNavigationAndMotion:
         -12.78 dB."""
         run_case(tmp_path, "--log-start", "20", "--look-side", "left")
 
+    def test_an_sbg_ins_looking_left_later_in_the_flight(self, tmp_path: Path) -> None:
+        """An SBG INS names no origin for its positions, so the store's NED frame is its
+        first fix, 160-185 m from the harness's origin. A north-up image about that point
+        fitted the truth better than the tiles and failed the harness's frame check by
+        184.86 m; the replay writes none there."""
+        run_case(tmp_path, "--log-start", "30", "--look-side", "left", "--nav-format", "sbg",
+                 "--seed", "55")  # fmt: skip
+
     def test_double_motion_and_ins_error(self, tmp_path: Path) -> None:
         """Twice the flight's motion and twice the INS error: -12.45 dB (T1) on the first
         block's heading, -12.81 dB on 4 s of the course."""
