@@ -221,11 +221,10 @@ def thread_scratch(n: int, dtype: type[np.generic]) -> np.ndarray:
     parallel kernel's per-row intermediate results (``numba.get_thread_id()`` picks the
     row); each row padded to whole 64-byte cache lines so that no two threads write one.
 
-    A kernel takes one such array per intermediate quantity, as its own argument. Measured
-    on the backprojection kernel (blocks of 128 pulses on 632 x 1532 and 1200 x 1532
-    pixels, two threads): scratch allocated inside the ``prange`` body (numba hoists it out
-    of the loop) 2.2 s; the rows of one array shared by the quantities 2.2 s; one array
-    per quantity 1.3 s; the pixels the same to the bit.
+    A kernel takes one such array per intermediate quantity, as its own argument: scratch
+    allocated inside the ``prange`` body (which numba hoists out of the loop), or rows of
+    one array shared by the quantities, left the direct kernel as slow on two threads as
+    on one (docs/measurements/realtime.md, "Each thread's scratch in its own arrays").
 
     Parameters
     ----------
