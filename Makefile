@@ -15,8 +15,9 @@ demo: $(STAMP)
 	$(BIN)/sarmoco demo --out demo-out
 
 # Three phases (tests/conftest.py REALTIME and EXCLUSIVE say which tests are `realtime`
-# and `exclusive`, and why): the rest on two pytest-xdist workers, a module's tests on one
-# worker (its fixtures built once; test_install's two in-tree pip builds never overlap);
+# and `exclusive`, and why): the rest on three pytest-xdist workers, a module's tests on one
+# worker (its fixtures built once; test_install's two in-tree pip builds never overlap;
+# three, not two, because a worker waiting on its subprocesses leaves a CPU idle);
 # then the realtime tests, a module at a time on two workers (each mostly waits on the
 # clock); then the exclusive ones alone, one after the other. The first two phases hand
 # the longest modules out first (tests/conftest.py LONGEST_FIRST); the realtime phase
@@ -30,7 +31,7 @@ demo: $(STAMP)
 NOT_SLOW := not bench and not fuzz_long
 test: export PYTHONDONTWRITEBYTECODE :=
 test: $(STAMP)
-	$(BIN)/python -m pytest -q -p no:cacheprovider -n 2 --dist loadscope --no-loadscope-reorder \
+	$(BIN)/python -m pytest -q -p no:cacheprovider -n 3 --dist loadscope --no-loadscope-reorder \
 	  --durations=15 \
 	  -m "not realtime and $(NOT_SLOW)"; s1=$$?; \
 	live=$$($(BIN)/python -c 'from tests.conftest import REALTIME; print(*REALTIME)') || exit 1; \

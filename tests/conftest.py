@@ -54,7 +54,7 @@ def gotcha_files() -> list[Path]:
     return shared_files("gotcha", "data_3dsar_pass1_az00*_HH.mat", 2)
 
 
-# `make test` runs the suite in three phases: every test but these on two pytest-xdist
+# `make test` runs the suite in three phases: every test but these on three pytest-xdist
 # workers (`-m "not realtime"`); then these, a module at a time on two workers (`-m
 # "realtime and not exclusive"`); then the EXCLUSIVE ones alone, one after the other.
 # Realtime tests start `sarmoco run` / `sarmoco sim --serve` processes or play in real
@@ -195,7 +195,7 @@ LONGEST_FIRST: tuple[str, ...] = (
 """The modules whose tests take longest, longest first (pytest's ``--durations``, summed
 per module, on a 2-core machine): those of the first phase of `make test`, then those of
 the realtime phase. They are collected first, the rest in pytest's order: the first two
-phases hand the scopes out in collection order (``--no-loadscope-reorder``), so their two
+phases hand the scopes out in collection order (``--no-loadscope-reorder``), so their
 workers end together instead of one running a long scope alone at the end."""
 
 

@@ -8,7 +8,7 @@ truth: every target found with azimuth and range PSLR <= -12.5 dB and IRW <= 1.1
 theory, in the right place (exit 0).
 
 Each case is one subprocess of about 30-35 s of CPU; the classes are the scopes that the
-suite's two ``--dist loadscope`` workers share out. The figures in the docstrings are the
+suite's ``--dist loadscope`` workers share out. The figures in the docstrings are the
 harness's verdicts when they were measured; docs/measurements/acceptance.md has the
 current ones.
 """
@@ -198,7 +198,7 @@ class TestCrab:
 
 
 class TestCrabLeft:
-    """A crosswind from the other side, looking left: a class of its own so that the two
+    """A crosswind from the other side, looking left: a class of its own so that two
     workers share the crab cases (each class is one worker's scope)."""
 
     def test_crab_minus_4_deg_left(self, tmp_path: Path) -> None:
