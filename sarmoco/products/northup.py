@@ -152,9 +152,10 @@ def north_up(
     cos_psi = float(np.sqrt(max(0.0, 1.0 - mean_sine**2)))
     phi_a = 2.0 * np.pi * cumulative_trapezoid(carrier, dx=step, initial=0.0)
 
-    carrier_free = image.data * np.exp(
-        -1j * (phi_a[:, None] + k * cos_psi * np.hypot(c, depth_m)[None, :])
-    )
+    # the carrier is separable: one exponential per row times one per column
+    along_turn = np.exp(-1j * phi_a).astype(np.complex64)
+    across_turn = np.exp(-1j * k * cos_psi * np.hypot(c, depth_m)).astype(np.complex64)
+    carrier_free = image.data * along_turn[:, None] * across_turn[None, :]
     coef = np.empty((2, *carrier_free.shape))
     for part, plane in zip((carrier_free.real, carrier_free.imag), coef, strict=True):
         spline_filter(part, order=3, output=plane, mode="mirror")
