@@ -16,6 +16,7 @@ current ones.
 from __future__ import annotations
 
 import json
+import os
 import shlex
 import shutil
 import subprocess
@@ -58,9 +59,12 @@ def run_case(workdir: Path, *options: str) -> None:
 
 def replay_with(workdir: Path, section: str, key: str, value: object) -> None:
     """Replay a case's files (``run_case`` left them in ``workdir``) with one key of the
-    harness's configuration changed, and require the harness's pass on that store."""
+    harness's configuration changed, and require the harness's pass on that store. The
+    replay writes no north-up image (``imaging.north_up``): the tiles are what the key
+    changes, and the harness would score a second image of them."""
     config = tomllib.loads((workdir / "sarmoco.toml").read_text())
     config.setdefault(section, {})[key] = value
+    config.setdefault("imaging", {})["north_up"] = False
     changed = workdir / "changed.toml"
     changed.write_text(tomli_w.dumps(config))
     store = workdir / "changed.zarr"
@@ -87,7 +91,7 @@ def score_north_up_alone(workdir: Path) -> dict:
     store = workdir / "OUT.zarr"
     frame = zarr.open_group(str(store / "north_up" / "image_00"), mode="r").attrs["frame"]
     alone = workdir / "north_up_alone.zarr"
-    shutil.copytree(store, alone)
+    shutil.copytree(store, alone, copy_function=os.link)  # links: nothing is rewritten
     shutil.rmtree(alone / "images")
     result = workdir / "north_up_alone.json"
     truth = workdir / "truth.json"
