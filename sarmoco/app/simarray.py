@@ -40,7 +40,7 @@ from sarmoco.sim.array_run import (
 )
 from sarmoco.sim.array_scenario import ARRAY_PRESET, ArrayScenario, load_array_preset
 from sarmoco.sim.emitter import Emitter
-from sarmoco.sim.insemitters import INS_EMITTERS, live_ins_emitter
+from sarmoco.sim.insemitters import INS_EMITTERS, InsEmitterOptions, live_ins_emitter
 from sarmoco.sim.outfiles import RADAR_FILE, TRUTH_FILE, write_truth
 from sarmoco.sim.player import Pacing, play_emitters
 from sarmoco.sim.scenario import radar_table
@@ -132,7 +132,7 @@ def serve_array(args: argparse.Namespace, radar: Link, pacing: Pacing) -> int:
     try:
         emitters["radar"] = array_radar_emitter(run, radar, args.payload, args.seed)
         for k, spec in enumerate(args.ins or [], start=1):
-            options = {"faults": None, "seed": args.seed * 16 + k, "rank": k}
+            options = InsEmitterOptions(None, args.seed * 16 + k, k)
             emitters[f"ins{k}"] = live_ins_emitter(spec, feed, options)
         _print_line({
             "event": "listening", "pid": os.getpid(), "preset": ARRAY_PRESET,

@@ -72,7 +72,7 @@ from sarmoco.sim.emitter import Emitter, WireTime
 from sarmoco.sim.extended import SCENES, load_scene
 from sarmoco.sim.faults import Faults, parse_faults
 from sarmoco.sim.ins import GRADES
-from sarmoco.sim.insemitters import host_port, live_ins_emitter
+from sarmoco.sim.insemitters import InsEmitterOptions, host_port, live_ins_emitter
 from sarmoco.sim.insfeed import InsFeed
 from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.outfiles import NAV_FILES, TRUTH_FILE, TruthWriter, write_run
@@ -305,9 +305,9 @@ def _serve(args: argparse.Namespace, run: SimRun, faults: Faults) -> int:
             if args.pregenerate is not None:
                 radar.pregenerate(args.pregenerate)
         for k, spec in enumerate(args.ins or [], start=1):
-            options: dict[str, Any] = {"faults": faults.ins, "seed": args.seed * 16 + k, "rank": k}
-            if faults.mavlink_rogue_system:
-                options["rogue_system"] = faults.mavlink_rogue_system
+            options = InsEmitterOptions(
+                faults.ins, args.seed * 16 + k, k, faults.mavlink_rogue_system
+            )
             emitters[f"ins{k}"] = live_ins_emitter(spec, feed, options)
         if args.mission:
             emitters["mission"] = _mission_emitter(args.mission, run)

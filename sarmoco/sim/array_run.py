@@ -30,7 +30,7 @@ from sarmoco.sim.emitter import Emitter, WireTime
 from sarmoco.sim.faults import Faults
 from sarmoco.sim.ins import InsMeasurement, measure_ins
 from sarmoco.sim.insclock import InsClock
-from sarmoco.sim.insemitters import INS_EMITTERS
+from sarmoco.sim.insemitters import INS_EMITTERS, InsEmitterOptions
 from sarmoco.sim.insfeed import InsFeed
 from sarmoco.sim.outfiles import RADAR_FILE, TRUTH_FILE, write_truth
 from sarmoco.sim.player import Pacing, play_emitters
@@ -181,7 +181,7 @@ def write_array_run(
     emitters: dict[str, Emitter] = {"radar": radar}
     nav = INS_EMITTERS[NAV_PROTOCOL]
     emitters[NAV_PROTOCOL] = nav.to_file(
-        FileLink(out_dir / nav.file), feed, {"faults": None, "seed": seed * 16 + 1, "rank": 1}
+        FileLink(out_dir / nav.file), feed, InsEmitterOptions(None, seed * 16 + 1, 1)
     )
     try:
         result = play_emitters(list(emitters.values()), Pacing(realtime=False))

@@ -32,7 +32,7 @@ from sarmoco.geodesy import ned_to_geodetic
 from sarmoco.sim.emit_radar import RadarEmitter
 from sarmoco.sim.emitter import Emitter, WireTime
 from sarmoco.sim.faults import Faults
-from sarmoco.sim.insemitters import INS_EMITTERS
+from sarmoco.sim.insemitters import INS_EMITTERS, InsEmitterOptions
 from sarmoco.sim.insfeed import GEODETIC_ORIGIN, InsFeed
 from sarmoco.sim.player import Pacing, play_emitters
 from sarmoco.sim.run import SimRun
@@ -182,7 +182,7 @@ def write_run(
     }
     for k, proto in enumerate(nav, start=1):
         link = FileLink(out_dir / NAV_FILES[proto])
-        options: dict[str, Any] = {"faults": faults.ins, "seed": seed * 16 + k, "rank": k}
+        options = InsEmitterOptions(faults.ins, seed * 16 + k, k)
         emitters[proto] = INS_EMITTERS[proto].to_file(link, feed, options)
     try:
         result = play_emitters(list(emitters.values()), pacing or Pacing(realtime=False))

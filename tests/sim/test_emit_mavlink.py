@@ -12,8 +12,10 @@ from sarmoco.app.demo import free_udp_port
 from sarmoco.drivers.mavlink import REQUESTED_RATES_HZ as DAEMON_RATES
 from sarmoco.drivers.mavlink import MavlinkSource
 from sarmoco.drivers.samples import AttitudeSample, Sample, VelocitySample
+from sarmoco.errors import ConfigError
 from sarmoco.sim.emit_mavlink import MavlinkEmitter
 from sarmoco.sim.faults import Faults, PacketFaults
+from sarmoco.sim.insemitters import InsEmitterOptions, live_ins_emitter
 from sarmoco.sim.insfeed import InsFeed
 from sarmoco.sim.player import Pacing, PlayResult, play_emitters
 from sarmoco.sim.transports import FileLink, Link, PtyLink, TcpServerLink, UdpOutLink
@@ -161,3 +163,17 @@ def test_loss_and_corruption_are_counted(tmp_path: Path) -> None:
     assert c.frames + c.crc_errors + c.parse_errors >= sent - injected.lost - 2
     samples_lost = sent - injected.lost - c.frames
     assert c.drops >= injected.lost + samples_lost
+
+
+def test_a_second_mavlink_system_is_put_on_mavlink_links_only() -> None:
+    """``--fault mavlink-rogue=ID`` reaches the simulated autopilot of a MAVLink link, and
+    is refused, by name, on an SBG link (which has no systems to add one to)."""
+    options = InsEmitterOptions(None, 0, 1, rogue_system=42)
+    em = live_ins_emitter("mavlink:pty", feed(), options)
+    try:
+        assert isinstance(em, MavlinkEmitter) and em._rogue is not None
+    finally:
+        em.close()
+    for spec in ("sbg:pty", "sbg-can:slcan-pty"):
+        with pytest.raises(ConfigError, match="mavlink-rogue=42: the INS link is sbg"):
+            live_ins_emitter(spec, feed(), options)

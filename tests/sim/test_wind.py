@@ -32,7 +32,7 @@ from sarmoco.sim.emit_can import SbgCanEmitter
 from sarmoco.sim.emit_sbg import SbgEmitter
 from sarmoco.sim.emitter import Emitter
 from sarmoco.sim.faults import Faults
-from sarmoco.sim.insemitters import INS_EMITTERS
+from sarmoco.sim.insemitters import INS_EMITTERS, InsEmitterOptions
 from sarmoco.sim.insfeed import InsFeed
 from sarmoco.sim.motionspec import MotionSpec
 from sarmoco.sim.run import SimRun, simulate
@@ -113,7 +113,7 @@ def crabbed_runs() -> dict[tuple[float, str], SimRun]:
 def _emitter(wire: str, path: Path, feed: InsFeed) -> Emitter:
     link = FileLink(path)
     if wire == "mavlink":
-        return INS_EMITTERS["mavlink"].to_file(link, feed, {})
+        return INS_EMITTERS["mavlink"].to_file(link, feed, InsEmitterOptions(None, 0, 1))
     proto, _, attitude = wire.partition("/")
     if proto == "sbg":
         return SbgEmitter(link, feed, attitude=attitude)
