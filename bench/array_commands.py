@@ -1,4 +1,4 @@
-"""Issue 13 through the user's three commands, at any scale (the end-to-end test's path, full size).
+"""The MIMO array through the user's three commands, at any scale (the end-to-end path).
 
 Cases, each ``sarmoco sim --preset mimo-array --scale S ... --out DIR``, ``sarmoco replay``,
 ``sarmoco report --truth --json``:

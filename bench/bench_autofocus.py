@@ -1,4 +1,4 @@
-"""Issue 4 bench 5: autofocus CPU time per second of full-size ku-vehicle data at its real PRF.
+"""Autofocus CPU time per second of full-size ku-vehicle data at its real PRF.
 
 Simulates ``ku-vehicle`` at scale 1 (PRF 1 kHz, full swath, the table's motion and GPS
 navigation), range-compresses it, and times (process CPU time, all threads) per second of

@@ -1,4 +1,4 @@
-"""Ground reprocessing with dask (issue 15): wall time against workers and block size.
+"""Ground reprocessing with dask: wall time against workers and block size.
 
 Run as ``.venv/bin/python -m bench.bench_batch [--scale 0.05] [--pulses 3000] [--separate]``.
 

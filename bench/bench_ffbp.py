@@ -1,4 +1,4 @@
-"""FFBP against direct backprojection: speed-up and image error (issue 14).
+"""FFBP against direct backprojection: speed-up and image error.
 
 Presets (``ku-vehicle``, ``thz-spotlight``, ``ku-microuav`` at ``--scale``): point targets
 across the swath, ideal straight flight, no noise, autofocus off, run through

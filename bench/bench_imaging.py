@@ -1,4 +1,4 @@
-"""Backprojection throughput in pixel*pulses/s (issue 3, bench 5, second half).
+"""Backprojection throughput in pixel*pulses/s.
 
 Full-size ``thz-spotlight`` geometry and pulse (4096 range bins, upsampled 8x
 before linear interpolation) onto a ground grid around the scene centre. Three

@@ -1,6 +1,6 @@
 """Throughput of range compression + INS D_los compensation, full-size ``thz-spotlight`` pulse.
 
-Issue 3, bench 5 (first half): pulses per second of :func:`rangecomp.compress` (dechirp, 4096
+Pulses per second of :func:`rangecomp.compress` (dechirp, 4096
 complex samples per pulse) followed by :class:`InsMotionCompensator`, next to the cost of the
 bare FFTs that chain needs, measured in the same run on the same block:
 

@@ -1,4 +1,4 @@
-"""MIMO downward-looking array (issue 13): the array paper's Table 2 and more, full size.
+"""MIMO downward-looking array: the array paper's Table 2 and more, full size.
 
 Cases (all with the paper's Table 1 system, 2 Tx × 80 Rx, :func:`paper_system`):
 

@@ -1,4 +1,4 @@
-"""Georeferencing and ``sarmoco export --sicd`` on a simulated scene (issue 15).
+"""Georeferencing and ``sarmoco export --sicd`` on a simulated scene.
 
 A scene is written by ``sarmoco sim --out`` (ideal INS grade, so that the georeferencing
 error is ours alone) and replayed from its SBG log into a store: the store carries the

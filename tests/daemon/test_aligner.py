@@ -1,4 +1,4 @@
-"""Pulse/INS alignment under stress (issue 6, acceptance 3).
+"""Pulse/INS alignment under stress.
 
 An analytic smooth trajectory (positions, velocities and attitude are exact
 derivatives of one process) is sampled by a simulated INS whose link has 2 ms

@@ -1,4 +1,4 @@
-"""The ``array`` configuration section (issue 13): one channel per Tx/Rx pair, named errors."""
+"""The ``array`` configuration section: one channel per Tx/Rx pair, named errors."""
 
 from __future__ import annotations
 

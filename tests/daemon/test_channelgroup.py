@@ -1,4 +1,4 @@
-"""Grouping an array radar's per-channel packets into pulses (issue 13)."""
+"""Grouping an array radar's per-channel packets into pulses."""
 
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 Each link combination of the issue plays a scaled ku-vehicle scenario (turbulent
 cross-track motion, tactical INS) in real time; the daemon focuses and records it,
 stops cleanly on SIGTERM, and the store's image must show every point target
-focused to the autofocus issue's thresholds (PSLR ≤ -12.5 dB, IRW ≤ 1.1 × theory).
+focused to the autofocus's acceptance thresholds (PSLR ≤ -12.5 dB, IRW ≤ 1.1 × theory).
 The MAVLink run is then replayed, from its store (same image to float tolerance) and
 from the simulator's raw ``.vrt`` + ``.tlog`` files.
 """

@@ -24,7 +24,7 @@ from sarmoco.sim.scenario import load_preset
 from tests.daemon.test_pipeline import _target_metrics
 
 GOAL_DB = -13.0
-"""The issue's goal beyond the bar: every target at or below -13.0 dB azimuth PSLR."""
+"""The goal beyond the bar: every target at or below -13.0 dB azimuth PSLR."""
 
 
 @pytest.mark.parametrize("fraction", [None, 0.25])

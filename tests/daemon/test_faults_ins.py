@@ -4,7 +4,7 @@ target's aperture spans the run).
 
 - **Combined**: radar loss 2 %, radar bit flips 1 %, an INS dropout of 0.3 s at 1.2 s
   (mid-aperture): exit 0, the three targets' azimuth PSLR printed and held to 1 dB of the
-  unweighted sinc's -13.26 dB (the issue measured -7.0 to -7.2 dB before issue 12). The
+  unweighted sinc's -13.26 dB (-7.0 to -7.2 dB when the case was first measured). The
   pulses of the silence (shorter than ``ins.bridge_gap_s``) are focused with navigation
   bridged across it and flagged ``NAV_BRIDGED`` in the store, none ``NAV_UNUSABLE``
   (blanked instead, an 11 % hole mid-aperture, they gave -5.0 to -5.2 dB).

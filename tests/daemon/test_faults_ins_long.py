@@ -4,8 +4,8 @@ straight approach before the targets' aperture (``sarmoco sim --approach-s``: 14
 pulses, the targets in the beam over the last 2.6 s), ``/status`` polled every 0.1 s while
 the daemon runs. One run serves both tests.
 
-The INS sends nothing from 1.0 s to 11.0 s after the first pulse (``ins-dropout=1:10``,
-issue 12's longest dropout), 0.5 s before the targets come into the beam. Checked:
+The INS sends nothing from 1.0 s to 11.0 s after the first pulse (``ins-dropout=1:10``),
+0.5 s before the targets come into the beam. Checked:
 
 - every pulse sent is in the store (complete), and the pulses of the silence, and only
   they, are flagged ``NAV_TIMEOUT`` or ``NAV_GAP`` and not focused: the store's focused

@@ -3,7 +3,7 @@
 A scaled ku-vehicle run with turbulent cross-track motion and a tactical INS is fed
 pulse by pulse (with INS samples arriving ahead of the pulses, as live), then the
 store is reopened and its tiles measured: every point target must focus to the
-unweighted-sinc limit within the autofocus issue's thresholds (PSLR ≤ -12.5 dB,
+unweighted-sinc limit within the autofocus's acceptance thresholds (PSLR ≤ -12.5 dB,
 IRW ≤ 1.1 × theory) at the right place.
 """
 

@@ -1,4 +1,4 @@
-"""Ends of runs focus like the middle (README issue 10 item 8), through the daemon.
+"""Ends of runs focus like the middle, through the daemon.
 
 ``bench/run_ends.py`` at three noise seeds: ku-vehicle ×0.1 flown with a real ArduPilot
 log's motion, tactical INS, nine targets (start, middle and end of the run × three ranges;

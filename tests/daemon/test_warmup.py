@@ -1,4 +1,4 @@
-"""Kernel warm-up before READY=1 (issue 12: the soak's daemon compiled its numba kernels
+"""Kernel warm-up before READY=1 (the soak's daemon compiled its numba kernels
 at the first block, while the radar ring overflowed and the watchdog went unfed).
 
 After :func:`warm_up_kernels` a focusing run compiles nothing: every kernel it calls

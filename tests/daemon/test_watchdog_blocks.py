@@ -2,7 +2,7 @@
 
 Under load the daemon falls behind and one pass of its loop releases many blocks; if
 WATCHDOG=1 went out only between passes, a pass longer than ``WatchdogSec`` would get a
-progressing daemon restarted (the 30-minute soak of issue 12 missed 92 periods so). The
+progressing daemon restarted (a 30-minute soak once missed 92 periods so). The
 pings go through the real notification socket (:class:`sarmoco.daemon.sdnotify.Notifier`
 with a 1 us period, so that none is rate-limited away).
 """

@@ -1,4 +1,4 @@
-"""Acceptance 4 (issue 3): AFRL GOTCHA real phase history, 2 x 1 deg, X band, 640 MHz.
+"""AFRL GOTCHA real phase history, 2 x 1 deg, X band, 640 MHz.
 
 Backprojection and polar format on the real antenna positions (234 pulses); the
 numbers measured when this was written are in the comments. Without the files the tests

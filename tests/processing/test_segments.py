@@ -119,7 +119,7 @@ def test_a_restart_takes_the_whole_segment_s_mean_heading() -> None:
 
 
 def test_after_a_navigation_gap_the_track_follows_the_flight_after_it() -> None:
-    """A 10 s INS silence (issue 12's longest): before it the APC flies at -16 mrad,
+    """A 10 s INS silence: before it the APC flies at -16 mrad,
     sinking 0.16 m/s; during it the daemon holds that last velocity as a placeholder
     (``known`` false); after it the APC flies level at -6.5 mrad. The placeholders drift
     3 m off the first track (due north) 8.3 s into the silence: no segment starts there.

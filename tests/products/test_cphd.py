@@ -1,4 +1,4 @@
-"""CPHD out and in (issue 15) on the AFRL GOTCHA phase history (2 x 1 deg, pass 1 HH).
+"""CPHD out and in on the AFRL GOTCHA phase history (2 x 1 deg, pass 1 HH).
 
 GOTCHA converted to CPHD 1.1.0 passes sarkit's ``CphdConsistency`` with no failures, and
 ``sarmoco import-cphd`` of that file stores the image that GOTCHA read directly gives

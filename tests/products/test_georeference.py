@@ -1,4 +1,4 @@
-"""Georeferencing parts (issue 15): WGS-84 conversions, the store's geodetic codecs and the
+"""Georeferencing parts: WGS-84 conversions, the store's geodetic codecs and the
 SBG decoder's positions.
 
 The conversions are checked against sarkit's independent WGS-84 implementation; the

@@ -1,4 +1,4 @@
-"""The mimo-array preset's scenario and files (issue 13): scale, roll, DEM input, streams."""
+"""The mimo-array preset's scenario and files: scale, roll, DEM input, streams."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The store's ``dem`` group of an array run (issue 13): written, read back, damage named."""
+"""The store's ``dem`` group of an array run: written, read back, damage named."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The recorder and the store reader, and SIGKILL of a real writer (issue 6, acceptance 4)."""
+"""The recorder and the store reader, and SIGKILL of a real writer."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Ends of runs with the autofocus on (README "Real flights (issue 10)", item 8).
+"""Ends of runs with the autofocus on.
 
 Run as ``.venv/bin/python -m bench.run_ends [--seeds 0 1 2] [--uniform] [--no-autofocus]``.
 

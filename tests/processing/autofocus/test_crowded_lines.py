@@ -1,6 +1,6 @@
 """Map drift on range lines that hold several scatterers.
 
-The ends of the ku-vehicle flight-log run (``bench/run_ends.py``, README issue 10 item 8)
+The ends of the ku-vehicle flight-log run (``bench/run_ends.py``)
 were defocused by them: each range line there holds the targets of two or three
 along-track groups at different Doppler frequencies.
 """

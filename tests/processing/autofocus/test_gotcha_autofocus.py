@@ -1,4 +1,4 @@
-"""Issue 4 acceptance 4 on GOTCHA (spotlight, 2 deg, 234 pulses).
+"""The autofocus on GOTCHA (spotlight, 2 deg, 234 pulses).
 
 4a: the per-pulse ML phase estimator of ``sarmoco.processing.autofocus.spotlight`` (PGA's
 estimator at the brightest pixels) must sharpen the data as provided (lower entropy).

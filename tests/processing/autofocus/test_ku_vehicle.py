@@ -1,4 +1,4 @@
-"""Issue 4 acceptance 1-2 on a small ku-vehicle case (sarmoco.sim, GPS-grade navigation).
+"""The autofocus on a small ku-vehicle case (sarmoco.sim, GPS-grade navigation).
 
 The full table is ``bench/ku_vehicle_table.py``; this runs the same pipeline at scale 0.2.
 """

@@ -1,4 +1,4 @@
-"""Acceptance 1 (issue 3): each imager focuses an ideal-track point target to the sinc limits.
+"""Each imager focuses an ideal-track point target to the sinc limits.
 
 A scaled simulated point target (``sarmoco.sim``, ideal motion, no noise, no
 window anywhere) is range compressed and focused; the cuts through its peak
