@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 
 import numpy as np
 from scipy import fft as sfft
@@ -186,29 +187,34 @@ class StripPga:
         cols = _bright_columns(np.abs(data) ** 2, self.n_lines, guard)
         if cols.size == 0:
             return np.asarray(data, dtype=np.complex64), np.zeros(n0)
-        total = self._estimate(axis.decompress(data[:, cols], slant[cols]), slant[cols], axis)
+        comp = axis.compression(slant[cols])
+        hist = axis.decompress(data[:, cols], comp)
+        total = self._estimate(hist, slant[cols], comp, axis)
         if not np.any(total):
             return np.asarray(data, dtype=np.complex64), np.zeros(n0)
         out = np.empty(data.shape, dtype=np.complex64)
         corr = np.exp(-1j * total)[:, None]
         for j0 in range(0, y.size, 64):  # 64 columns at a time bound the memory
             sl = slice(j0, min(y.size, j0 + 64))
-            hist = axis.decompress(data[:, sl], slant[sl]) * corr
-            out[:, sl] = axis.recompress(hist, slant[sl])[pad : pad + n0]
+            comp = axis.compression(slant[sl])
+            hist = axis.decompress(data[:, sl], comp) * corr
+            out[:, sl] = axis.recompress(hist, comp)[pad : pad + n0]
         return out, total[pad : pad + n0]
 
-    def _estimate(self, hist: ComplexArray, rho: FloatArray, axis: _PaddedAxis) -> FloatArray:
+    def _estimate(
+        self, hist: ComplexArray, rho: FloatArray, comp: ComplexArray, axis: _PaddedAxis
+    ) -> FloatArray:
         """Iterated phase error on the padded x_p axis of ``axis``, rad.
 
         ``hist`` holds the phase histories of the selected columns, ``rho`` their slant
-        ranges (m).
+        ranges (m), ``comp`` their :meth:`_PaddedAxis.compression`.
         """
         pad, n0 = axis.pad, axis.n0
         rows = np.arange(axis.n_fft)
         total = np.zeros(axis.n_fft)
         width = max(MIN_WINDOW_PX, round(self.settings.pga_window_m / axis.pixel_m))
         focused = np.asarray(sfft.ifft(np.abs(axis.kernel(rho)) ** 2, axis=0))
-        img = axis.recompress(hist, rho)
+        img = axis.recompress(hist, comp)
         for it in range(self.settings.pga_iterations):
             peaks = pad + np.argmax(np.abs(img[pad : pad + n0]), axis=0)
             if it:
@@ -221,12 +227,12 @@ class StripPga:
             u = (peaks[None, sel] - rows[:, None]) * axis.pixel_m
             r = rho[None, sel]
             dechirp = np.exp(1j * axis.wavenum * (u**2 / (np.sqrt(u**2 + r**2) + r)))
-            g = axis.decompress(img[:, sel] * win, rho[sel]) * dechirp
+            g = axis.decompress(img[:, sel] * win, comp[:, sel]) * dechirp
             # the same for a focused point at the peak: the Fresnel phase ripple of the
             # kernel near the aperture ends, which is not a phase error
             idx = (rows[:, None] - peaks[None, sel]) % axis.n_fft
             ref = np.take_along_axis(focused[:, sel], idx, axis=0) * win
-            ref = axis.decompress(ref, rho[sel]) * dechirp
+            ref = axis.decompress(ref, comp[:, sel]) * dechirp
             inside = np.abs(ref) > APERTURE_LEVEL * np.abs(ref).max(axis=0)[None, :]
             g = g * np.exp(-1j * np.angle(ref)) * inside
             h = np.conj(g[:-1]) * g[1:]
@@ -236,7 +242,7 @@ class StripPga:
             phi = np.concatenate([[0.0], np.cumsum(np.where(support, np.angle(acc), 0.0))])
             edge = np.concatenate([support, [False]]) | np.concatenate([[False], support])
             phi = _detrend(phi, edge)
-            new = axis.recompress(hist * np.exp(-1j * (total + phi))[:, None], rho)
+            new = axis.recompress(hist * np.exp(-1j * (total + phi))[:, None], comp)
             if _sharpness(new[pad : pad + n0]) <= _sharpness(img[pad : pad + n0]):
                 break  # an update that blurs the selected lines is not taken
             total += phi
@@ -263,7 +269,7 @@ class _PaddedAxis:
     squint_rad: tuple[float, float]
     """Squint interval (lo, hi) the pixels took pulses over, rad (positive: ahead)."""
 
-    @property
+    @cached_property
     def kx(self) -> FloatArray:
         """Along-track wavenumber of each FFT bin, rad/m: the one of its aliases within a
         sampling band (``2π / pixel_m`` wide) centred on the beam's band."""
@@ -272,28 +278,31 @@ class _PaddedAxis:
         kx = 2.0 * math.pi * np.fft.fftfreq(self.n_fft, self.pixel_m)
         return np.asarray(centre + (kx - centre + span / 2.0) % span - span / 2.0, np.float64)
 
-    def _kernel(self, rho: FloatArray, sign: int) -> ComplexArray:
-        """``exp(sign j R (sqrt(K² - k_x²) - K))`` per line (lines on axis 1, slant R)."""
+    def compression(self, rho: FloatArray) -> ComplexArray:
+        """``exp(j R (sqrt(K² - k_x²) - K))`` per FFT bin and line (lines on axis 1, slant
+        ``R``): what :meth:`recompress` applies and :meth:`decompress` takes back."""
         kx2 = self.kx**2
         psi = -kx2 / (np.sqrt(self.wavenum**2 - kx2) + self.wavenum)  # no cancellation
-        return np.exp(sign * 1j * psi[:, None] * rho[None, :])
+        return np.exp(1j * psi[:, None] * np.asarray(rho)[None, :])
 
-    def decompress(self, lines: ComplexArray, rho: FloatArray) -> ComplexArray:
-        """Phase histories (padded rows) of image lines (strip rows, or padded rows)."""
+    def decompress(self, lines: ComplexArray, comp: ComplexArray) -> ComplexArray:
+        """Phase histories (padded rows) of image lines (strip rows, or padded rows);
+        ``comp``: the lines' :meth:`compression`."""
         if lines.shape[0] == self.n0:
             lines = np.concatenate([np.zeros((self.pad, lines.shape[1]), lines.dtype), lines])
         spec = sfft.fft(lines, n=self.n_fft, axis=0)
-        return np.asarray(sfft.ifft(spec * self._kernel(rho, -1), axis=0))
+        return np.asarray(sfft.ifft(spec * np.conj(comp), axis=0))
 
-    def recompress(self, hist: ComplexArray, rho: FloatArray) -> ComplexArray:
-        """Image lines (padded rows) of phase histories, limited to the beam's band.
+    def recompress(self, hist: ComplexArray, comp: ComplexArray) -> ComplexArray:
+        """Image lines (padded rows) of phase histories, limited to the beam's band;
+        ``comp``: the lines' :meth:`compression`.
 
         Backprojection passes only the beam's band (beam culling); a phase
         correction spreads the band of a phase history, so the band is cut again
         (without this cut, a 1 rad rms phase error corrected with its true value still
         left targets at -12.6 dB azimuth PSLR).
         """
-        spec = sfft.fft(hist, axis=0) * self._kernel(rho, +1) * self.band[:, None]
+        spec = sfft.fft(hist, axis=0) * comp * self.band[:, None]
         return np.asarray(sfft.ifft(spec, axis=0))
 
     def kernel(self, rho: FloatArray) -> ComplexArray:
@@ -311,7 +320,7 @@ class _PaddedAxis:
         c *= (u >= r * lo) & (u <= r * hi)
         return np.asarray(sfft.fft(c, axis=0))
 
-    @property
+    @cached_property
     def band(self) -> BoolArray:
         """FFT bins inside the beam's band ``K sin ψ_lo <= k_x <= K sin ψ_hi``."""
         lo, hi = self.wavenum * np.sin(self.squint_rad)
