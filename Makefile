@@ -17,13 +17,15 @@ demo: $(STAMP)
 # Three phases (tests/conftest.py REALTIME and EXCLUSIVE say which tests are `realtime`
 # and `exclusive`, and why): the rest on three pytest-xdist workers, a module's tests on one
 # worker (its fixtures built once; test_install's two in-tree pip builds never overlap;
-# three, not two, because a worker waiting on its subprocesses leaves a CPU idle);
+# a third worker takes up the CPU the others leave while they wait on subprocesses);
 # then the realtime tests, a module at a time on two workers (each mostly waits on the
 # clock); then the exclusive ones alone, one after the other. The first two phases hand
 # the longest modules out first (tests/conftest.py LONGEST_FIRST); the realtime phase
 # collects only the modules REALTIME names, the exclusive phase those EXCLUSIVE names.
 # Every phase runs; the target fails when any does (pytest's 5, no test collected,
 # included). The -m options replace pyproject's, so they name bench and fuzz_long again.
+# First the numba kernels are compiled once into the checkout's cache (tests/prewarm.py:
+# in a fresh clone every process that starts before a kernel is cached compiles it).
 # The suite's processes share the checkout's bytecode (the package's modules, pytest's
 # rewritten test modules): where the environment turns writing it off
 # (PYTHONDONTWRITEBYTECODE), every `sarmoco` process and every phase's collection would
@@ -31,6 +33,7 @@ demo: $(STAMP)
 NOT_SLOW := not bench and not fuzz_long
 test: export PYTHONDONTWRITEBYTECODE :=
 test: $(STAMP)
+	$(BIN)/python -m tests.prewarm || exit 1; \
 	$(BIN)/python -m pytest -q -p no:cacheprovider -n 3 --dist loadscope --no-loadscope-reorder \
 	  --durations=15 \
 	  -m "not realtime and $(NOT_SLOW)"; s1=$$?; \
