@@ -24,8 +24,6 @@ demo: $(STAMP)
 # collects only the modules REALTIME names, the exclusive phase those EXCLUSIVE names.
 # Every phase runs; the target fails when any does (pytest's 5, no test collected,
 # included). The -m options replace pyproject's, so they name bench and fuzz_long again.
-# First the numba kernels are compiled once into the checkout's cache (tests/prewarm.py:
-# in a fresh clone every process that starts before a kernel is cached compiles it).
 # The suite's processes share the checkout's bytecode (the package's modules, pytest's
 # rewritten test modules): where the environment turns writing it off
 # (PYTHONDONTWRITEBYTECODE), every `sarmoco` process and every phase's collection would
@@ -33,7 +31,6 @@ demo: $(STAMP)
 NOT_SLOW := not bench and not fuzz_long
 test: export PYTHONDONTWRITEBYTECODE :=
 test: $(STAMP)
-	$(BIN)/python -m tests.prewarm || exit 1; \
 	$(BIN)/python -m pytest -q -p no:cacheprovider -n 3 --dist loadscope --no-loadscope-reorder \
 	  --durations=15 \
 	  -m "not realtime and $(NOT_SLOW)"; s1=$$?; \

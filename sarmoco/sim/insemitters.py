@@ -31,12 +31,8 @@ class InsEmitterOptions:
 
     Attributes
     ----------
-    faults : PacketFaults or None
-        Packet faults of the link (None: none).
-    seed : int
-        Seed of the fault draws.
-    rank : int
-        Tie-break of the emitter's events against others due at the same time.
+    faults, seed, rank
+        The :class:`~sarmoco.sim.emitter.Emitter` parameters of those names.
     rogue_system : int
         System id of a second MAVLink system talking on the link (0: none); MAVLink only.
     """
